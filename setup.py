@@ -26,6 +26,7 @@ setup(
         "bt_meta.data.robots": ["*.yaml"],
         "bt_meta.data.trees": ["*.yaml", "*.xml"],
         "bt_meta_plugins": ["*.yaml"],
+        "bt_meta.bench": ["problems/*.yaml"],
     },
     include_package_data=False,
 )

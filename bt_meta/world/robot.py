@@ -1,0 +1,445 @@
+"""Robot descriptions as data: load ``robots/NAME.yaml`` and check it against the robot's URDF.
+
+Offers:
+
+* :func:`load_robot` -- a :class:`RobotDescription` from a shipped name (``"baxter"``) or a YAML path
+* :class:`RobotDescription` -- model files, arms, cameras, home pose, joint limits, IK settings
+* :class:`ArmDescription`, :class:`GripperDescription`, :class:`IKSettings` -- its parts
+* :class:`UrdfSummary` / :func:`read_urdf_summary` -- joint and link names, types and limits of a URDF
+
+A wrong robot file raises :class:`~bt_meta.errors.ConfigError` located at the offending YAML node
+(``path:line:column``): a missing key, a wrong type, or a joint or frame that the URDF does not have.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import math
+import xml.etree.ElementTree as ElementTree
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from bt_meta.errors import ConfigError
+from bt_meta.resources import robots_dir
+
+__all__ = [
+    "ArmDescription",
+    "GripperDescription",
+    "IKSettings",
+    "RobotDescription",
+    "UrdfSummary",
+    "available_robots",
+    "load_robot",
+    "read_urdf_summary",
+]
+
+
+@dataclass(frozen=True)
+class GripperDescription:
+    joints: tuple[str, ...]
+    open: tuple[float, ...]
+    closed: tuple[float, ...]
+    opening: float
+    """Distance between the open fingers (m)."""
+
+
+@dataclass(frozen=True)
+class ArmDescription:
+    name: str
+    joints: tuple[str, ...]
+    end_effector: str
+    camera: str | None
+    gripper: GripperDescription | None
+
+
+@dataclass(frozen=True)
+class IKSettings:
+    position_tolerance: float = 1e-4
+    orientation_tolerance: float = 1e-3
+    lm_damping: float = 1e-3
+    orientation_cost: float = 1.0
+    max_iterations: int = 40
+    max_attempts: int = 40
+    stall_iterations: int = 6
+    stall_ratio: float = 0.5
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class UrdfSummary:
+    """What the loader needs from a URDF: names, joint types, limits and mimic relations."""
+
+    robot_name: str
+    links: tuple[str, ...]
+    joints: dict[str, str]
+    """joint name -> URDF type, in file order."""
+    limits: dict[str, tuple[float, float]]
+    """movable joint -> (lower, upper); continuous joints get (-inf, inf)."""
+    mimic: dict[str, tuple[str, float, float]]
+    """mimicking joint -> (mimicked joint, multiplier, offset)."""
+
+    @property
+    def movable_joints(self) -> tuple[str, ...]:
+        return tuple(name for name, kind in self.joints.items() if kind not in ("fixed", "floating", "planar"))
+
+    @property
+    def frames(self) -> frozenset[str]:
+        return frozenset(self.links) | frozenset(self.joints)
+
+
+@dataclass(frozen=True)
+class RobotDescription:
+    name: str
+    source: Path
+    """The YAML file this description came from."""
+    urdf_path: Path
+    srdf_path: Path | None
+    package_dirs: tuple[Path, ...]
+    srdf_joint_prefix: str
+    base_frame: str
+    arms: dict[str, ArmDescription]
+    head_joints: tuple[str, ...]
+    head_camera: str | None
+    home: dict[str, float]
+    """Every movable joint of the URDF -> its home value (0 unless the file says otherwise)."""
+    joint_limits: dict[str, tuple[float, float]]
+    ik: IKSettings
+    urdf: UrdfSummary = field(repr=False)
+
+    def arm(self, name: str) -> ArmDescription:
+        from bt_meta.world.kinematics import KinematicsError
+
+        try:
+            return self.arms[name]
+        except KeyError:
+            raise KinematicsError(f"robot {self.name!r} has no arm {name!r}; arms: {', '.join(self.arms)}") from None
+
+    @property
+    def cameras(self) -> dict[str, str]:
+        """Camera name -> frame: ``head`` and ``<arm>_hand``."""
+        out = {f"{arm.name}_hand": arm.camera for arm in self.arms.values() if arm.camera}
+        if self.head_camera:
+            out["head"] = self.head_camera
+        return out
+
+
+def available_robots() -> list[str]:
+    return sorted(p.stem for p in robots_dir().glob("*.yaml"))
+
+
+def load_robot(name: str | Path = "baxter") -> RobotDescription:
+    """Load a robot description by shipped name or by path to a YAML file."""
+    path = Path(name)
+    if path.suffix not in (".yaml", ".yml"):
+        path = robots_dir() / f"{name}.yaml"
+        if not path.is_file():
+            raise ConfigError(f"no robot description {name!r}; available: {', '.join(available_robots()) or 'none'}")
+    if not path.is_file():
+        raise ConfigError("robot description file not found", path)
+    return _RobotFile(path).load()
+
+
+# --------------------------------------------------------------------------------------------------------------
+# URDF
+
+
+def read_urdf_summary(path: Path) -> UrdfSummary:
+    text = path.read_text(encoding="utf-8")
+    if "<!DOCTYPE" in text or "<!ENTITY" in text:
+        raise ConfigError("URDF files with a DOCTYPE or entities are not accepted", path)
+    try:
+        root = ElementTree.fromstring(text)
+    except ElementTree.ParseError as error:
+        line, column = error.position
+        raise ConfigError(f"URDF is not well-formed XML: {error}", path, line, column + 1) from None
+    if root.tag != "robot":
+        raise ConfigError(f"URDF root element is <{root.tag}>, expected <robot>", path, 1)
+    links = tuple(el.get("name", "") for el in root.findall("link"))
+    joints: dict[str, str] = {}
+    limits: dict[str, tuple[float, float]] = {}
+    mimic: dict[str, tuple[str, float, float]] = {}
+    for el in root.findall("joint"):
+        jname, kind = el.get("name", ""), el.get("type", "")
+        joints[jname] = kind
+        if kind == "continuous":
+            limits[jname] = (-math.inf, math.inf)
+        elif kind in ("revolute", "prismatic"):
+            limit = el.find("limit")
+            lower = float(limit.get("lower", "0")) if limit is not None else 0.0
+            upper = float(limit.get("upper", "0")) if limit is not None else 0.0
+            limits[jname] = (lower, upper)
+        m = el.find("mimic")
+        if m is not None:
+            mimic[jname] = (m.get("joint", ""), float(m.get("multiplier", "1")), float(m.get("offset", "0")))
+    return UrdfSummary(root.get("name", ""), links, joints, limits, mimic)
+
+
+# --------------------------------------------------------------------------------------------------------------
+# YAML with positions
+
+
+class _RobotFile:
+    """Walks the composed YAML node tree so that every error can name its line and column."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.root: yaml.Node | None = None
+
+    # -- node helpers ------------------------------------------------------------------------------------------
+
+    def error(self, message: str, node: yaml.Node | None) -> ConfigError:
+        if node is None:
+            return ConfigError(message, self.path)
+        return ConfigError(message, self.path, node.start_mark.line + 1, node.start_mark.column + 1)
+
+    def mapping(self, node: yaml.Node, what: str) -> dict[str, tuple[yaml.Node, yaml.Node]]:
+        if not isinstance(node, yaml.MappingNode):
+            raise self.error(f"{what} must be a mapping", node)
+        out: dict[str, tuple[yaml.Node, yaml.Node]] = {}
+        for key, value in node.value:
+            if not isinstance(key, yaml.ScalarNode):
+                raise self.error(f"{what}: keys must be plain names", key)
+            if key.value in out:
+                raise self.error(f"{what}: duplicate key {key.value!r}", key)
+            out[key.value] = (key, value)
+        return out
+
+    def require(self, entries: dict[str, tuple[yaml.Node, yaml.Node]], key: str, parent: yaml.Node, what: str):
+        if key not in entries:
+            raise self.error(f"{what}: missing key {key!r}", parent)
+        return entries[key][1]
+
+    def check_keys(self, entries: dict[str, tuple[yaml.Node, yaml.Node]], allowed: set[str], what: str) -> None:
+        for key, (key_node, _) in entries.items():
+            if key not in allowed:
+                raise self.error(f"{what}: unknown key {key!r}; expected one of {', '.join(sorted(allowed))}", key_node)
+
+    def scalar(self, node: yaml.Node, what: str) -> Any:
+        if not isinstance(node, yaml.ScalarNode):
+            raise self.error(f"{what} must be a single value", node)
+        return yaml.safe_load(yaml.serialize(node))
+
+    def string(self, node: yaml.Node, what: str) -> str:
+        value = self.scalar(node, what)
+        if not isinstance(value, str) or not value:
+            raise self.error(f"{what} must be a non-empty string", node)
+        return value
+
+    def number(self, node: yaml.Node, what: str, *, positive: bool = False) -> float:
+        value = self.scalar(node, what)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise self.error(f"{what} must be a number", node)
+        if positive and value <= 0:
+            raise self.error(f"{what} must be positive", node)
+        return float(value)
+
+    def integer(self, node: yaml.Node, what: str) -> int:
+        value = self.scalar(node, what)
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise self.error(f"{what} must be a non-negative integer", node)
+        return value
+
+    def sequence(self, node: yaml.Node, what: str) -> list[yaml.Node]:
+        if not isinstance(node, yaml.SequenceNode):
+            raise self.error(f"{what} must be a list", node)
+        return list(node.value)
+
+    # -- checks against the URDF -------------------------------------------------------------------------------
+
+    def joint(self, node: yaml.Node, what: str, urdf: UrdfSummary) -> str:
+        name = self.string(node, what)
+        if name not in urdf.joints:
+            raise self.error(f"{what}: unknown joint {name!r} (not in the URDF)", node)
+        if name not in urdf.limits:
+            raise self.error(f"{what}: joint {name!r} is {urdf.joints[name]}, not movable", node)
+        return name
+
+    def frame(self, node: yaml.Node, what: str, urdf: UrdfSummary) -> str:
+        name = self.string(node, what)
+        if name not in urdf.frames:
+            raise self.error(f"{what}: unknown frame {name!r} (no such link or joint in the URDF)", node)
+        return name
+
+    # -- the file ----------------------------------------------------------------------------------------------
+
+    def load(self) -> RobotDescription:
+        try:
+            with self.path.open(encoding="utf-8") as stream:
+                root = yaml.compose(stream, Loader=yaml.SafeLoader)
+        except yaml.MarkedYAMLError as error:
+            mark = error.problem_mark or error.context_mark
+            line = mark.line + 1 if mark else None
+            column = mark.column + 1 if mark else None
+            raise ConfigError(f"not valid YAML: {error.problem or error}", self.path, line, column) from None
+        if root is None:
+            raise ConfigError("the robot description is empty", self.path, 1, 1)
+        top = self.mapping(root, "robot description")
+        self.check_keys(
+            top, {"name", "files", "base_frame", "arms", "head", "home", "joint_limits", "ik"}, "robot description"
+        )
+        name = self.string(self.require(top, "name", root, "robot description"), "name")
+
+        files_node = self.require(top, "files", root, "robot description")
+        urdf_path, srdf_path, package_dirs, prefix = self.files(files_node)
+        urdf = read_urdf_summary(urdf_path)
+
+        base_frame = self.frame(self.require(top, "base_frame", root, "robot description"), "base_frame", urdf)
+
+        arms_node = self.require(top, "arms", root, "robot description")
+        arms = {}
+        for arm_name, (_, arm_node) in self.mapping(arms_node, "arms").items():
+            arms[arm_name] = self.arm(arm_name, arm_node, urdf)
+        if not arms:
+            raise self.error("arms: at least one arm is required", arms_node)
+
+        head_joints: tuple[str, ...] = ()
+        head_camera = None
+        if "head" in top:
+            head_node = top["head"][1]
+            head = self.mapping(head_node, "head")
+            self.check_keys(head, {"joints", "camera"}, "head")
+            if "joints" in head:
+                head_joints = tuple(
+                    self.joint(n, "head.joints", urdf) for n in self.sequence(head["joints"][1], "head.joints")
+                )
+            if "camera" in head:
+                head_camera = self.frame(head["camera"][1], "head.camera", urdf)
+
+        limits = dict(urdf.limits)
+        if "joint_limits" in top:
+            for jname, (key_node, value_node) in self.mapping(top["joint_limits"][1], "joint_limits").items():
+                self.joint(key_node, "joint_limits", urdf)
+                pair = self.sequence(value_node, f"joint_limits.{jname}")
+                if len(pair) != 2:
+                    raise self.error(f"joint_limits.{jname} must be [lower, upper]", value_node)
+                lower = self.number(pair[0], f"joint_limits.{jname} lower")
+                upper = self.number(pair[1], f"joint_limits.{jname} upper")
+                urdf_lower, urdf_upper = urdf.limits[jname]
+                if not (urdf_lower <= lower < upper <= urdf_upper):
+                    raise self.error(
+                        f"joint_limits.{jname}: [{lower}, {upper}] must be increasing and within the URDF limits "
+                        f"[{urdf_lower}, {urdf_upper}]",
+                        value_node,
+                    )
+                limits[jname] = (lower, upper)
+
+        home = {j: min(max(0.0, limits[j][0]), limits[j][1]) for j in urdf.movable_joints}
+        if "home" in top:
+            for jname, (key_node, value_node) in self.mapping(top["home"][1], "home").items():
+                self.joint(key_node, "home", urdf)
+                value = self.number(value_node, f"home.{jname}")
+                lower, upper = limits[jname]
+                if not lower - 1e-12 <= value <= upper + 1e-12:
+                    raise self.error(
+                        f"home.{jname} = {value} is outside the joint limits [{lower}, {upper}]", value_node
+                    )
+                home[jname] = value
+
+        ik = IKSettings()
+        if "ik" in top:
+            ik = self.ik(top["ik"][1])
+
+        return RobotDescription(
+            name=name,
+            source=self.path,
+            urdf_path=urdf_path,
+            srdf_path=srdf_path,
+            package_dirs=package_dirs,
+            srdf_joint_prefix=prefix,
+            base_frame=base_frame,
+            arms=arms,
+            head_joints=head_joints,
+            head_camera=head_camera,
+            home=home,
+            joint_limits=limits,
+            ik=ik,
+            urdf=urdf,
+        )
+
+    def files(self, node: yaml.Node) -> tuple[Path, Path | None, tuple[Path, ...], str]:
+        entries = self.mapping(node, "files")
+        self.check_keys(entries, {"distribution", "share", "urdf", "srdf", "srdf_joint_prefix"}, "files")
+        if "distribution" in entries:
+            dist_node = entries["distribution"][1]
+            dist_name = self.string(dist_node, "files.distribution")
+            try:
+                distribution = importlib.metadata.distribution(dist_name)
+            except importlib.metadata.PackageNotFoundError:
+                raise self.error(f"files.distribution: {dist_name!r} is not installed", dist_node) from None
+            share_node = self.require(entries, "share", node, "files")
+            share = Path(str(distribution.locate_file(self.string(share_node, "files.share"))))
+        else:
+            share_node = self.require(entries, "share", node, "files")
+            share = self.path.parent / self.string(share_node, "files.share")
+        if not share.is_dir():
+            raise self.error(f"files.share: folder {share} does not exist", share_node)
+        urdf_node = self.require(entries, "urdf", node, "files")
+        urdf_path = share / self.string(urdf_node, "files.urdf")
+        if not urdf_path.is_file():
+            raise self.error(f"files.urdf: file {urdf_path} does not exist", urdf_node)
+        srdf_path = None
+        if "srdf" in entries:
+            srdf_node = entries["srdf"][1]
+            srdf_path = share / self.string(srdf_node, "files.srdf")
+            if not srdf_path.is_file():
+                raise self.error(f"files.srdf: file {srdf_path} does not exist", srdf_node)
+        prefix = ""
+        if "srdf_joint_prefix" in entries:
+            prefix = self.string(entries["srdf_joint_prefix"][1], "files.srdf_joint_prefix")
+        return urdf_path, srdf_path, (share,), prefix
+
+    def arm(self, arm_name: str, node: yaml.Node, urdf: UrdfSummary) -> ArmDescription:
+        what = f"arms.{arm_name}"
+        entries = self.mapping(node, what)
+        self.check_keys(entries, {"joints", "end_effector", "camera", "gripper"}, what)
+        joints_node = self.require(entries, "joints", node, what)
+        joints = tuple(self.joint(n, f"{what}.joints", urdf) for n in self.sequence(joints_node, f"{what}.joints"))
+        if not joints:
+            raise self.error(f"{what}.joints: at least one joint is required", joints_node)
+        if len(set(joints)) != len(joints):
+            raise self.error(f"{what}.joints: a joint is listed twice", joints_node)
+        end_effector = self.frame(self.require(entries, "end_effector", node, what), f"{what}.end_effector", urdf)
+        camera = self.frame(entries["camera"][1], f"{what}.camera", urdf) if "camera" in entries else None
+        gripper = None
+        if "gripper" in entries:
+            gripper = self.gripper(what + ".gripper", entries["gripper"][1], urdf)
+        return ArmDescription(arm_name, joints, end_effector, camera, gripper)
+
+    def gripper(self, what: str, node: yaml.Node, urdf: UrdfSummary) -> GripperDescription:
+        entries = self.mapping(node, what)
+        self.check_keys(entries, {"joints", "open", "closed", "opening"}, what)
+        joints_node = self.require(entries, "joints", node, what)
+        joints = tuple(self.joint(n, f"{what}.joints", urdf) for n in self.sequence(joints_node, f"{what}.joints"))
+        values = {}
+        for key in ("open", "closed"):
+            values_node = self.require(entries, key, node, what)
+            items = self.sequence(values_node, f"{what}.{key}")
+            if len(items) != len(joints):
+                raise self.error(f"{what}.{key}: expected {len(joints)} values, one per gripper joint", values_node)
+            numbers = tuple(self.number(n, f"{what}.{key}") for n in items)
+            for joint, value, item in zip(joints, numbers, items, strict=True):
+                lower, upper = urdf.limits[joint]
+                if not lower - 1e-12 <= value <= upper + 1e-12:
+                    raise self.error(f"{what}.{key}: {joint} = {value} is outside [{lower}, {upper}]", item)
+            values[key] = numbers
+        opening = self.number(self.require(entries, "opening", node, what), f"{what}.opening", positive=True)
+        return GripperDescription(joints, values["open"], values["closed"], opening)
+
+    def ik(self, node: yaml.Node) -> IKSettings:
+        entries = self.mapping(node, "ik")
+        defaults = IKSettings()
+        kinds = {f: type(getattr(defaults, f)) for f in defaults.__dataclass_fields__}
+        self.check_keys(entries, set(kinds), "ik")
+        values: dict[str, Any] = {}
+        for key, (_, value_node) in entries.items():
+            if kinds[key] is int:
+                values[key] = self.integer(value_node, f"ik.{key}")
+            else:
+                values[key] = self.number(value_node, f"ik.{key}", positive=key != "lm_damping")
+        for key in ("max_iterations", "max_attempts", "stall_iterations"):
+            if key in values and values[key] < 1:
+                raise self.error(f"ik.{key} must be at least 1", entries[key][1])
+        return IKSettings(**values)

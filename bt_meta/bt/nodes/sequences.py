@@ -1,0 +1,95 @@
+"""BehaviorTree.CPP's three sequences.
+
+Offers:
+
+* :class:`Sequence` -- resumes at the RUNNING child; on FAILURE resets every child and restarts at 0 next time
+* :class:`SequenceWithMemory` -- resumes at the RUNNING child and, after a FAILURE, at the child that failed
+  (BT.CPP keeps the index even when halted)
+* :class:`ReactiveSequence` -- re-ticks every child from 0 on every tick; a RUNNING child halts all the others
+
+py_trees' ``Sequence(memory=True)`` resumes at the RUNNING child but restarts at 0 after a failure, like BT.CPP's
+``Sequence``; ``Sequence(memory=False)`` is close to ``ReactiveSequence`` but neither resets finished siblings nor
+halts earlier RUNNING ones the same way, so these classes re-implement BT.CPP's ``tick()`` and ``halt()``.
+"""
+
+from __future__ import annotations
+
+import py_trees
+from py_trees.common import Status
+
+from bt_meta.bt.nodes.base import ControlNode, TickGenerator
+
+
+class Sequence(ControlNode):
+    """BT.CPP ``Sequence``."""
+
+    def __init__(self, name: str = "Sequence", children: list[py_trees.behaviour.Behaviour] | None = None) -> None:
+        super().__init__(name, children)
+        self.current_child_idx = 0
+
+    def execute(self) -> TickGenerator:
+        self.status = Status.RUNNING
+        while self.current_child_idx < len(self.children):
+            child_status = yield from self.tick_child(self.current_child_idx)
+            if child_status == Status.RUNNING:
+                return Status.RUNNING
+            if child_status == Status.FAILURE:
+                self.reset_children()
+                self.current_child_idx = 0
+                return Status.FAILURE
+            self.current_child_idx += 1
+        self.reset_children()
+        self.current_child_idx = 0
+        return Status.SUCCESS
+
+    def halt(self) -> None:
+        self.current_child_idx = 0
+        super().halt()
+
+
+class SequenceWithMemory(ControlNode):
+    """BT.CPP ``SequenceWithMemory``: a failed child is retried first next time, even after a halt."""
+
+    def __init__(
+        self, name: str = "SequenceWithMemory", children: list[py_trees.behaviour.Behaviour] | None = None
+    ) -> None:
+        super().__init__(name, children)
+        self.current_child_idx = 0
+
+    def execute(self) -> TickGenerator:
+        self.status = Status.RUNNING
+        while self.current_child_idx < len(self.children):
+            child_status = yield from self.tick_child(self.current_child_idx)
+            if child_status == Status.RUNNING:
+                return Status.RUNNING
+            if child_status == Status.FAILURE:
+                self.reset_children(self.current_child_idx)
+                return Status.FAILURE
+            self.current_child_idx += 1
+        self.reset_children()
+        self.current_child_idx = 0
+        return Status.SUCCESS
+
+
+class ReactiveSequence(ControlNode):
+    """BT.CPP ``ReactiveSequence``."""
+
+    def __init__(
+        self, name: str = "ReactiveSequence", children: list[py_trees.behaviour.Behaviour] | None = None
+    ) -> None:
+        super().__init__(name, children)
+
+    def execute(self) -> TickGenerator:
+        self.status = Status.RUNNING
+        for index in range(len(self.children)):
+            child_status = yield from self.tick_child(index)
+            if child_status == Status.RUNNING:
+                for other in range(len(self.children)):
+                    if other != index:
+                        self.reset_child(other)
+                return Status.RUNNING
+            if child_status == Status.FAILURE:
+                self.reset_children()
+                return Status.FAILURE
+        self.reset_children()
+        return Status.SUCCESS

@@ -1,0 +1,31 @@
+"""BehaviorTree.CPP's ``SubTree`` node.
+
+Offers:
+
+* :class:`SubTree` -- passes its subtree's status through and resets the subtree when it finishes
+
+The subtree's own blackboard scope is implemented by the XML reader, which rewrites every ``{key}`` inside the
+subtree to the parent's key (remapped or ``_autoremap``-ed ports) or to a key private to this SubTree instance.
+"""
+
+from __future__ import annotations
+
+import py_trees
+from py_trees.common import Status
+
+from bt_meta.bt.nodes.base import DecoratorNode, TickGenerator
+
+
+class SubTree(DecoratorNode):
+    """BT.CPP ``SubTree``; ``tree_id`` is the ``<BehaviorTree ID>`` it instantiates."""
+
+    def __init__(self, name: str, child: py_trees.behaviour.Behaviour, tree_id: str) -> None:
+        super().__init__(name, child)
+        self.tree_id = tree_id
+
+    def execute(self) -> TickGenerator:
+        self.status = Status.RUNNING
+        child_status = yield from self.tick_child()
+        if child_status in (Status.SUCCESS, Status.FAILURE):
+            self.reset_child()
+        return child_status

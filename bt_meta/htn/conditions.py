@@ -1,0 +1,580 @@
+"""The safe condition language of task files: tokenizer, parser, compiler and matcher (never ``eval``).
+
+Offers:
+
+* :class:`Var` -- a variable term (``?x`` in the text; ``Var("x")`` here); constants are plain ``str``
+* :func:`parse_condition`, :func:`parse_atom`, :func:`parse_parameter` -- text to syntax tree, raising
+  :class:`ConditionSyntaxError` with the offset (0-based) of the offending character
+* :func:`compile_condition` -- syntax tree to a :class:`Condition`: checks predicates, arities and that every
+  variable of ``not`` / ``==`` / ``!=`` / external atoms is bound first, and turns the condition into a
+  disjunction of clauses (DNF) whose literals are matched left to right (SHOP2 style)
+* :class:`Condition` -- ``holds`` and ``satisfiers`` over a :class:`~bt_meta.htn.state.State`
+* :func:`match_clause` -- the iterative matcher, also used by the axiom evaluator
+* :class:`ExternalPredicateError` -- a condition needs an external predicate but no callable was given
+
+Grammar (lowest precedence first)::
+
+    expr    := and ('or' and)*
+    and     := unary ('and' unary)*
+    unary   := 'not' unary | primary
+    primary := '(' expr ')' | 'true' | 'false' | term ('==' | '!=') term | NAME '(' [term (',' term)*] ')'
+    term    := ?variable | NAME | NUMBER | 'quoted' | "quoted"
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from bt_meta.errors import PlanningError
+from bt_meta.htn.state import Atom, State
+
+KEYWORDS = frozenset({"and", "or", "not", "true", "false"})
+
+ExternalFn = Callable[[str, tuple, State], bool]
+
+
+class Var:
+    """A variable term. Equality and hash follow the name so templates can be compared."""
+
+    __slots__ = ("name",)
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Var) and other.name == self.name
+
+    def __hash__(self) -> int:
+        return hash(("?", self.name))
+
+    def __repr__(self) -> str:
+        return f"?{self.name}"
+
+
+Term = Var | str
+
+
+def term_text(term: Term) -> str:
+    return f"?{term.name}" if isinstance(term, Var) else term
+
+
+def template_text(pred: str, args: Sequence[Term]) -> str:
+    return f"{pred}({', '.join(term_text(a) for a in args)})"
+
+
+class ConditionSyntaxError(Exception):
+    """A mistake inside one condition or atom string; ``offset`` is 0-based within that string."""
+
+    def __init__(self, message: str, offset: int) -> None:
+        super().__init__(message)
+        self.message = message
+        self.offset = offset
+
+
+class ExternalPredicateError(PlanningError):
+    """A condition asked an external predicate but the planner was given no ``external`` callable."""
+
+
+# -- syntax tree ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class AtomExpr:
+    pred: str
+    args: tuple[Term, ...]
+    offset: int
+    arg_offsets: tuple[int, ...] = ()
+
+
+@dataclass(frozen=True)
+class CompareExpr:
+    op: str  # "==" or "!="
+    left: Term
+    right: Term
+    offset: int
+
+
+@dataclass(frozen=True)
+class NotExpr:
+    child: Expr
+    offset: int
+
+
+@dataclass(frozen=True)
+class AndExpr:
+    children: tuple[Expr, ...]
+
+
+@dataclass(frozen=True)
+class OrExpr:
+    children: tuple[Expr, ...]
+
+
+@dataclass(frozen=True)
+class BoolExpr:
+    value: bool
+
+
+Expr = AtomExpr | CompareExpr | NotExpr | AndExpr | OrExpr | BoolExpr
+
+
+# -- tokenizer --------------------------------------------------------------------------------------------------
+_TOKEN_RE = re.compile(
+    r"""
+    (?P<ws>\s+)
+  | (?P<var>\?[A-Za-z_][A-Za-z0-9_\-]*)
+  | (?P<str>"[^"\\\n]*(?:\\.[^"\\\n]*)*"|'[^'\n]*')
+  | (?P<op>==|!=|\(|\)|,)
+  | (?P<name>[A-Za-z0-9_.+\-][A-Za-z0-9_.+\-/:]*)
+    """,
+    re.VERBOSE,
+)
+
+
+@dataclass(frozen=True)
+class Token:
+    kind: str  # var, str, op, name, kw, eof
+    text: str
+    offset: int
+
+    def describe(self) -> str:
+        return "end of text" if self.kind == "eof" else repr(self.text)
+
+
+def tokenize(text: str) -> list[Token]:
+    tokens: list[Token] = []
+    pos = 0
+    while pos < len(text):
+        match = _TOKEN_RE.match(text, pos)
+        if match is None:
+            char = text[pos]
+            if char == "?":
+                raise ConditionSyntaxError("a variable is '?' followed by a letter or '_'", pos)
+            if char in "\"'":
+                raise ConditionSyntaxError("unterminated quoted string", pos)
+            raise ConditionSyntaxError(f"unexpected character {char!r}", pos)
+        kind = match.lastgroup or ""
+        if kind != "ws":
+            value = match.group()
+            if kind == "name" and value in KEYWORDS:
+                kind = "kw"
+            tokens.append(Token(kind, value, pos))
+        pos = match.end()
+    tokens.append(Token("eof", "", len(text)))
+    return tokens
+
+
+# -- parser -----------------------------------------------------------------------------------------------------
+class _Parser:
+    def __init__(self, text: str) -> None:
+        self.text = text
+        self.tokens = tokenize(text)
+        self.pos = 0
+
+    @property
+    def tok(self) -> Token:
+        return self.tokens[self.pos]
+
+    def peek(self, ahead: int = 1) -> Token:
+        return self.tokens[min(self.pos + ahead, len(self.tokens) - 1)]
+
+    def take(self) -> Token:
+        token = self.tokens[self.pos]
+        self.pos += 1
+        return token
+
+    def expect_op(self, op: str, what: str) -> Token:
+        if self.tok.kind == "op" and self.tok.text == op:
+            return self.take()
+        raise ConditionSyntaxError(f"expected {what}, found {self.tok.describe()}", self.tok.offset)
+
+    def expect_end(self, what: str) -> None:
+        if self.tok.kind != "eof":
+            raise ConditionSyntaxError(f"expected end of {what}, found {self.tok.describe()}", self.tok.offset)
+
+    def expr(self) -> Expr:
+        children = [self.conj()]
+        while self.tok.kind == "kw" and self.tok.text == "or":
+            self.take()
+            children.append(self.conj())
+        return children[0] if len(children) == 1 else OrExpr(tuple(children))
+
+    def conj(self) -> Expr:
+        children = [self.unary()]
+        while self.tok.kind == "kw" and self.tok.text == "and":
+            self.take()
+            children.append(self.unary())
+        return children[0] if len(children) == 1 else AndExpr(tuple(children))
+
+    def unary(self) -> Expr:
+        if self.tok.kind == "kw" and self.tok.text == "not":
+            offset = self.take().offset
+            return NotExpr(self.unary(), offset)
+        return self.primary()
+
+    def primary(self) -> Expr:
+        tok = self.tok
+        if tok.kind == "op" and tok.text == "(":
+            self.take()
+            inner = self.expr()
+            self.expect_op(")", "')' to close the '(' opened before")
+            return inner
+        if tok.kind == "kw" and tok.text in ("true", "false"):
+            self.take()
+            return BoolExpr(tok.text == "true")
+        if tok.kind == "name" and self.peek().kind == "op" and self.peek().text == "(":
+            return self.atom()
+        if tok.kind in ("var", "name", "str"):
+            nxt = self.peek()
+            if nxt.kind == "op" and nxt.text in ("==", "!="):
+                left = self.term()
+                op = self.take().text
+                right = self.term()
+                return CompareExpr(op, left, right, tok.offset)
+            if tok.kind == "name":
+                raise ConditionSyntaxError(
+                    f"expected '(' after predicate name {tok.text!r} (write {tok.text}() for a 0-ary atom)",
+                    nxt.offset,
+                )
+            raise ConditionSyntaxError(f"expected '==' or '!=' after {tok.text}, found {nxt.describe()}", nxt.offset)
+        raise ConditionSyntaxError(
+            f"expected an atom like pred(?x), 'not', '(', 'true' or a comparison, found {tok.describe()}", tok.offset
+        )
+
+    def term(self) -> Term:
+        tok = self.tok
+        if tok.kind == "var":
+            self.take()
+            return Var(tok.text[1:])
+        if tok.kind == "name":
+            self.take()
+            return tok.text
+        if tok.kind == "str":
+            self.take()
+            body = tok.text[1:-1]
+            if tok.text[0] == '"':
+                body = re.sub(r"\\(.)", r"\1", body)
+            return body
+        raise ConditionSyntaxError(f"expected a variable or a constant, found {tok.describe()}", tok.offset)
+
+    def atom(self) -> AtomExpr:
+        name_tok = self.take()
+        self.expect_op("(", "'('")
+        args: list[Term] = []
+        offsets: list[int] = []
+        if self.tok.kind == "op" and self.tok.text == ")":
+            self.take()
+            return AtomExpr(name_tok.text, (), name_tok.offset, ())
+        while True:
+            offsets.append(self.tok.offset)
+            args.append(self.term())
+            if self.tok.kind == "op" and self.tok.text == ",":
+                self.take()
+                continue
+            if self.tok.kind == "op" and self.tok.text == ")":
+                self.take()
+                return AtomExpr(name_tok.text, tuple(args), name_tok.offset, tuple(offsets))
+            raise ConditionSyntaxError(f"expected ',' or ')' in the arguments of {name_tok.text}, found "
+                                       f"{self.tok.describe()}", self.tok.offset)
+
+
+def parse_condition(text: str) -> Expr:
+    parser = _Parser(text)
+    if parser.tok.kind == "eof":
+        raise ConditionSyntaxError("empty condition (write 'true' for no condition)", 0)
+    expr = parser.expr()
+    parser.expect_end("condition")
+    return expr
+
+
+def parse_atom(text: str) -> AtomExpr:
+    """One atom ``name(arg, ...)``: an effect, a subtask, a task head, an initial fact or a goal fact."""
+    parser = _Parser(text)
+    tok = parser.tok
+    if tok.kind != "name":
+        raise ConditionSyntaxError(f"expected an atom like name(arg, ...), found {tok.describe()}", tok.offset)
+    if not (parser.peek().kind == "op" and parser.peek().text == "("):
+        raise ConditionSyntaxError(
+            f"expected '(' after {tok.text!r} (write {tok.text}() when there are no arguments)", parser.peek().offset
+        )
+    atom = parser.atom()
+    parser.expect_end("atom")
+    return atom
+
+
+_PARAM_RE = re.compile(r"^\s*\?([A-Za-z_][A-Za-z0-9_\-]*)\s*(?:-\s*([A-Za-z_][A-Za-z0-9_\-]*))?\s*$")
+
+
+def parse_parameter(text: str) -> tuple[str, str | None]:
+    """``?b - block`` (typed) or ``?b`` (untyped) to ``("b", "block")`` / ``("b", None)``."""
+    match = _PARAM_RE.match(text)
+    if match is None:
+        stripped = text.lstrip()
+        offset = len(text) - len(stripped)
+        if not stripped.startswith("?"):
+            raise ConditionSyntaxError("expected a parameter like '?b' or '?b - block'", offset)
+        raise ConditionSyntaxError("expected a parameter like '?b' or '?b - block'", offset)
+    return match.group(1), match.group(2)
+
+
+# -- compiled form ----------------------------------------------------------------------------------------------
+# Literal kinds of a compiled clause.
+POS, NEG, DPOS, DNEG, EXT, NEXT, EQ, NEQ = range(8)
+
+
+@dataclass
+class DomainContext:
+    """What the compiler and matcher need to know about predicates; ``axioms`` is set once they are built."""
+
+    arities: dict[str, int]
+    derived: set[str] = field(default_factory=set)
+    external: set[str] = field(default_factory=set)
+    axioms: Any = None  # bt_meta.htn.axioms.AxiomSet
+
+
+Step = tuple  # (kind, pred_or_left, args_or_right, node)
+
+
+def _to_dnf(expr: Expr, negate: bool) -> list[list[tuple[str, Expr, bool]]]:
+    """Clauses of (literal-kind, node, negated) in left-to-right order."""
+    if isinstance(expr, AtomExpr):
+        return [[("atom", expr, negate)]]
+    if isinstance(expr, CompareExpr):
+        return [[("cmp", expr, negate)]]
+    if isinstance(expr, BoolExpr):
+        return [[]] if expr.value != negate else []
+    if isinstance(expr, NotExpr):
+        return _to_dnf(expr.child, not negate)
+    conjunctive = isinstance(expr, AndExpr) != negate
+    parts = [_to_dnf(child, negate) for child in expr.children]
+    if conjunctive:
+        clauses: list[list[tuple[str, Expr, bool]]] = [[]]
+        for part in parts:
+            clauses = [left + right for left in clauses for right in part]
+            if len(clauses) > 4096:
+                raise ConditionSyntaxError("condition too large once distributed (more than 4096 alternatives)", 0)
+        return clauses
+    result: list[list[tuple[str, Expr, bool]]] = []
+    for part in parts:
+        result.extend(part)
+    return result
+
+
+def _vars_of(terms: Iterable[Term]) -> list[Var]:
+    return [t for t in terms if isinstance(t, Var)]
+
+
+class Condition:
+    """A compiled condition: a disjunction of clauses, each a list of literals matched left to right.
+
+    ``variables_bound`` is the set of variable names every clause binds (given the initially bound ones):
+    effects and subtasks may only use those.
+    """
+
+    def __init__(self, source: str, expr: Expr, clauses: list[list[Step]], context: DomainContext,
+                 variables_bound: frozenset[str]) -> None:
+        self.source = source
+        self.expr = expr
+        self.clauses = clauses
+        self.context = context
+        self.variables_bound = variables_bound
+        self.trivial = len(clauses) == 1 and not clauses[0]
+
+    def __repr__(self) -> str:
+        return f"Condition({self.source!r})"
+
+    def satisfiers(self, state: State, bindings: dict[str, str] | None = None,
+                   external: ExternalFn | None = None) -> Iterator[dict[str, str]]:
+        """Every extension of ``bindings`` that makes the condition true, in SHOP2 order (lazy)."""
+        env = dict(bindings) if bindings else {}
+        clauses = self.clauses
+        if len(clauses) == 1:
+            yield from match_clause(clauses[0], state, env, external, self.context.axioms)
+            return
+        seen: set[tuple] = set()
+        for clause in clauses:
+            for result in match_clause(clause, state, env, external, self.context.axioms):
+                key = tuple(sorted(result.items()))
+                if key not in seen:
+                    seen.add(key)
+                    yield result
+
+    def holds(self, state: State, bindings: dict[str, str] | None = None, external: ExternalFn | None = None) -> bool:
+        for _ in self.satisfiers(state, bindings, external):
+            return True
+        return False
+
+
+def compile_condition(source: str, expr: Expr, context: DomainContext, bound: Iterable[str]) -> Condition:
+    """Check and compile; raises :class:`ConditionSyntaxError` at the offending offset."""
+    initially = frozenset(bound)
+    clauses: list[list[Step]] = []
+    bound_everywhere: set[str] | None = None
+    for raw in _to_dnf(expr, False):
+        have = set(initially)
+        steps: list[Step] = []
+        for kind, node, negated in raw:
+            if kind == "atom":
+                assert isinstance(node, AtomExpr)
+                check_atom_predicate(node, context)
+                variables = _vars_of(node.args)
+                if node.pred in context.external:
+                    _require_bound(variables, have, node, "an external atom")
+                    steps.append((NEXT if negated else EXT, node.pred, node.args, node))
+                    continue
+                derived = node.pred in context.derived
+                if negated:
+                    _require_bound(variables, have, node, "'not'")
+                    steps.append((DNEG if derived else NEG, node.pred, node.args, node))
+                else:
+                    have.update(v.name for v in variables)
+                    steps.append((DPOS if derived else POS, node.pred, node.args, node))
+            else:
+                assert isinstance(node, CompareExpr)
+                _require_bound(_vars_of((node.left, node.right)), have, node, f"'{node.op}'")
+                is_eq = (node.op == "==") != negated
+                steps.append((EQ if is_eq else NEQ, node.left, node.right, node))
+        clauses.append(steps)
+        bound_everywhere = have if bound_everywhere is None else bound_everywhere & have
+    return Condition(source, expr, clauses, context, frozenset(bound_everywhere or initially))
+
+
+def _require_bound(variables: list[Var], have: set[str], node: AtomExpr | CompareExpr, what: str) -> None:
+    for var in variables:
+        if var.name not in have:
+            offset = node.offset
+            if isinstance(node, AtomExpr):
+                for arg, arg_offset in zip(node.args, node.arg_offsets, strict=False):
+                    if arg == var:
+                        offset = arg_offset
+                        break
+            raise ConditionSyntaxError(
+                f"variable ?{var.name} in {what} is not bound: bind it first with a positive atom to its left "
+                "or a parameter", offset)
+
+
+def check_atom_predicate(node: AtomExpr, context: DomainContext) -> None:
+    arity = context.arities.get(node.pred)
+    if arity is None:
+        known = ", ".join(sorted(context.arities)) or "none declared"
+        raise ConditionSyntaxError(f"unknown predicate {node.pred!r} (known: {known})", node.offset)
+    if arity != len(node.args):
+        raise ConditionSyntaxError(
+            f"predicate {node.pred} takes {arity} argument{'s' if arity != 1 else ''}, got {len(node.args)}",
+            node.offset)
+
+
+# -- matcher ----------------------------------------------------------------------------------------------------
+def ground(pred: str, args: Sequence[Term], env: dict[str, str]) -> Atom:
+    """The ground atom of a template under ``env`` (every variable must be bound)."""
+    return (pred, *[env[a.name] if a.__class__ is Var else a for a in args])  # type: ignore[union-attr]
+
+
+def _value(term: Term, env: dict[str, str]) -> str:
+    return env[term.name] if term.__class__ is Var else term  # type: ignore[union-attr,return-value]
+
+
+def _candidates(source: Any, pred: str, args: Sequence[Term], env: dict[str, str]) -> Iterable[dict[str, str]]:
+    """Extensions of ``env`` matching ``pred(args)`` against ``source`` (a State or a derived index)."""
+    vals: list[Any] = [pred]
+    free: list[tuple[int, str]] | None = None
+    for arg in args:
+        if arg.__class__ is Var:
+            value = env.get(arg.name)  # type: ignore[union-attr]
+            if value is None:
+                if free is None:
+                    free = []
+                free.append((len(vals), arg.name))  # type: ignore[union-attr]
+                vals.append(None)
+                continue
+            vals.append(value)
+        else:
+            vals.append(arg)
+    if free is None:
+        return (env,) if tuple(vals) in source else ()
+    if len(vals) > 1 and vals[1] is not None:
+        pool: Iterable[Atom] = source.with_first(pred, vals[1])
+        fixed = [(i, v) for i, v in enumerate(vals) if i > 1 and v is not None]
+    else:
+        pool = source.atoms_of(pred)
+        fixed = [(i, v) for i, v in enumerate(vals) if i > 0 and v is not None]
+    return _extend(pool, len(vals), fixed, free, env)
+
+
+def _extend(pool: Iterable[Atom], length: int, fixed: list[tuple[int, str]], free: list[tuple[int, str]],
+            env: dict[str, str]) -> Iterator[dict[str, str]]:
+    single = free[0] if len(free) == 1 else None
+    for atom in pool:
+        if len(atom) != length:
+            continue
+        for i, v in fixed:
+            if atom[i] != v:
+                break
+        else:
+            new = dict(env)
+            if single is not None:
+                new[single[1]] = atom[single[0]]
+                yield new
+                continue
+            for i, name in free:
+                prior = new.get(name)
+                if prior is None:
+                    new[name] = atom[i]
+                elif prior != atom[i]:
+                    break
+            else:
+                yield new
+
+
+def _step_results(step: Step, state: State, env: dict[str, str], external: ExternalFn | None,
+                  axioms: Any, derived_source: Callable[[str], Any] | None) -> Iterable[dict[str, str]]:
+    kind = step[0]
+    if kind == POS:
+        return _candidates(state, step[1], step[2], env)
+    if kind == NEG:
+        return () if ground(step[1], step[2], env) in state else (env,)
+    if kind == EQ:
+        return (env,) if _value(step[1], env) == _value(step[2], env) else ()
+    if kind == NEQ:
+        return (env,) if _value(step[1], env) != _value(step[2], env) else ()
+    if kind in (DPOS, DNEG):
+        source = derived_source(step[1]) if derived_source is not None else axioms.extension(state, step[1])
+        if kind == DPOS:
+            return _candidates(source, step[1], step[2], env)
+        return () if ground(step[1], step[2], env) in source else (env,)
+    # external
+    if external is None:
+        raise ExternalPredicateError(
+            f"condition uses external predicate {step[1]!r} but the planner was given no external callable")
+    args = tuple(_value(a, env) for a in step[2])
+    truth = bool(external(step[1], args, state))
+    if kind == NEXT:
+        truth = not truth
+    return (env,) if truth else ()
+
+
+def match_clause(steps: Sequence[Step], state: State, env: dict[str, str], external: ExternalFn | None,
+                 axioms: Any, derived_source: Callable[[str], Any] | None = None) -> Iterator[dict[str, str]]:
+    """Iterative left-to-right matching of one clause; yields each complete binding."""
+    count = len(steps)
+    if count == 0:
+        yield env
+        return
+    if count == 1:
+        yield from _step_results(steps[0], state, env, external, axioms, derived_source)
+        return
+    iters: list[Iterator[dict[str, str]]] = [iter(())] * count
+    iters[0] = iter(_step_results(steps[0], state, env, external, axioms, derived_source))
+    depth = 0
+    last = count - 1
+    while depth >= 0:
+        result = next(iters[depth], None)
+        if result is None:
+            depth -= 1
+            continue
+        if depth == last:
+            yield result
+            continue
+        depth += 1
+        iters[depth] = iter(_step_results(steps[depth], state, result, external, axioms, derived_source))

@@ -1,0 +1,214 @@
+"""The task-file model: what a loaded YAML domain and its problems are made of.
+
+Offers:
+
+* :class:`Primitive` (with :meth:`Primitive.ground` -> :class:`GroundPrimitive`) -- an action
+* :class:`TaskDecl` -- a compound task's name and parameters
+* :class:`Method` -- a recipe decomposing a compound task (ordered or unordered subtasks)
+* :class:`Domain` -- types, predicates, externals, axioms, primitives, tasks, methods (in file order)
+* :class:`Problem` -- objects, initial state, task network, goal facts
+* :class:`TaskFile` -- a loaded file: its path, domain and problems
+
+Atom templates (effects, subtasks, task heads) are tuples ``(name, term, ...)`` whose terms are constants
+(``str``) or :class:`~bt_meta.htn.conditions.Var`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from bt_meta.errors import PlanningError
+from bt_meta.htn.axioms import Axiom, AxiomSet
+from bt_meta.htn.conditions import Condition, DomainContext, ExternalFn, Term, Var, ground, template_text
+from bt_meta.htn.state import Atom, State, atom_text
+
+Template = tuple  # (name, *terms)
+
+
+def _bind_parameters(kind: str, name: str, parameters: Sequence[str], args: Sequence[str]) -> dict[str, str]:
+    if len(args) != len(parameters):
+        raise PlanningError(f"{kind} {name} takes {len(parameters)} argument(s), got {len(args)}")
+    env: dict[str, str] = {}
+    for param, arg in zip(parameters, args, strict=False):
+        if param in env and env[param] != arg:
+            raise PlanningError(f"{kind} {name}: parameter ?{param} given two values")
+        env[param] = str(arg)
+    return env
+
+
+def types_hold(types: Sequence[str | None], args: Sequence[str], state: State) -> bool:
+    """Typed parameters require the fact ``type(arg)`` in the state (from ``objects:`` or ``init:``)."""
+    for type_name, arg in zip(types, args, strict=False):
+        if type_name is not None and (type_name, arg) not in state:
+            return False
+    return True
+
+
+@dataclass
+class Primitive:
+    name: str
+    parameters: list[str]
+    types: list[str | None]
+    precondition: Condition
+    add: list[Template]
+    delete: list[Template]
+    cost: float = 1.0
+    expectations: dict[str, Any] = field(default_factory=dict)
+    line: int | None = None
+    column: int | None = None
+
+    def ground(self, args: Sequence[str]) -> GroundPrimitive:
+        return GroundPrimitive(self, tuple(str(a) for a in args),
+                               _bind_parameters("primitive", self.name, self.parameters, args))
+
+    def satisfiers(self, state: State, args: Sequence[str], external: ExternalFn | None = None) -> Iterator[dict]:
+        """Bindings under which the primitive applies to ``args`` in ``state`` (types, then precondition)."""
+        env = _bind_parameters("primitive", self.name, self.parameters, args)
+        if not types_hold(self.types, args, state):
+            return iter(())
+        return self.precondition.satisfiers(state, env, external)
+
+    def effects(self, env: dict[str, str]) -> tuple[list[Atom], list[Atom]]:
+        add = [ground(t[0], t[1:], env) for t in self.add]
+        delete = [ground(t[0], t[1:], env) for t in self.delete]
+        return add, delete
+
+    def signature(self) -> str:
+        return template_text(self.name, [Var(p) for p in self.parameters])
+
+
+@dataclass
+class GroundPrimitive:
+    """A primitive with its parameters bound; checks the precondition and applies the effects."""
+
+    primitive: Primitive
+    args: tuple[str, ...]
+    bindings: dict[str, str]
+
+    @property
+    def name(self) -> str:
+        return self.primitive.name
+
+    def holds(self, state: State, external: ExternalFn | None = None) -> bool:
+        return next(iter(self.primitive.satisfiers(state, self.args, external)), None) is not None
+
+    def effects(self, state: State, external: ExternalFn | None = None) -> tuple[list[Atom], list[Atom]]:
+        """(add, delete) atoms under the first binding that satisfies the precondition."""
+        env = next(iter(self.primitive.satisfiers(state, self.args, external)), None)
+        if env is None:
+            raise PlanningError(f"precondition of {self} does not hold: {self.primitive.precondition.source}")
+        return self.primitive.effects(env)
+
+    def apply(self, state: State, external: ExternalFn | None = None) -> State:
+        add, delete = self.effects(state, external)
+        return state.apply(add=add, delete=delete)
+
+    def __str__(self) -> str:
+        return atom_text((self.name, *self.args))
+
+
+@dataclass
+class TaskDecl:
+    name: str
+    parameters: list[str]
+    types: list[str | None]
+    line: int | None = None
+    column: int | None = None
+
+
+@dataclass
+class Method:
+    name: str
+    task_name: str
+    task_args: tuple[Term, ...]
+    precondition: Condition
+    subtasks: list[Template]
+    ordered: bool = True
+    line: int | None = None
+    column: int | None = None
+
+    def task_text(self) -> str:
+        return template_text(self.task_name, self.task_args)
+
+    def subtask_texts(self) -> list[str]:
+        return [template_text(t[0], t[1:]) for t in self.subtasks]
+
+
+@dataclass
+class Domain:
+    name: str
+    types: dict[str, str | None]
+    predicates: dict[str, list[str]]
+    external: dict[str, list[str]]
+    axioms: list[Axiom]
+    primitives: dict[str, Primitive]
+    tasks: dict[str, TaskDecl]
+    methods: list[Method]
+    context: DomainContext
+    axiom_set: AxiomSet
+    path: str | None = None
+    methods_by_task: dict[str, list[Method]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not self.methods_by_task:
+            for method in self.methods:
+                self.methods_by_task.setdefault(method.task_name, []).append(method)
+
+    def add_method(self, method: Method, *, first: bool = False) -> None:
+        """Add a method (e.g. a learned refinement); ``first=True`` makes it the first one tried."""
+        if method.task_name not in self.tasks:
+            raise PlanningError(f"method {method.name}: {method.task_name} is not a compound task")
+        if any(m.name == method.name for m in self.methods):
+            raise PlanningError(f"a method named {method.name} already exists")
+        if first:
+            self.methods.insert(0, method)
+        else:
+            self.methods.append(method)
+        self.methods_by_task = {}
+        for existing in self.methods:
+            self.methods_by_task.setdefault(existing.task_name, []).append(existing)
+
+    def derived_atoms(self, state: State) -> list[Atom]:
+        return self.axiom_set.derived_atoms(state)
+
+    def is_primitive(self, name: str) -> bool:
+        return name in self.primitives
+
+
+@dataclass
+class Problem:
+    name: str
+    objects: dict[str, list[str]]
+    init: list[Atom]
+    tasks: list[Atom]
+    goal: list[Atom]
+    state: State
+    line: int | None = None
+    column: int | None = None
+
+
+@dataclass
+class TaskFile:
+    path: str
+    domain: Domain
+    problems: dict[str, Problem]
+    domain_path: str | None = None
+
+    def problem(self, name: str | None = None) -> Problem:
+        """The named problem, or the only one; a clear error otherwise."""
+        from bt_meta.errors import UserInputError
+
+        if name is None:
+            if len(self.problems) == 1:
+                return next(iter(self.problems.values()))
+            if not self.problems:
+                raise UserInputError("the file defines no problems", Path(self.path))
+            names = ", ".join(self.problems)
+            raise UserInputError(f"the file has several problems, choose one with --problem: {names}", self.path)
+        if name not in self.problems:
+            names = ", ".join(self.problems) or "none"
+            raise UserInputError(f"no problem named {name!r}; problems: {names}", self.path)
+        return self.problems[name]

@@ -1,0 +1,323 @@
+"""The HTN planner: SHOP2-style total-order forward decomposition, iterative, returning a decomposition tree.
+
+Offers:
+
+* :func:`plan` -- plan a problem of a domain; never raises on "no plan", returns a :class:`PlanResult`
+* :class:`PlanResult` -- status (``success`` / ``no_plan`` / ``budget_exhausted``), plan, tree, stats, message
+* :class:`GroundAction` -- one step of the plan, with the id of its tree node
+* :class:`Search` -- the search engine, shared with :mod:`bt_meta.htn.replan`
+
+How it searches (docs/task-files.md has the full statement): the task network is an agenda processed left
+to right. A primitive applies when its argument types and precondition hold; its effects give the next state.
+A compound task tries its methods in file order; a method applies when its head unifies with the task and its
+precondition has a satisfier; the satisfiers are tried in SHOP2 order (atoms matched left to right, facts in
+state order). Every task expansion pushes a choice point (an iterator over the remaining alternatives) on an
+explicit stack; a dead end resumes the most recent choice point, undoing the agenda, state, tree and plan to
+what they were there. No Python recursion is involved, so plans of any length fit. A compound task that
+reappears below itself in the same state (same ground task, equal state) is a loop and that branch fails.
+Goal facts, when the problem has some, must hold at the end, else the search backtracks.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+from bt_meta.htn.conditions import ExternalFn, Var, ground
+from bt_meta.htn.model import Domain, Method, Problem, types_hold
+from bt_meta.htn.state import Atom, State, atom_text
+from bt_meta.htn.tree import DecompositionNode, DecompositionTree
+
+# agenda item kinds
+TASK, CLOSE, UNORDERED = 0, 1, 2
+
+
+@dataclass
+class GroundAction:
+    name: str
+    args: tuple[str, ...]
+    node_id: str
+
+    def as_list(self) -> list[str]:
+        return [self.name, *self.args]
+
+    def __str__(self) -> str:
+        return atom_text((self.name, *self.args))
+
+
+@dataclass
+class PlanResult:
+    status: str  # "success", "no_plan" or "budget_exhausted"
+    plan: list[GroundAction]
+    tree: DecompositionTree | None
+    stats: dict[str, Any]
+    message: str
+    state: State | None = None  # final state when successful
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "success"
+
+
+def _unify_head(method: Method, task: tuple[str, ...]) -> dict[str, str] | None:
+    args = method.task_args
+    if len(args) != len(task) - 1:
+        return None
+    env: dict[str, str] = {}
+    for term, value in zip(args, task[1:], strict=False):
+        if term.__class__ is Var:
+            prior = env.get(term.name)  # type: ignore[union-attr]
+            if prior is None:
+                env[term.name] = value  # type: ignore[union-attr]
+            elif prior != value:
+                return None
+        elif term != value:
+            return None
+    return env
+
+
+class Search:
+    """One search over an agenda. Parent keys of new nodes are trail indices (int) or existing node ids (str)."""
+
+    def __init__(self, domain: Domain, *, external: ExternalFn | None = None, max_nodes: int | None = None,
+                 max_seconds: float | None = None, id_offset: int = 0, step_offset: int = 0,
+                 goal: list[Atom] | None = None) -> None:
+        self.domain = domain
+        self.external = external
+        self.max_nodes = max_nodes
+        self.max_seconds = max_seconds
+        self.id_offset = id_offset
+        self.step_offset = step_offset
+        self.goal = goal or []
+        self.expansions = 0
+        self.backtracks = 0
+        self.loops = 0
+        self.deepest: tuple[int, str] | None = None  # (plan length, description) of the deepest dead end
+        self.started = time.perf_counter()
+
+    # -- alternatives ----------------------------------------------------------------------------------------
+    def _method_alternatives(self, task: tuple[str, ...], state: State, exclude: Any) -> Iterator[tuple]:
+        external = self.external
+        for method in self.domain.methods_by_task.get(task[0], ()):
+            env = _unify_head(method, task)
+            if env is None:
+                continue
+            for satisfier in method.precondition.satisfiers(state, env, external):
+                if exclude is not None and (method.name, frozenset(satisfier.items())) == exclude:
+                    continue
+                yield method, satisfier
+
+    def _dead_end(self, plan_len: int, description: str) -> None:
+        if self.deepest is None or plan_len > self.deepest[0]:
+            self.deepest = (plan_len, description)
+
+    def _explain(self, task: tuple[str, ...], state: State) -> str:
+        name = task[0]
+        if name in self.domain.primitives:
+            prim = self.domain.primitives[name]
+            if not types_hold(prim.types, task[1:], state):
+                return f"{atom_text(task)}: its argument types do not hold"
+            return f"{atom_text(task)}: precondition false: {prim.precondition.source}"
+        decl = self.domain.tasks[name]
+        if not types_hold(decl.types, task[1:], state):
+            return f"{atom_text(task)}: its argument types do not hold"
+        methods = self.domain.methods_by_task.get(name, [])
+        if not methods:
+            return f"{atom_text(task)}: no method decomposes this task"
+        return f"{atom_text(task)}: no method applies (tried {', '.join(m.name for m in methods)})"
+
+    # -- the search ------------------------------------------------------------------------------------------
+    def run(self, state: State, items: list[tuple]) -> PlanResult:
+        domain = self.domain
+        primitives = domain.primitives
+        tasks_decl = domain.tasks
+        external = self.external
+        agenda: tuple | None = None
+        for item in reversed(items):
+            agenda = (item, agenda)
+        trail: list[list] = []  # [task, kind, method, bindings, parent_key, state_before, step]
+        plan: list[int] = []
+        active: dict[tuple, list[State]] = {}
+        undo: list[tuple] = []
+        stack: list[list] = []  # [alternatives, item, rest, state, trail_len, plan_len, undo_len, taken]
+        max_nodes = self.max_nodes
+        deadline = self.started + self.max_seconds if self.max_seconds is not None else None
+        advance = False
+        while True:
+            if advance:
+                advance = False
+                while stack:
+                    cp = stack[-1]
+                    state = cp[3]
+                    del trail[cp[4]:]
+                    del plan[cp[5]:]
+                    while len(undo) > cp[6]:
+                        entry = undo.pop()
+                        if entry[0]:
+                            states = active[entry[1]]
+                            states.pop()
+                            if not states:
+                                del active[entry[1]]
+                        else:
+                            active.setdefault(entry[1], []).append(entry[2])
+                    alternative = next(cp[0], None)
+                    if alternative is None:
+                        stack.pop()
+                        if cp[7] == 0 and cp[1][0] == TASK:
+                            self._dead_end(len(plan), self._explain(cp[1][1], state))
+                        continue
+                    if cp[7]:
+                        self.backtracks += 1
+                    cp[7] += 1
+                    item = cp[1]
+                    rest = cp[2]
+                    kind = item[0]
+                    if kind == TASK:
+                        task = item[1]
+                        if task[0] in primitives:
+                            prim = primitives[task[0]]
+                            add, delete = prim.effects(alternative)
+                            trail.append([task, "primitive", None, alternative, item[2], state,
+                                          self.step_offset + len(plan)])
+                            plan.append(len(trail) - 1)
+                            state = state._apply(add, delete)
+                            agenda = rest
+                        else:
+                            method, env = alternative
+                            index = len(trail)
+                            trail.append([task, "compound", method.name, env, item[2], state, None])
+                            key = (task, hash(state))
+                            active.setdefault(key, []).append(state)
+                            undo.append((True, key))
+                            agenda = ((CLOSE, key, state), rest)
+                            subtasks = [ground(t[0], t[1:], env) for t in method.subtasks]
+                            if method.ordered:
+                                for sub in reversed(subtasks):
+                                    agenda = ((TASK, sub, index, None), agenda)
+                            elif subtasks:
+                                agenda = ((UNORDERED, tuple(subtasks), index), agenda)
+                    else:  # UNORDERED: the alternative is the index of the subtask to do first
+                        subs = item[1]
+                        remaining = subs[:alternative] + subs[alternative + 1:]
+                        agenda = rest
+                        if remaining:
+                            agenda = ((UNORDERED, remaining, item[2]), agenda)
+                        agenda = ((TASK, subs[alternative], item[2], None), agenda)
+                    break
+                else:
+                    return self._failure("no_plan", trail)
+            if agenda is None:
+                if self.goal and not self._goal_holds(state):
+                    missing = [atom_text(a) for a in self.goal if not self._holds(a, state)]
+                    self._dead_end(len(plan) + 1, f"goal facts do not hold at the end: {', '.join(missing)}")
+                    advance = True
+                    continue
+                return self._success(trail, plan, state)
+            item, rest = agenda
+            kind = item[0]
+            if kind == CLOSE:
+                states = active[item[1]]
+                states.remove(item[2]) if states[-1] is not item[2] else states.pop()
+                if not states:
+                    del active[item[1]]
+                undo.append((False, item[1], item[2]))
+                agenda = rest
+                continue
+            self.expansions += 1
+            if max_nodes is not None and self.expansions > max_nodes:
+                return self._failure("budget_exhausted", trail, f"node budget of {max_nodes} expansions exhausted")
+            if deadline is not None and (self.expansions & 255) == 0 and time.perf_counter() > deadline:
+                return self._failure("budget_exhausted", trail, f"time budget of {self.max_seconds} s exhausted")
+            if kind == UNORDERED:
+                alternatives: Iterator[Any] = iter(range(len(item[1])))
+            else:
+                task = item[1]
+                name = task[0]
+                if name in primitives:
+                    alternatives = primitives[name].satisfiers(state, task[1:], external)
+                else:
+                    decl = tasks_decl[name]
+                    key = (task, hash(state))
+                    seen = active.get(key)
+                    if seen is not None and any(s == state for s in seen):
+                        self.loops += 1
+                        self._dead_end(len(plan), f"{atom_text(task)}: loop (the task recurs below itself in the "
+                                                  "same state)")
+                        advance = True
+                        continue
+                    if decl.types and not types_hold(decl.types, task[1:], state):
+                        alternatives = iter(())
+                    else:
+                        alternatives = self._method_alternatives(task, state, item[3])
+            stack.append([alternatives, item, rest, state, len(trail), len(plan), len(undo), 0])
+            advance = True
+
+    def _holds(self, atom: Atom, state: State) -> bool:
+        if atom[0] in self.domain.context.derived:
+            return atom in self.domain.axiom_set.extension(state, atom[0])
+        return atom in state
+
+    def _goal_holds(self, state: State) -> bool:
+        return all(self._holds(atom, state) for atom in self.goal)
+
+    def stats(self, **more: Any) -> dict[str, Any]:
+        data = {
+            "expansions": self.expansions,
+            "backtracks": self.backtracks,
+            "loops_pruned": self.loops,
+            "seconds": round(time.perf_counter() - self.started, 6),
+        }
+        data.update(more)
+        return data
+
+    def node_id(self, index: int) -> str:
+        return f"n{self.id_offset + index}"
+
+    def build_nodes(self, trail: list[list]) -> list[DecompositionNode]:
+        nodes = []
+        for index, (task, kind, method, env, parent, state, step) in enumerate(trail):
+            parent_id = self.node_id(parent) if isinstance(parent, int) else parent
+            nodes.append(DecompositionNode(self.node_id(index), task, kind, method, env, parent_id, state, step))
+        return nodes
+
+    def _success(self, trail: list[list], plan: list[int], state: State) -> PlanResult:
+        nodes = self.build_nodes(trail)
+        by_id = {node.id: node for node in nodes}
+        roots: list[str] = []
+        for node in nodes:
+            if node.parent is None:
+                roots.append(node.id)
+            elif node.parent in by_id:
+                by_id[node.parent].children.append(node.id)
+        tree = DecompositionTree(by_id, roots)
+        actions = [GroundAction(trail[i][0][0], tuple(trail[i][0][1:]), self.node_id(i)) for i in plan]
+        stats = self.stats(plan_length=len(actions), tree_nodes=len(nodes))
+        message = f"plan found: {len(actions)} steps, {len(nodes)} tree nodes, {stats['expansions']} expansions, " \
+                  f"{stats['backtracks']} backtracks"
+        result = PlanResult("success", actions, tree, stats, message, state)
+        result.extra["nodes"] = nodes
+        return result
+
+    def _failure(self, status: str, trail: list[list], reason: str | None = None) -> PlanResult:
+        stats = self.stats()
+        if status == "no_plan":
+            message = "no plan: every method and binding failed"
+            if self.deepest is not None:
+                message += f"; deepest dead end after {self.deepest[0]} step(s): {self.deepest[1]}"
+        else:
+            message = f"budget exhausted: {reason} ({stats['expansions']} expansions, {stats['seconds']:.3f} s) " \
+                      "without a plan"
+            if self.deepest is not None:
+                message += f"; deepest dead end so far after {self.deepest[0]} step(s): {self.deepest[1]}"
+        return PlanResult(status, [], None, stats, message)
+
+
+def plan(domain: Domain, problem: Problem, *, max_nodes: int | None = None, max_seconds: float | None = None,
+         external: ExternalFn | None = None) -> PlanResult:
+    """Plan ``problem.tasks`` from ``problem.state``; see the module docstring for the semantics."""
+    search = Search(domain, external=external, max_nodes=max_nodes, max_seconds=max_seconds, goal=problem.goal)
+    items = [(TASK, task, None, None) for task in problem.tasks]
+    return search.run(problem.state, items)

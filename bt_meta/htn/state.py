@@ -1,0 +1,180 @@
+"""Immutable symbolic states shared between planner nodes.
+
+Offers:
+
+* :class:`State` -- an immutable set of ground atoms ``(pred, arg1, ...)`` indexed by predicate and, lazily,
+  by first argument; :meth:`State.apply` builds a successor that shares every untouched predicate with its
+  parent, so keeping the state before every decomposition node costs only the delta.
+* :func:`atom_text` -- ``pred(a, b)`` text of an atom, for messages and pretty printing.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from typing import Any
+
+Atom = tuple[str, ...]
+
+_MASK = (1 << 64) - 1
+_EMPTY: frozenset[Atom] = frozenset()
+
+
+def atom_text(atom: Iterable[str]) -> str:
+    pred, *args = tuple(atom)
+    return f"{pred}({', '.join(args)})"
+
+
+class State:
+    """An immutable set of ground atoms.
+
+    The hash is the sum of the atoms' hashes, maintained incrementally by :meth:`apply`, so loop detection
+    can compare states in O(1) expected time. Derived atoms (axioms) are cached per state in ``_derived`` by
+    the axiom evaluator, which is sound because a state never changes.
+    """
+
+    __slots__ = ("_by_first", "_derived", "_hash", "_len", "_preds")
+
+    def __init__(self, atoms: Iterable[Iterable[str]] = ()) -> None:
+        preds: dict[str, set[Atom]] = {}
+        for atom in atoms:
+            atom_tuple = tuple(str(part) for part in atom)
+            if not atom_tuple:
+                raise ValueError("an atom needs at least a predicate name")
+            preds.setdefault(atom_tuple[0], set()).add(atom_tuple)
+        self._preds: dict[str, frozenset[Atom]] = {p: frozenset(s) for p, s in preds.items()}
+        self._len = sum(len(s) for s in self._preds.values())
+        total = 0
+        for atoms_of in self._preds.values():
+            for atom in atoms_of:
+                total += hash(atom)
+        self._hash = total & _MASK
+        self._by_first: dict[str, dict[str, tuple[Atom, ...]]] = {}
+        self._derived: dict[Any, Any] = {}
+
+    @classmethod
+    def _make(
+        cls,
+        preds: dict[str, frozenset[Atom]],
+        length: int,
+        hash_: int,
+        by_first: dict[str, dict[str, tuple[Atom, ...]]],
+    ) -> State:
+        state = cls.__new__(cls)
+        state._preds = preds
+        state._len = length
+        state._hash = hash_
+        state._by_first = by_first
+        state._derived = {}
+        return state
+
+    # -- queries -------------------------------------------------------------------------------------------
+    def holds(self, atom: Iterable[str]) -> bool:
+        atom_tuple = atom if isinstance(atom, tuple) else tuple(atom)
+        atoms_of = self._preds.get(atom_tuple[0])
+        return atoms_of is not None and atom_tuple in atoms_of
+
+    def __contains__(self, atom: object) -> bool:
+        if not isinstance(atom, tuple) or not atom:
+            return False
+        atoms_of = self._preds.get(atom[0])
+        return atoms_of is not None and atom in atoms_of
+
+    def atoms_of(self, pred: str) -> frozenset[Atom]:
+        """Every atom of one predicate."""
+        return self._preds.get(pred, _EMPTY)
+
+    def with_first(self, pred: str, first: str) -> tuple[Atom, ...]:
+        """Atoms of ``pred`` whose first argument is ``first`` (index built once per state and predicate)."""
+        index = self._by_first.get(pred)
+        if index is None:
+            built: dict[str, list[Atom]] = {}
+            for atom in self._preds.get(pred, _EMPTY):
+                if len(atom) > 1:
+                    built.setdefault(atom[1], []).append(atom)
+            index = {key: tuple(value) for key, value in built.items()}
+            self._by_first[pred] = index
+        return index.get(first, ())
+
+    def predicates(self) -> list[str]:
+        return sorted(self._preds)
+
+    def __iter__(self) -> Iterator[Atom]:
+        for atoms_of in self._preds.values():
+            yield from atoms_of
+
+    def __len__(self) -> int:
+        return self._len
+
+    def __hash__(self) -> int:
+        return self._hash
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, State):
+            return NotImplemented
+        if self is other:
+            return True
+        return self._hash == other._hash and self._len == other._len and self._preds == other._preds
+
+    def __repr__(self) -> str:
+        shown = ", ".join(atom_text(a) for a in sorted(self)[:8])
+        more = f", ... ({self._len} atoms)" if self._len > 8 else ""
+        return f"State({shown}{more})"
+
+    def to_list(self) -> list[list[str]]:
+        """The atoms as sorted lists, the JSON form."""
+        return [list(atom) for atom in sorted(self)]
+
+    # -- successors ----------------------------------------------------------------------------------------
+    def apply(self, add: Iterable[Iterable[str]] = (), delete: Iterable[Iterable[str]] = ()) -> State:
+        """The successor state: ``(self - delete) | add`` (add wins when an atom is in both, as in STRIPS)."""
+        add_t = [a if isinstance(a, tuple) else tuple(a) for a in add]
+        del_t = [a if isinstance(a, tuple) else tuple(a) for a in delete]
+        return self._apply(add_t, del_t)
+
+    def _apply(self, add: list[Atom], delete: list[Atom]) -> State:
+        preds = self._preds
+        removed: dict[str, set[Atom]] = {}
+        added: dict[str, set[Atom]] = {}
+        add_set = set(add)
+        for atom in delete:
+            atoms_of = preds.get(atom[0])
+            if atoms_of is not None and atom in atoms_of and atom not in add_set:
+                removed.setdefault(atom[0], set()).add(atom)
+        for atom in add_set:
+            atoms_of = preds.get(atom[0])
+            if atoms_of is None or atom not in atoms_of:
+                added.setdefault(atom[0], set()).add(atom)
+        if not removed and not added:
+            return self
+        new_preds = dict(preds)
+        new_by_first = dict(self._by_first)
+        hash_ = self._hash
+        length = self._len
+        for pred in removed.keys() | added.keys():
+            gone = removed.get(pred, set())
+            new = added.get(pred, set())
+            updated = (preds.get(pred, _EMPTY) - gone) | new
+            if updated:
+                new_preds[pred] = updated
+            else:
+                new_preds.pop(pred, None)
+            for atom in gone:
+                hash_ -= hash(atom)
+            for atom in new:
+                hash_ += hash(atom)
+            length += len(new) - len(gone)
+            index = self._by_first.get(pred)
+            if index is not None:
+                index = dict(index)
+                for atom in gone:
+                    if len(atom) > 1:
+                        remaining = tuple(a for a in index.get(atom[1], ()) if a != atom)
+                        if remaining:
+                            index[atom[1]] = remaining
+                        else:
+                            index.pop(atom[1], None)
+                for atom in new:
+                    if len(atom) > 1:
+                        index[atom[1]] = (*index.get(atom[1], ()), atom)
+                new_by_first[pred] = index
+        return State._make(new_preds, length, hash_ & _MASK, new_by_first)

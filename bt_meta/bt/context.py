@@ -1,0 +1,175 @@
+"""The run a tree executes in: world, plugins, belief state, recorded failures, tick count.
+
+Monitors, actions and guards find the run through the blackboard (``/bt_meta/run``) when they start, so a tree
+compiled or loaded once can be ticked in any run. The run mirrors its parts to the documented keys:
+
+* ``/bt_meta/world`` -- the :class:`~bt_meta.world.base.World`
+* ``/bt_meta/state`` -- the belief :class:`~bt_meta.htn.state.State` (updated after every monitored step)
+* ``/bt_meta/failures`` -- the list of :meth:`~bt_meta.bt.failures.Failure.to_dict` records
+
+Offers:
+
+* :class:`RunContext` -- the run; :meth:`RunContext.install` puts it on the blackboard,
+  :meth:`RunContext.record_failure` records, logs, traces and hands a failure to the meta-reasoner hook
+* :func:`current_run` -- the installed run (``None`` when none is)
+* the key constants
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import TYPE_CHECKING, Any
+
+import py_trees
+
+from bt_meta.bt.failures import Failure, FailureKind
+from bt_meta.htn.state import State
+
+if TYPE_CHECKING:
+    from bt_meta.bt.expectations import StepContext
+    from bt_meta.plugins import HookResult, PluginHost
+
+RUN_KEY = "/bt_meta/run"
+WORLD_KEY = "/bt_meta/world"
+STATE_KEY = "/bt_meta/state"
+FAILURES_KEY = "/bt_meta/failures"
+
+log = logging.getLogger("bt_meta.run")
+
+# py_trees keeps one process-wide blackboard store; bt-meta writes its own keys straight into it (no client
+# bookkeeping on the tick path) and reads them back the same way.
+_STORAGE: dict[str, Any] = py_trees.blackboard.Blackboard.storage
+
+
+def current_run() -> RunContext | None:
+    return _STORAGE.get(RUN_KEY)
+
+
+class RunContext:
+    """One execution of a tree: the world it acts on, the plugins it calls, what it believes and what failed."""
+
+    def __init__(
+        self,
+        world: Any = None,
+        plugins: PluginHost | None = None,
+        *,
+        domain: Any = None,
+        problem: Any = None,
+        state: State | None = None,
+        task_file: Any = None,
+    ) -> None:
+        self.world = world
+        self.plugins = plugins
+        self.domain = domain
+        self.problem = problem
+        self.task_file = task_file
+        if state is None:
+            state = world.symbolic_state() if world is not None else State()
+        self._state = state
+        self.failures: list[Failure] = []
+        self.failure_records: list[dict[str, Any]] = []
+        self.tick_count = 0
+        self.steps_started = 0
+        self._trace = bool(plugins and plugins.implements("bt_meta_trace_event"))
+        self._external = None if plugins is None else plugins.external_predicate
+
+    # -- blackboard ---------------------------------------------------------------------------------------------
+
+    def install(self) -> RunContext:
+        """Make this the run monitors and actions see, and write the documented keys."""
+        _STORAGE[RUN_KEY] = self
+        _STORAGE[WORLD_KEY] = self.world
+        _STORAGE[STATE_KEY] = self._state
+        _STORAGE[FAILURES_KEY] = self.failure_records
+        return self
+
+    @property
+    def state(self) -> State:
+        return self._state
+
+    @state.setter
+    def state(self, value: State) -> None:
+        self._state = value
+        if _STORAGE.get(RUN_KEY) is self:
+            _STORAGE[STATE_KEY] = value
+
+    @property
+    def external(self) -> Any:
+        """The ``external`` callable for conditions (``None`` without plugins)."""
+        return self._external
+
+    # -- plugins ------------------------------------------------------------------------------------------------
+
+    @property
+    def tracing(self) -> bool:
+        return self._trace
+
+    def emit(self, event_type: str, **data: Any) -> None:
+        """Send a trace event to ``bt_meta_trace_event`` implementations (nothing to do when there are none)."""
+        if not self._trace:
+            return
+        event = {"type": event_type, "tick": self.tick_count, **data}
+        result = self.plugins.call("bt_meta_trace_event", event=event)  # type: ignore[union-attr]
+        for error in result.errors:
+            # A broken trace plugin must not recurse into tracing its own failure.
+            self._store(self._internal(error, None), notify=False)
+
+    def contain(self, result: HookResult, context: StepContext | None) -> Failure | None:
+        """Record every error of a safe hook call as an ``internal`` failure; return the first (or ``None``)."""
+        first = None
+        for error in result.errors:
+            failure = self._internal(error, context)
+            self.record_failure(failure, context)
+            first = first or failure
+        return first
+
+    @staticmethod
+    def _internal(error: Any, context: StepContext | None) -> Failure:
+        return Failure(
+            kind=FailureKind.INTERNAL,
+            message=error.message,
+            step=None if context is None else context.step,
+            node_id=None if context is None else context.node_id,
+            action=None if context is None else context.action,
+            args=() if context is None else context.args,
+            evidence={"hook": error.hook, "error": f"{type(error.error).__name__}: {error.error}",
+                      "traceback": error.traceback},
+            plugin=error.plugin,
+            node_name=None if context is None else context.node_name,
+        )
+
+    def tick(self, root: py_trees.behaviour.Behaviour) -> py_trees.common.Status:
+        """Tick ``root`` once inside this run (installing it first) and return the root's status."""
+        if _STORAGE.get(RUN_KEY) is not self:
+            self.install()
+        self.tick_count += 1
+        root.tick_once()
+        if self._trace:
+            self.emit("tick", status=root.status.value)
+        return root.status
+
+    # -- failures -----------------------------------------------------------------------------------------------
+
+    def record_failure(self, failure: Failure, context: StepContext | None = None) -> Failure:
+        """Record ``failure`` (blackboard, run log, trace), then call the meta-reasoner hook ``bt_meta_on_failure``."""
+        index = len(self.failure_records)
+        self._store(failure, notify=True)
+        plugins = self.plugins
+        if plugins is not None and plugins.implements("bt_meta_on_failure"):
+            result = plugins.call("bt_meta_on_failure", failure=failure, context=context)
+            if result.results:
+                failure.evidence.setdefault("meta", {}).update({name: value for name, value in result.results})
+                self.failure_records[index] = failure.to_dict()
+            for error in result.errors:
+                self._store(self._internal(error, context), notify=True)
+        return failure
+
+    def _store(self, failure: Failure, notify: bool) -> None:
+        if failure.tick is None:
+            failure.tick = self.tick_count
+        self.failures.append(failure)
+        record = failure.to_dict()
+        self.failure_records.append(record)
+        log.info("%s", failure.summary())
+        if notify:
+            self.emit("failure", failure=record)

@@ -59,12 +59,14 @@ class ArmDescription:
 class IKSettings:
     position_tolerance: float = 1e-4
     orientation_tolerance: float = 1e-3
-    lm_damping: float = 1e-3
+    lm_damping: float = 1e-2
     orientation_cost: float = 1.0
     max_iterations: int = 40
     max_attempts: int = 40
-    stall_iterations: int = 6
+    stall_iterations: int = 5
     stall_ratio: float = 0.5
+    max_colliding_solutions: int = 20
+    restart_samples: int = 16
     seed: int = 0
 
 
@@ -439,7 +441,7 @@ class _RobotFile:
                 values[key] = self.integer(value_node, f"ik.{key}")
             else:
                 values[key] = self.number(value_node, f"ik.{key}", positive=key != "lm_damping")
-        for key in ("max_iterations", "max_attempts", "stall_iterations"):
+        for key in ("max_iterations", "max_attempts", "stall_iterations", "max_colliding_solutions", "restart_samples"):
             if key in values and values[key] < 1:
                 raise self.error(f"ik.{key} must be at least 1", entries[key][1])
         return IKSettings(**values)

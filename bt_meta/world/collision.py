@@ -1,0 +1,389 @@
+"""Collision checking of the robot against itself and a scene, with coal through Pinocchio geometry models.
+
+Offers:
+
+* :class:`CollisionChecker` -- the robot's collision geometry (URDF primitives and meshes), self-collision pairs
+  minus the SRDF's disabled pairs, and a scene of named boxes, cylinders and spheres that can be added, moved,
+  removed, attached to a robot frame (carried) and detached at run time
+* :class:`Contact` -- the first colliding pair found, by name, with its penetration depth when coal gives one
+* :class:`SceneObject` -- what the checker knows of one scene object
+* :func:`pose_from_xyz_rpy` -- a pose from position and roll/pitch/yaw, the form object states use
+
+Robot geometries are reported by link name (``right_gripper_base_link``); scene objects by their own name.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ElementTree
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from bt_meta.world.kinematics import Kinematics, KinematicsError, se3_from_matrix
+
+__all__ = ["CollisionChecker", "Contact", "SceneObject", "pose_from_xyz_rpy"]
+
+Pose = pin.SE3 | np.ndarray | Sequence[float]
+
+
+def pose_from_xyz_rpy(x: float, y: float, z: float, roll: float = 0.0, pitch: float = 0.0, yaw: float = 0.0) -> pin.SE3:
+    return pin.SE3(pin.rpy.rpyToMatrix(roll, pitch, yaw), np.array([x, y, z], dtype=float))
+
+
+def as_se3(pose: Pose) -> pin.SE3:
+    """A pose from an SE3, a 4x4 matrix, (x, y, z) or (x, y, z, roll, pitch, yaw)."""
+    if isinstance(pose, pin.SE3):
+        return pin.SE3(pose)
+    array = np.asarray(pose, dtype=float)
+    if array.shape == (4, 4):
+        return se3_from_matrix(array)
+    if array.shape == (3,):
+        return pose_from_xyz_rpy(*array)
+    if array.shape == (6,):
+        return pose_from_xyz_rpy(*array)
+    raise KinematicsError(f"a pose is an SE3, a 4x4 matrix, (x, y, z) or (x, y, z, roll, pitch, yaw); got {pose!r}")
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A colliding pair: robot links by link name, scene objects by object name."""
+
+    first: str
+    second: str
+    kind: str
+    """``self`` (robot against robot) or ``scene`` (involving a scene object)."""
+    penetration: float | None = None
+    """Penetration depth in metres when coal reports a contact (positive = overlapping)."""
+
+    @property
+    def pair(self) -> tuple[str, str]:
+        return (self.first, self.second)
+
+    def __str__(self) -> str:
+        depth = f" (penetration {self.penetration * 1000:.1f} mm)" if self.penetration is not None else ""
+        return f"{self.first} <-> {self.second}{depth}"
+
+
+@dataclass(frozen=True)
+class SceneObject:
+    name: str
+    shape: str
+    """``box``, ``cylinder`` or ``sphere``."""
+    dimensions: tuple[float, ...]
+    """box: (size x, size y, size z); cylinder: (radius, length along z); sphere: (radius,)."""
+    attached_to: str | None
+    """The robot frame carrying the object, or None when it is fixed in the base frame."""
+
+
+class CollisionChecker:
+    """Self-collision and scene collision of one robot, for a whole configuration ``q``."""
+
+    def __init__(self, kinematics: Kinematics) -> None:
+        self.kinematics = kinematics
+        model = kinematics.model
+        robot = kinematics.robot
+        self._model = model
+        self._data = model.createData()
+        self.geometry: pin.GeometryModel = pin.buildGeomFromUrdf(
+            model, str(robot.urdf_path), pin.GeometryType.COLLISION, package_dirs=[str(p) for p in robot.package_dirs]
+        )
+        self._robot_geometries = self.geometry.ngeoms
+        self._link_of = [model.frames[g.parentFrame].name for g in self.geometry.geometryObjects]
+        self._disabled_links = _srdf_disabled_pairs(robot.srdf_path) if robot.srdf_path else set()
+        self._objects: dict[str, SceneObject] = {}
+        self._allowed: set[frozenset[str]] = set()
+        self._geometry_data: pin.GeometryData | None = None
+        self._broadphase = None
+        self._pair_kinds: list[str] = []
+        self._masks: dict[tuple[bool, bool, str | None], np.ndarray] = {}
+        self._active_key: tuple[bool, bool, str | None] | None = None
+        self._rebuild_pairs()
+
+    # -- pairs -------------------------------------------------------------------------------------------------
+
+    def _name_of(self, geometry_index: int) -> str:
+        if geometry_index < self._robot_geometries:
+            return self._link_of[geometry_index]
+        return self.geometry.geometryObjects[geometry_index].name
+
+    def _rebuild_pairs(self) -> None:
+        """Robot pairs minus the SRDF's, then every robot geometry against every scene object, minus allowed."""
+        geometry = self.geometry
+        geometry.removeAllCollisionPairs()
+        objects = geometry.geometryObjects
+        n_robot = self._robot_geometries
+        kinds = []
+        for i in range(n_robot):
+            for j in range(i + 1, n_robot):
+                a, b = objects[i], objects[j]
+                if a.parentJoint == b.parentJoint:
+                    continue  # rigidly joined: they never move relative to each other
+                if frozenset((self._link_of[i], self._link_of[j])) in self._disabled_links:
+                    continue
+                geometry.addCollisionPair(pin.CollisionPair(i, j))
+                kinds.append("self")
+        for j in range(n_robot, geometry.ngeoms):
+            carried_by = objects[j].parentJoint
+            for i in range(n_robot):
+                if carried_by != 0 and objects[i].parentJoint == carried_by:
+                    continue
+                if frozenset((self._link_of[i], objects[j].name)) in self._allowed:
+                    continue
+                geometry.addCollisionPair(pin.CollisionPair(i, j))
+                kinds.append("scene")
+        self._pair_kinds = kinds
+        self._masks = {}
+        self._geometry_data = None
+        self._broadphase = None
+
+    @property
+    def geometry_data(self) -> pin.GeometryData:
+        if self._geometry_data is None:
+            self._geometry_data = self.geometry.createData()
+            for request in self._geometry_data.collisionRequests:
+                request.enable_contact = True
+            self._active_key = (True, True, None)
+            self._broadphase = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(
+                self._model, self.geometry, self._geometry_data
+            )
+        return self._geometry_data
+
+    @property
+    def n_self_pairs(self) -> int:
+        return self._pair_kinds.count("self")
+
+    @property
+    def n_scene_pairs(self) -> int:
+        return self._pair_kinds.count("scene")
+
+    @property
+    def links(self) -> tuple[str, ...]:
+        """Robot links that carry collision geometry."""
+        return tuple(dict.fromkeys(self._link_of))
+
+    # -- the scene ---------------------------------------------------------------------------------------------
+
+    @property
+    def objects(self) -> dict[str, SceneObject]:
+        return dict(self._objects)
+
+    def add_box(self, name: str, size: Sequence[float], pose: Pose) -> None:
+        """A box of full side lengths ``size`` centred at ``pose``."""
+        sx, sy, sz = _positive(size, 3, "box size")
+        self._add(SceneObject(name, "box", (sx, sy, sz), None), coal.Box(sx, sy, sz), pose)
+
+    def add_cylinder(self, name: str, radius: float, length: float, pose: Pose) -> None:
+        """A cylinder whose axis is the z axis of ``pose``, centred at ``pose``."""
+        r, h = _positive((radius, length), 2, "cylinder radius and length")
+        self._add(SceneObject(name, "cylinder", (r, h), None), coal.Cylinder(r, h), pose)
+
+    def add_sphere(self, name: str, radius: float, pose: Pose) -> None:
+        (r,) = _positive((radius,), 1, "sphere radius")
+        self._add(SceneObject(name, "sphere", (r,), None), coal.Sphere(r), pose)
+
+    def _add(self, description: SceneObject, shape: coal.CollisionGeometry, pose: Pose) -> None:
+        name = description.name
+        if not name:
+            raise KinematicsError("a scene object needs a name")
+        if name in self._objects or name in self._link_of:
+            raise KinematicsError(f"scene object {name!r} already exists (or names a robot link)")
+        placement = as_se3(pose)
+        self.geometry.addGeometryObject(pin.GeometryObject(name, 0, 0, placement, shape))
+        self._objects[name] = description
+        self._rebuild_pairs()
+
+    def _index(self, name: str) -> int:
+        if name not in self._objects:
+            known = ", ".join(self._objects) or "none"
+            raise KinematicsError(f"unknown scene object {name!r}; scene objects: {known}")
+        return int(self.geometry.getGeometryId(name))
+
+    def move(self, name: str, pose: Pose) -> None:
+        """Place an object at ``pose`` in the base frame (it stops being carried if it was)."""
+        index = self._index(name)
+        obj = self.geometry.geometryObjects[index]
+        if obj.parentJoint != 0:
+            self.detach(name, pose)
+            return
+        obj.placement = as_se3(pose)
+
+    def pose(self, name: str, q: np.ndarray | None = None) -> pin.SE3:
+        """Where an object is; a carried object's pose depends on ``q`` (default home)."""
+        index = self._index(name)
+        obj = self.geometry.geometryObjects[index]
+        if obj.parentJoint == 0:
+            return pin.SE3(obj.placement)
+        q = self.kinematics.home if q is None else self.kinematics.check_q(q)
+        pin.forwardKinematics(self._model, self._data, q)
+        return self._data.oMi[obj.parentJoint] * obj.placement
+
+    def remove(self, name: str) -> None:
+        self._index(name)
+        self.geometry.removeGeometryObject(name)
+        del self._objects[name]
+        self._allowed = {pair for pair in self._allowed if name not in pair}
+        self._rebuild_pairs()
+
+    def clear_scene(self) -> None:
+        for name in list(self._objects):
+            self.geometry.removeGeometryObject(name)
+        self._objects.clear()
+        self._allowed.clear()
+        self._rebuild_pairs()
+
+    def allow(self, name: str, links: Iterable[str]) -> None:
+        """Stop checking ``name`` against these robot links (e.g. a block between the fingers that hold it)."""
+        self._index(name)
+        for link in links:
+            if link not in self._link_of:
+                raise KinematicsError(f"unknown collision link {link!r}; links: {', '.join(self.links)}")
+            self._allowed.add(frozenset((name, link)))
+        self._rebuild_pairs()
+
+    def disallow(self, name: str) -> None:
+        """Check ``name`` against every robot link again."""
+        self._index(name)
+        self._allowed = {pair for pair in self._allowed if name not in pair}
+        self._rebuild_pairs()
+
+    def attach(self, name: str, frame: str, q: np.ndarray) -> None:
+        """Carry an object with robot ``frame``, keeping its current pose relative to that frame at ``q``.
+
+        The object is then no longer checked against geometries rigidly joined to the carrying link.
+        """
+        index = self._index(name)
+        fid = self.kinematics.frame_id(frame)
+        world = self.pose(name, q)
+        pin.forwardKinematics(self._model, self._data, self.kinematics.check_q(q))
+        joint = self._model.frames[fid].parentJoint
+        obj = self.geometry.geometryObjects[index]
+        obj.parentJoint = joint
+        obj.parentFrame = fid
+        obj.placement = self._data.oMi[joint].actInv(world)
+        self._objects[name] = SceneObject(name, self._objects[name].shape, self._objects[name].dimensions, frame)
+        self._rebuild_pairs()
+
+    def detach(self, name: str, pose: Pose) -> None:
+        index = self._index(name)
+        obj = self.geometry.geometryObjects[index]
+        obj.parentJoint = 0
+        obj.parentFrame = 0
+        obj.placement = as_se3(pose)
+        self._objects[name] = SceneObject(name, self._objects[name].shape, self._objects[name].dimensions, None)
+        self._rebuild_pairs()
+
+    # -- queries -----------------------------------------------------------------------------------------------
+
+    def check(
+        self, q: np.ndarray, *, scene: bool = True, self_collision: bool = True, arm: str | None = None
+    ) -> Contact | None:
+        """The first colliding pair at ``q`` (pairs in a fixed order: deterministic), or None if collision-free.
+
+        ``arm`` restricts the check to pairs with a geometry moved by that arm's joints (what an arm motion can
+        change: about half the pairs); ``scene`` and ``self_collision`` choose the kinds of pairs.
+        """
+        q = self.kinematics.check_q(q)
+        key = (scene, self_collision, arm)
+        data, mask = self._activate(key)
+        # Broad phase first (AABB tree: ~25 us instead of ~110 us when nothing collides); it visits pairs in its
+        # own order, so a collision is named by the ordered pass below.
+        if key == (True, True, None) and not pin.computeCollisions(self._model, self._data, self._broadphase, q, True):
+            return None
+        pin.updateGeometryPlacements(self._model, self._data, self.geometry, data, q)
+        if not pin.computeCollisions(self.geometry, data, True):
+            return None
+        results = data.collisionResults
+        # Results of inactive pairs and of pairs after the first hit are stale: look only at active ones, in order.
+        for k in np.flatnonzero(mask).tolist():
+            if results[k].isCollision():
+                return self._contact(k, results[k])
+        return None  # pragma: no cover - computeCollisions said there was one
+
+    def all_contacts(self, q: np.ndarray) -> list[Contact]:
+        """Every colliding pair at ``q`` (slower than :meth:`check`: no early stop)."""
+        q = self.kinematics.check_q(q)
+        data, mask = self._activate((True, True, None))
+        pin.updateGeometryPlacements(self._model, self._data, self.geometry, data, q)
+        pin.computeCollisions(self.geometry, data, False)
+        results = data.collisionResults
+        return [self._contact(k, results[k]) for k in np.flatnonzero(mask).tolist() if results[k].isCollision()]
+
+    def _mask(self, key: tuple[bool, bool, str | None]) -> np.ndarray:
+        mask = self._masks.get(key)
+        if mask is None:
+            scene, self_collision, arm = key
+            kinds = np.array(self._pair_kinds)
+            mask = np.zeros(len(kinds), dtype=bool)
+            if scene:
+                mask |= kinds == "scene"
+            if self_collision:
+                mask |= kinds == "self"
+            if arm is not None:
+                moved = self._joints_moved_by(arm)
+                objects = self.geometry.geometryObjects
+                for k, pair in enumerate(self.geometry.collisionPairs):
+                    if mask[k]:
+                        first, second = objects[pair.first].parentJoint, objects[pair.second].parentJoint
+                        mask[k] = first in moved or second in moved
+            self._masks[key] = mask
+        return mask
+
+    def _joints_moved_by(self, arm: str) -> set[int]:
+        arm_joints = {self._model.getJointId(name) for name in self.kinematics.robot.arm(arm).joints}
+        return {j for j in range(self._model.njoints) if arm_joints & set(self._model.supports[j])}
+
+    def _activate(self, key: tuple[bool, bool, str | None]) -> tuple[pin.GeometryData, np.ndarray]:
+        """Geometry data with exactly the wanted pairs active (switched only when the wish changes)."""
+        data = self.geometry_data
+        mask = self._mask(key)
+        if self._active_key != key:
+            for k, active in enumerate(mask):
+                if active:
+                    data.activateCollisionPair(k)
+                else:
+                    data.deactivateCollisionPair(k)
+            self._active_key = key
+        return data, mask
+
+    def in_collision(self, q: np.ndarray) -> bool:
+        return self.check(q) is not None
+
+    def distance(self, q: np.ndarray, name: str) -> tuple[float, str]:
+        """Smallest distance between scene object ``name`` and the robot, and the closest link."""
+        index = self._index(name)
+        q = self.kinematics.check_q(q)
+        data = self.geometry_data
+        pin.updateGeometryPlacements(self._model, self._data, self.geometry, data, q)
+        best, link = np.inf, ""
+        for k, pair in enumerate(self.geometry.collisionPairs):
+            if pair.second != index:
+                continue
+            result = pin.computeDistance(self.geometry, data, k)
+            if result.min_distance < best:
+                best, link = float(result.min_distance), self._link_of[pair.first]
+        if not link:
+            raise KinematicsError(f"scene object {name!r} is not checked against any robot link")
+        return best, link
+
+    def _contact(self, k: int, result: coal.CollisionResult) -> Contact:
+        pair = self.geometry.collisionPairs[k]
+        depth = None
+        if result.numContacts() > 0:
+            depth = float(-result.getContact(0).penetration_depth)
+            depth = abs(depth)
+        return Contact(self._name_of(pair.first), self._name_of(pair.second), self._pair_kinds[k], depth)
+
+
+def _positive(values: Sequence[float], count: int, what: str) -> tuple[float, ...]:
+    out = tuple(float(v) for v in values)
+    if len(out) != count or not all(np.isfinite(v) and v > 0 for v in out):
+        raise KinematicsError(f"{what} must be {count} positive numbers, got {tuple(values)!r}")
+    return out
+
+
+def _srdf_disabled_pairs(path) -> set[frozenset[str]]:
+    root = ElementTree.fromstring(path.read_text(encoding="utf-8"))
+    return {frozenset((el.get("link1", ""), el.get("link2", ""))) for el in root.iter("disable_collisions")}

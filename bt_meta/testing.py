@@ -1,1 +1,262 @@
-"""Tick-by-tick test harness and pytest fixtures for bt-meta trees (registered as the ``pytest11`` plugin)."""
+"""Tick-by-tick test harness and pytest fixtures for bt-meta trees (registered as the ``pytest11`` plugin).
+
+Load a task file (planned and compiled) or a tree XML, tick it once, N times or until a status, and inspect what
+each node did, the blackboard and the recorded failures -- without the simulator: the fake world runs the skills.
+
+Offers:
+
+* :class:`TreeHarness` -- :meth:`~TreeHarness.from_file`, :meth:`~TreeHarness.from_text`,
+  :meth:`~TreeHarness.tick`, :meth:`~TreeHarness.tick_n`, :meth:`~TreeHarness.tick_until`,
+  :meth:`~TreeHarness.status`, :meth:`~TreeHarness.statuses`, :meth:`~TreeHarness.node`,
+  :meth:`~TreeHarness.blackboard`, :attr:`~TreeHarness.failures`, :attr:`~TreeHarness.state`,
+  :attr:`~TreeHarness.history`
+* :class:`HarnessError` -- a node that does not exist, a status never reached
+* fixtures: ``bt_harness`` (a factory: ``bt_harness(path_or_yaml_text, problem=..., faults=[...])``),
+  ``bt_plugins`` (a factory for plugin hosts), ``bt_blackboard`` (clears bt-meta's blackboard keys around a test)
+
+Statuses are recorded *during* each tick, as every node finishes its part of it: BehaviorTree.CPP control nodes
+reset their children when they finish, so reading ``behaviour.status`` afterwards would mostly show INVALID.
+A monitored action reports its Monitor's status (what the tree sees); pass ``raw=True`` for the action's own.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
+from typing import Any
+
+import py_trees
+from py_trees.common import Status
+
+from bt_meta.bt.context import FAILURES_KEY, RUN_KEY, STATE_KEY, WORLD_KEY, RunContext
+from bt_meta.bt.failures import Failure
+from bt_meta.errors import BtMetaError
+
+__all__ = ["HarnessError", "TreeHarness", "bt_blackboard", "bt_harness", "bt_plugins"]
+
+_BT_META_KEYS = (RUN_KEY, WORLD_KEY, STATE_KEY, FAILURES_KEY)
+
+
+class HarnessError(BtMetaError):
+    """A harness request that cannot be answered: an unknown or ambiguous node, a status never reached."""
+
+
+def _status(value: Status | str) -> Status:
+    if isinstance(value, Status):
+        return value
+    try:
+        return Status(value.upper())
+    except ValueError:
+        raise HarnessError(f"unknown status {value!r}; expected RUNNING, SUCCESS, FAILURE or INVALID") from None
+
+
+def clear_blackboard() -> None:
+    """Remove bt-meta's keys (and bindings written by policy guards) from py_trees' process-wide blackboard."""
+    storage = py_trees.blackboard.Blackboard.storage
+    for key in list(storage):
+        if key in _BT_META_KEYS or key.startswith("/bt_meta/"):
+            del storage[key]
+
+
+class TreeHarness:
+    """A tree, the run it ticks in, and what every node did on every tick."""
+
+    def __init__(self, root: py_trees.behaviour.Behaviour, run: RunContext, compiled: Any = None) -> None:
+        self.root = root
+        self.run = run
+        self.compiled = compiled
+        self.history: list[dict[str, Any]] = []
+        self._last: dict[str, Status] = {}
+        self._by_name: dict[str, list[py_trees.behaviour.Behaviour]] = {}
+        for behaviour in root.iterate():
+            self._by_name.setdefault(behaviour.name, []).append(behaviour)
+        run.install()
+
+    # -- construction -------------------------------------------------------------------------------------------
+
+    @classmethod
+    def from_file(
+        cls,
+        path: str | Path,
+        problem: str | None = None,
+        *,
+        task_file: str | Path | None = None,
+        policy: bool = False,
+        world: str | Any = "fake",
+        faults: Iterable[Any] = (),
+        ticks_per_skill: int | dict[str, int] = 1,
+        plugins: Any = None,
+        plugin_dirs: Iterable[str | Path] = (),
+        entry_points: bool = True,
+        extra_plugins: Iterable[tuple[str, Any]] = (),
+    ) -> TreeHarness:
+        """Load a task file or tree XML, build the world (``"fake"``, another name a plugin provides, a World
+        object, or ``None``) and a plugin host (given, or built-ins + entry points + folders + ``extra_plugins``)."""
+        from bt_meta.bt.loading import load_runnable
+        from bt_meta.plugins import create_plugin_host
+
+        if plugins is None:
+            plugins = create_plugin_host(plugin_dirs, project_file=path, entry_points=entry_points,
+                                         plugins=extra_plugins)
+        compiled = load_runnable(path, problem=problem, task_file=task_file, policy=policy, plugins=plugins)
+        if isinstance(world, str):
+            options = {"faults": list(faults), "ticks_per_skill": ticks_per_skill}
+            made = plugins.call("bt_meta_make_world", name=world, domain=compiled.domain,
+                                problem=compiled.problem, options=options)
+            if made.errors:
+                raise made.errors[0].error
+            if not made.results:
+                raise HarnessError(f"no plugin provides a world named {world!r}")
+            world = made.first
+        run = RunContext(world, plugins, domain=compiled.domain, problem=compiled.problem,
+                         task_file=compiled.task_file)
+        return cls(compiled.root, run, compiled)
+
+    @classmethod
+    def from_text(cls, text: str, problem: str | None = None, *, suffix: str | None = None,
+                  **kwargs: Any) -> TreeHarness:
+        """Like :meth:`from_file` for YAML or XML text (written to a temporary file, so errors name a path)."""
+        if suffix is None:
+            suffix = ".xml" if text.lstrip().startswith("<") else ".yaml"
+        folder = Path(tempfile.mkdtemp(prefix="bt_meta_harness_"))
+        path = folder / f"tree{suffix}"
+        path.write_text(text, encoding="utf-8")
+        return cls.from_file(path, problem, **kwargs)
+
+    # -- ticking ------------------------------------------------------------------------------------------------
+
+    def tick(self) -> Status:
+        """Tick the tree once; returns the root's status."""
+        seen: dict[str, Status] = {}
+
+        def visit(behaviour: py_trees.behaviour.Behaviour) -> None:
+            seen[behaviour.name] = behaviour.status
+
+        status = self.run.tick(self.root, visit)
+        self._last = seen
+        self.history.append({"tick": self.run.tick_count, "status": status,
+                             "statuses": {name: s.value for name, s in seen.items()}})
+        return status
+
+    def tick_n(self, count: int) -> list[Status]:
+        return [self.tick() for _ in range(count)]
+
+    def tick_until(self, status: Status | str | Callable[[TreeHarness], bool] = "done",
+                   max_ticks: int = 1000) -> Status:
+        """Tick until the root has ``status`` (``"done"``: anything but RUNNING) or ``status(harness)`` is true."""
+        if callable(status):
+            def reached(root: Status) -> bool:
+                return bool(status(self))
+        elif status == "done":
+            def reached(root: Status) -> bool:
+                return root is not Status.RUNNING
+        else:
+            wanted = _status(status)
+
+            def reached(root: Status) -> bool:
+                return root is wanted
+        for _ in range(max_ticks):
+            root = self.tick()
+            if reached(root):
+                return root
+        raise HarnessError(f"not reached after {max_ticks} ticks: {status!r} (root is {self.root.status.value})")
+
+    # -- inspection ---------------------------------------------------------------------------------------------
+
+    def node(self, name: str, *, raw: bool = False) -> py_trees.behaviour.Behaviour:
+        """The behaviour named ``name``, or whose name starts with the node id ``name`` (``"n3"``)."""
+        matches = self._by_name.get(name)
+        if not matches:
+            matches = [b for n, bs in self._by_name.items() if n.startswith(name + " ") for b in bs
+                       if not getattr(b, "is_monitor", False)]
+        if not matches:
+            close = ", ".join(sorted(self._by_name)[:20])
+            raise HarnessError(f"no node named {name!r}; nodes: {close}")
+        if len(matches) > 1:
+            raise HarnessError(f"{len(matches)} nodes match {name!r}: {', '.join(b.name for b in matches)}")
+        behaviour = matches[0]
+        parent = behaviour.parent
+        if not raw and parent is not None and getattr(parent, "is_monitor", False):
+            return parent
+        return behaviour
+
+    def status(self, name: str, *, raw: bool = False) -> Status:
+        """The status ``name`` had when last ticked (INVALID if never ticked)."""
+        behaviour = self.node(name, raw=raw)
+        for tick in reversed(self.history):
+            value = tick["statuses"].get(behaviour.name)
+            if value is not None:
+                return Status(value)
+        return Status.INVALID
+
+    def statuses(self, tick: int | None = None) -> dict[str, str]:
+        """Name -> status of every node ticked in the last tick (or in tick number ``tick``, 1-based)."""
+        if not self.history:
+            return {}
+        entry = self.history[-1] if tick is None else self.history[tick - 1]
+        return dict(entry["statuses"])
+
+    def blackboard(self, key: str) -> Any:
+        storage = py_trees.blackboard.Blackboard.storage
+        name = key if key.startswith("/") else "/" + key
+        if name not in storage:
+            raise HarnessError(f"no blackboard entry {name!r}")
+        return storage[name]
+
+    @property
+    def failures(self) -> list[Failure]:
+        return list(self.run.failures)
+
+    @property
+    def failure_kinds(self) -> list[str]:
+        return [failure.kind.value for failure in self.run.failures]
+
+    @property
+    def state(self) -> Any:
+        return self.run.state
+
+    @property
+    def world(self) -> Any:
+        return self.run.world
+
+    def close(self) -> None:
+        clear_blackboard()
+
+
+# -- pytest fixtures ------------------------------------------------------------------------------------------------
+
+try:
+    import pytest
+except ImportError:  # pragma: no cover - the harness works without pytest
+    pytest = None  # type: ignore[assignment]
+
+if pytest is not None:
+
+    @pytest.fixture
+    def bt_blackboard() -> Iterator[Any]:
+        """Clear bt-meta's blackboard keys before and after the test; yields py_trees' blackboard storage."""
+        clear_blackboard()
+        yield py_trees.blackboard.Blackboard.storage
+        clear_blackboard()
+
+    @pytest.fixture
+    def bt_harness(bt_blackboard: Any) -> Callable[..., TreeHarness]:
+        """Factory: ``bt_harness(path_or_text, problem=None, **options)`` -> :class:`TreeHarness`."""
+
+        def make(source: str | Path, problem: str | None = None, **options: Any) -> TreeHarness:
+            if isinstance(source, Path) or ("\n" not in str(source) and Path(str(source)).is_file()):
+                return TreeHarness.from_file(source, problem, **options)
+            return TreeHarness.from_text(str(source), problem, **options)
+
+        return make
+
+    @pytest.fixture
+    def bt_plugins() -> Callable[..., Any]:
+        """Factory for plugin hosts: ``bt_plugins(("name", plugin), ..., entry_points=True, dirs=())``."""
+        from bt_meta.plugins import create_plugin_host
+
+        def make(*plugins: tuple[str, Any], entry_points: bool = True, dirs: Iterable[str | Path] = ()) -> Any:
+            return create_plugin_host(dirs, entry_points=entry_points, plugins=plugins)
+
+        return make

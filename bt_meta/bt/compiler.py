@@ -38,6 +38,7 @@ from bt_meta.bt.actions import PrimitiveAction
 from bt_meta.bt.domain_nodes import CHECK_CONDITION, domain_registry, node_id_of
 from bt_meta.bt.guards import format_bindings
 from bt_meta.bt.monitor import Monitor
+from bt_meta.bt.nodes.ticking import install_wake_up
 from bt_meta.bt.registry import NodeRegistry
 from bt_meta.errors import BtMetaError, PlanningError
 from bt_meta.htn.state import atom_text
@@ -104,7 +105,9 @@ def compile_plan(
     roots = [build(root) for root in tree.roots]
     if not roots:
         roots = [registry.create("AlwaysSuccess", name="empty plan")]
-    return registry.create("Sequence", name=name, children=roots)
+    root = registry.create("Sequence", name=name, children=roots)
+    install_wake_up(root)
+    return root
 
 
 def compile_policy(
@@ -191,7 +194,9 @@ def compile_policy(
     roots = [expand(task[0], [str(a) for a in task[1:]], 0) for task in tasks]
     if not roots:
         roots = [create("AlwaysSuccess", name="empty task network")]
-    return create("Sequence", name=name, children=roots)
+    root = create("Sequence", name=name, children=roots)
+    install_wake_up(root)
+    return root
 
 
 def compile_task_file(

@@ -138,12 +138,24 @@ class RunContext:
             node_name=None if context is None else context.node_name,
         )
 
-    def tick(self, root: py_trees.behaviour.Behaviour) -> py_trees.common.Status:
-        """Tick ``root`` once inside this run (installing it first) and return the root's status."""
+    def tick(self, root: py_trees.behaviour.Behaviour, visit: Any = None) -> py_trees.common.Status:
+        """Tick ``root`` once inside this run (installing it first) and return the root's status.
+
+        Like BehaviorTree.CPP's ``tickOnce``, the root is ticked again while it is RUNNING and a node raised the
+        tree's wake-up signal. ``visit(behaviour)`` sees every behaviour as it finishes its part of the tick.
+        """
         if _STORAGE.get(RUN_KEY) is not self:
             self.install()
         self.tick_count += 1
-        root.tick_once()
+        signal = getattr(root, "bt_wake_up", None)
+        while True:
+            if visit is None:
+                root.tick_once()
+            else:
+                for behaviour in root.tick():
+                    visit(behaviour)
+            if root.status is not py_trees.common.Status.RUNNING or signal is None or not signal.consume():
+                break
         if self._trace:
             self.emit("tick", status=root.status.value)
         return root.status

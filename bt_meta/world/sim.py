@@ -1,0 +1,763 @@
+"""The pybullet world: a fixed-base Baxter, a table in front of it, and the paper's objects, headless by default.
+
+Every pose is in the robot base frame (the URDF's ``base`` link, where Pinocchio's world is): the robot's base
+is placed at the pybullet origin, so pybullet world coordinates *are* robot base coordinates.
+
+Offers:
+
+* :class:`Simulation` -- own physics client (``gui=True`` for a person at a screen), context manager; robot
+  joints (teleport or drive targets and step), objects by name (spawn, move, remove, pose), grasp by fixed
+  constraint and release, the magnetic attach rule (checked at every step, joins by fixed constraint),
+  :meth:`Simulation.object_states` with AP/AN in the base frame
+* :class:`SimObjectState` -- ground truth of one object: pose, AP/AN (base and object frame), all features
+* :class:`Table` -- where the table is (defaults: top 0.2 m below the base frame, front edge 0.45 m ahead)
+* :class:`SimulationError` -- unknown object or link names, duplicate names, impossible requests
+
+Why the robot's visuals are its collision geometry by default: the original DAE meshes take ~1.3 s to load and
+~80 ms per 320x240 camera frame; the collision shapes load in ~0.07 s and render in ~7 ms. ``visuals="full"``
+keeps the meshes (for a GUI).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import tempfile
+import xml.etree.ElementTree as ElementTree
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pybullet
+
+from bt_meta.errors import BtMetaError
+from bt_meta.world.objects import (
+    COLOURS,
+    AttachmentRelation,
+    Box,
+    Cylinder,
+    ObjectModel,
+    Pose6,
+    attachment_relation,
+    matrix_to_pose,
+)
+from bt_meta.world.robot import RobotDescription, load_robot
+
+__all__ = ["SimObjectState", "Simulation", "SimulationError", "Table"]
+
+
+class SimulationError(BtMetaError):
+    """A request the simulation cannot carry out (unknown name, duplicate name, pose of the wrong length)."""
+
+
+@dataclass(frozen=True)
+class Table:
+    """A static table slab. ``top_z`` is the height of its top surface in the robot base frame.
+
+    The defaults put the top 0.20 m below the base frame, from x = 0.45 m (clear of the pedestal, which ends at
+    x = 0.42 m) to 1.05 m, y from -0.65 to 0.45 m: the right gripper reaches it pointing straight down over
+    x 0.45..0.75 m, y -0.55..0.15 m (checked by IK in tests/world/test_sim.py).
+    """
+
+    center_x: float = 0.75
+    center_y: float = -0.10
+    size_x: float = 0.60
+    size_y: float = 1.10
+    top_z: float = -0.20
+    thickness: float = 0.04
+    colour: tuple[float, float, float, float] = (0.93, 0.9, 0.83, 1.0)
+
+    @property
+    def bounds(self) -> tuple[tuple[float, float], tuple[float, float]]:
+        """((x_min, x_max), (y_min, y_max)) of the top surface."""
+        return (
+            (self.center_x - self.size_x / 2.0, self.center_x + self.size_x / 2.0),
+            (self.center_y - self.size_y / 2.0, self.center_y + self.size_y / 2.0),
+        )
+
+
+@dataclass(frozen=True)
+class SimObjectState:
+    """Ground truth of one object. ``ap``/``an`` are the primary feature in the robot base frame (what traces
+    compare, paper section 7.2.1); ``ap_object``/``an_object`` the same feature in the object frame; ``features``
+    maps every feature name to its (point, normal) in the base frame."""
+
+    name: str
+    type: str
+    colour: str
+    shape: str | None
+    pose: Pose6
+    ap: tuple[float, float, float]
+    an: tuple[float, float, float]
+    ap_object: tuple[float, float, float]
+    an_object: tuple[float, float, float]
+    features: dict[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = field(default_factory=dict)
+    held_by: str | None = None
+    """The arm holding the object, if any."""
+    attached_to: tuple[str, ...] = ()
+    """Objects magnetically joined to this one."""
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "type": self.type,
+            "colour": self.colour,
+            "shape": self.shape,
+            "pose": list(self.pose),
+            "ap": list(self.ap),
+            "an": list(self.an),
+            "held_by": self.held_by,
+            "attached_to": list(self.attached_to),
+        }
+
+
+@dataclass
+class _Body:
+    name: str
+    model: ObjectModel
+    body_id: int
+
+
+@dataclass
+class _Grasp:
+    arm: str
+    object_name: str
+    constraint_id: int
+
+
+def _tuple3(v: Iterable[float]) -> tuple[float, float, float]:
+    a, b, c = (float(x) for x in v)
+    return (a, b, c)
+
+
+def _light_urdf(robot: RobotDescription, directory: Path) -> Path:
+    """A copy of the robot's URDF whose visuals are its collision geometry and whose mesh paths are absolute."""
+    tree = ElementTree.parse(robot.urdf_path)
+    root = tree.getroot()
+    for link in root.findall("link"):
+        visuals = link.findall("visual")
+        material = next((v.find("material") for v in visuals if v.find("material") is not None), None)
+        for v in visuals:
+            link.remove(v)
+        for collision in link.findall("collision"):
+            geometry = collision.find("geometry")
+            if geometry is None:
+                continue
+            visual = ElementTree.SubElement(link, "visual")
+            origin = collision.find("origin")
+            if origin is not None:
+                visual.append(copy.deepcopy(origin))
+            visual.append(copy.deepcopy(geometry))
+            if material is not None:
+                visual.append(copy.deepcopy(material))
+    _absolute_meshes(root, robot)
+    out = directory / "robot_light.urdf"
+    tree.write(out)
+    return out
+
+
+def _full_urdf(robot: RobotDescription, directory: Path) -> Path:
+    tree = ElementTree.parse(robot.urdf_path)
+    _absolute_meshes(tree.getroot(), robot)
+    out = directory / "robot_full.urdf"
+    tree.write(out)
+    return out
+
+
+def _absolute_meshes(root: ElementTree.Element, robot: RobotDescription) -> None:
+    for mesh in root.iter("mesh"):
+        filename = mesh.get("filename", "")
+        if filename.startswith("package://"):
+            relative = filename[len("package://") :]
+            for base in robot.package_dirs:
+                if (Path(base) / relative).is_file():
+                    mesh.set("filename", str(Path(base) / relative))
+                    break
+            else:
+                raise SimulationError(f"mesh {filename} is not under any package dir {robot.package_dirs}")
+
+
+class Simulation:
+    """A pybullet world with the Baxter, a table and named objects.
+
+    Use as a context manager (or call :meth:`close`): it owns its physics client and never touches pybullet's
+    global default client. Stepping is deterministic: the same calls give the same poses; ``seed`` feeds
+    :attr:`rng`, the generator every random draw about this world (scene jitter) must use.
+    """
+
+    def __init__(
+        self,
+        *,
+        gui: bool = False,
+        seed: int = 0,
+        robot: RobotDescription | None = None,
+        table: Table | None = None,
+        time_step: float = 1.0 / 240.0,
+        visuals: str = "light",
+        attach_position_tolerance: float = 0.01,
+        attach_angle_tolerance: float = math.radians(15.0),
+    ) -> None:
+        if visuals not in ("light", "full"):
+            raise SimulationError(f"visuals must be 'light' or 'full', not {visuals!r}")
+        self.robot = robot or load_robot()
+        self.table = table or Table()
+        self.seed = seed
+        self.rng = np.random.default_rng(seed)
+        self.time_step = time_step
+        self.attach_position_tolerance = attach_position_tolerance
+        self.attach_angle_tolerance = attach_angle_tolerance
+        self.steps = 0
+        self.client = pybullet.connect(pybullet.GUI if gui else pybullet.DIRECT)
+        if self.client < 0:
+            raise SimulationError("pybullet could not connect (is another GUI window open?)")
+        self._closed = False
+        try:
+            self._setup(visuals)
+        except BaseException:
+            self.close()
+            raise
+
+    # -- set-up ----------------------------------------------------------------------------------------------
+
+    def _setup(self, visuals: str) -> None:
+        c = self.client
+        pybullet.resetSimulation(physicsClientId=c)
+        pybullet.setPhysicsEngineParameter(
+            fixedTimeStep=self.time_step, deterministicOverlappingPairs=1, physicsClientId=c
+        )
+        pybullet.setGravity(0.0, 0.0, -9.81, physicsClientId=c)
+        with tempfile.TemporaryDirectory(prefix="bt_meta_sim_") as tmp:
+            urdf = _light_urdf(self.robot, Path(tmp)) if visuals == "light" else _full_urdf(self.robot, Path(tmp))
+            self.robot_id = pybullet.loadURDF(
+                str(urdf), [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0], useFixedBase=True, physicsClientId=c
+            )
+        self._joint_index: dict[str, int] = {}
+        self._link_index: dict[str, int] = {pybullet.getBodyInfo(self.robot_id, physicsClientId=c)[0].decode(): -1}
+        self._parent: dict[int, int] = {}
+        self._limits: dict[str, tuple[float, float]] = {}
+        for j in range(pybullet.getNumJoints(self.robot_id, physicsClientId=c)):
+            info = pybullet.getJointInfo(self.robot_id, j, physicsClientId=c)
+            self._link_index[info[12].decode()] = j
+            self._parent[j] = info[16]
+            if info[2] != pybullet.JOINT_FIXED:
+                name = info[1].decode()
+                self._joint_index[name] = j
+                self._limits[name] = (info[8], info[9])
+        self.movable_joints: tuple[str, ...] = tuple(self._joint_index)
+        self._targets: dict[str, float] = {}
+        self.set_joint_positions(self.robot.home)
+        self.table_id = self._make_table()
+        self._bodies: dict[str, _Body] = {}
+        self._by_id: dict[int, str] = {}
+        self._grasps: dict[str, _Grasp] = {}
+        self._joins: dict[frozenset[str], int] = {}
+        self._pending_collision: list[tuple[str, str]] = []
+        self._hand_links: dict[str, tuple[int, ...]] = {
+            arm: self._descendants(self.link_index(self._hand_root(arm))) for arm in self.robot.arms
+        }
+
+    def _hand_root(self, arm: str) -> str:
+        """The wrist-side link of the hand: everything below it may touch a held object."""
+        end = self.robot.arm(arm).end_effector
+        j = self.link_index(end)
+        # Walk up from the gripper frame to the link whose parent moves with the last arm joint.
+        last_joint = self._joint_index[self.robot.arm(arm).joints[-1]]
+        while self._parent[j] != last_joint and self._parent[j] != -1:
+            j = self._parent[j]
+        return pybullet.getJointInfo(self.robot_id, j, physicsClientId=self.client)[12].decode()
+
+    def _descendants(self, link: int) -> tuple[int, ...]:
+        out = {link}
+        changed = True
+        while changed:
+            changed = False
+            for child, parent in self._parent.items():
+                if parent in out and child not in out:
+                    out.add(child)
+                    changed = True
+        return tuple(sorted(out))
+
+    def _make_table(self) -> int:
+        t, c = self.table, self.client
+        half = [t.size_x / 2.0, t.size_y / 2.0, t.thickness / 2.0]
+        col = pybullet.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half, physicsClientId=c)
+        vis = pybullet.createVisualShape(pybullet.GEOM_BOX, halfExtents=half, rgbaColor=t.colour, physicsClientId=c)
+        body = pybullet.createMultiBody(
+            0.0, col, vis, [t.center_x, t.center_y, t.top_z - t.thickness / 2.0], physicsClientId=c
+        )
+        pybullet.changeDynamics(body, -1, lateralFriction=0.8, physicsClientId=c)
+        return body
+
+    # -- lifetime --------------------------------------------------------------------------------------------
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            pybullet.disconnect(physicsClientId=self.client)
+
+    def __enter__(self) -> Simulation:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- robot -----------------------------------------------------------------------------------------------
+
+    def link_index(self, name: str) -> int:
+        try:
+            return self._link_index[name]
+        except KeyError:
+            raise SimulationError(f"the robot has no link {name!r}") from None
+
+    def joint_index(self, name: str) -> int:
+        try:
+            return self._joint_index[name]
+        except KeyError:
+            raise SimulationError(f"the robot has no movable joint {name!r}") from None
+
+    def joint_limits(self, name: str) -> tuple[float, float]:
+        self.joint_index(name)
+        return self._limits[name]
+
+    def joint_positions(self, names: Sequence[str] | None = None) -> dict[str, float]:
+        """Current joint values by name (all movable joints unless ``names``)."""
+        names = self.movable_joints if names is None else names
+        idx = [self.joint_index(n) for n in names]
+        states = pybullet.getJointStates(self.robot_id, idx, physicsClientId=self.client)
+        return {n: float(s[0]) for n, s in zip(names, states, strict=True)}
+
+    def set_joint_positions(self, q: Mapping[str, float]) -> None:
+        """Teleport joints (zero velocity) and make the values the motors' targets, so they stay."""
+        for name, value in q.items():
+            pybullet.resetJointState(
+                self.robot_id, self.joint_index(name), float(value), 0.0, physicsClientId=self.client
+            )
+        self.set_joint_targets(q)
+
+    def set_joint_targets(self, q: Mapping[str, float], max_velocity: float | None = None) -> None:
+        """Position targets the motors drive to while :meth:`step` runs (other joints keep their targets)."""
+        for name, value in q.items():
+            self.joint_index(name)
+            self._targets[name] = float(value)
+        names = list(self._targets)
+        idx = [self._joint_index[n] for n in names]
+        pybullet.setJointMotorControlArray(
+            self.robot_id,
+            idx,
+            pybullet.POSITION_CONTROL,
+            targetPositions=[self._targets[n] for n in names],
+            forces=[500.0] * len(idx),
+            physicsClientId=self.client,
+        )
+        if max_velocity is not None:
+            for name, value in q.items():
+                pybullet.setJointMotorControl2(
+                    self.robot_id,
+                    self._joint_index[name],
+                    pybullet.POSITION_CONTROL,
+                    targetPosition=float(value),
+                    force=500.0,
+                    maxVelocity=max_velocity,
+                    physicsClientId=self.client,
+                )
+
+    def joint_targets(self) -> dict[str, float]:
+        return dict(self._targets)
+
+    def link_transform(self, link: str) -> np.ndarray:
+        """4x4 pose of a robot link's URDF frame in the base frame."""
+        index = self.link_index(link)
+        if index == -1:
+            pos, quat = pybullet.getBasePositionAndOrientation(self.robot_id, physicsClientId=self.client)
+        else:
+            state = pybullet.getLinkState(
+                self.robot_id, index, computeForwardKinematics=True, physicsClientId=self.client
+            )
+            pos, quat = state[4], state[5]
+        return _transform(pos, quat)
+
+    def link_pose(self, link: str) -> Pose6:
+        return matrix_to_pose(self.link_transform(link))
+
+    def gripper_pose(self, arm: str = "right") -> Pose6:
+        """Pose of the arm's end-effector frame (between the fingertips, z = approach)."""
+        return self.link_pose(self.robot.arm(arm).end_effector)
+
+    def step(self, n: int = 1) -> None:
+        """Advance physics ``n`` fixed time steps, checking the magnetic attach rule after each."""
+        pairs = self._magnet_pairs()
+        for _ in range(n):
+            pybullet.stepSimulation(physicsClientId=self.client)
+            self.steps += 1
+            for active, reference in pairs:
+                if frozenset((active, reference)) not in self._joins:
+                    self.try_attach(active, reference)
+        if self._pending_collision:
+            self._restore_collisions()
+
+    def settle(self, steps: int = 240) -> None:
+        """Let objects come to rest (one second of simulated time by default)."""
+        self.step(steps)
+
+    # -- objects ---------------------------------------------------------------------------------------------
+
+    def spawn(self, name: str, model: ObjectModel, pose: Sequence[float], *, on_table: bool = False) -> int:
+        """Create an object at ``pose`` (x, y, z, roll, pitch, yaw); ``on_table`` replaces z by the height at
+        which the geometry, so turned, rests on the table top (loose objects 0.5 mm higher: they start out of contact
+        and drop)."""
+        if name in self._bodies:
+            raise SimulationError(f"an object named {name!r} already exists")
+        pose = self._checked_pose(pose, name)
+        if on_table:
+            pose = self.resting_pose(model, pose)
+        c = self.client
+        kinds, halves, radii, lengths, positions, orientations = [], [], [], [], [], []
+        for part in model.parts:
+            positions.append(list(part.position))
+            orientations.append(list(pybullet.getQuaternionFromEuler(part.rpy)))
+            if isinstance(part, Box):
+                kinds.append(pybullet.GEOM_BOX)
+                halves.append([s / 2.0 for s in part.size])
+                radii.append(0.0)
+                lengths.append(0.0)
+            elif isinstance(part, Cylinder):
+                kinds.append(pybullet.GEOM_CYLINDER)
+                halves.append([0.0, 0.0, 0.0])
+                radii.append(part.radius)
+                lengths.append(part.length)
+            else:  # pragma: no cover - ObjectModel only holds these
+                raise SimulationError(f"unknown part {part!r}")
+        col = pybullet.createCollisionShapeArray(
+            kinds,
+            radii=radii,
+            halfExtents=halves,
+            lengths=lengths,
+            collisionFramePositions=positions,
+            collisionFrameOrientations=orientations,
+            physicsClientId=c,
+        )
+        vis = pybullet.createVisualShapeArray(
+            kinds,
+            radii=radii,
+            halfExtents=halves,
+            lengths=lengths,
+            visualFramePositions=positions,
+            visualFrameOrientations=orientations,
+            physicsClientId=c,
+        )
+        body = pybullet.createMultiBody(
+            model.mass,
+            col,
+            vis,
+            list(pose[:3]),
+            list(pybullet.getQuaternionFromEuler(pose[3:])),
+            physicsClientId=c,
+        )
+        # createVisualShapeArray has no per-shape colour (and crashes when given one): colour the whole body.
+        pybullet.changeVisualShape(body, -1, rgbaColor=list(COLOURS[model.colour]), physicsClientId=c)
+        pybullet.changeDynamics(
+            body, -1, lateralFriction=model.lateral_friction, spinningFriction=0.001, physicsClientId=c
+        )
+        self._bodies[name] = _Body(name, model, body)
+        self._by_id[body] = name
+        return body
+
+    def resting_pose(self, model: ObjectModel, pose: Sequence[float]) -> Pose6:
+        """``pose`` with z set so the model, turned by its roll and pitch, rests on the table top."""
+        pose = self._checked_pose(pose, model.type)
+        gap = 0.0 if model.mass == 0.0 else 0.0005  # a static body never falls: put it exactly on the table
+        z = self.table.top_z + model.lowest_z(pose[3], pose[4]) + gap
+        return (pose[0], pose[1], z, pose[3], pose[4], pose[5])
+
+    def remove(self, name: str) -> None:
+        body = self._body(name)
+        for arm, grasp in list(self._grasps.items()):
+            if grasp.object_name == name:
+                self.release(arm)
+        for pair in [p for p in self._joins if name in p]:
+            pybullet.removeConstraint(self._joins.pop(pair), physicsClientId=self.client)
+        self._pending_collision = [p for p in self._pending_collision if p[1] != name]
+        pybullet.removeBody(body.body_id, physicsClientId=self.client)
+        del self._bodies[name]
+        del self._by_id[body.body_id]
+
+    def clear_objects(self) -> None:
+        for name in list(self._bodies):
+            self.remove(name)
+
+    def move_object(self, name: str, pose: Sequence[float]) -> None:
+        """Teleport an object (velocity zeroed)."""
+        body = self._body(name)
+        pose = self._checked_pose(pose, name)
+        pybullet.resetBasePositionAndOrientation(
+            body.body_id, list(pose[:3]), pybullet.getQuaternionFromEuler(pose[3:]), physicsClientId=self.client
+        )
+        pybullet.resetBaseVelocity(body.body_id, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], physicsClientId=self.client)
+
+    def object_names(self) -> tuple[str, ...]:
+        return tuple(self._bodies)
+
+    def object_model(self, name: str) -> ObjectModel:
+        return self._body(name).model
+
+    def body_id(self, name: str) -> int:
+        return self._body(name).body_id
+
+    def object_name_of(self, body_id: int) -> str | None:
+        """The object name of a pybullet body id (e.g. from a segmentation mask), ``None`` for robot/table."""
+        return self._by_id.get(body_id)
+
+    def object_transform(self, name: str) -> np.ndarray:
+        pos, quat = pybullet.getBasePositionAndOrientation(self._body(name).body_id, physicsClientId=self.client)
+        return _transform(pos, quat)
+
+    def object_pose(self, name: str) -> Pose6:
+        return matrix_to_pose(self.object_transform(name))
+
+    def feature(self, name: str, feature: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(point, normal) of an object's attachment feature (primary if ``None``) in the base frame."""
+        model = self._body(name).model
+        f = model.feature(feature)
+        t = self.object_transform(name)
+        return t[:3, :3] @ np.array(f.point) + t[:3, 3], t[:3, :3] @ np.array(f.normal)
+
+    def object_state(self, name: str) -> SimObjectState:
+        model = self._body(name).model
+        t = self.object_transform(name)
+        rot, pos = t[:3, :3], t[:3, 3]
+        features = {
+            f.name: (_tuple3(rot @ np.array(f.point) + pos), _tuple3(rot @ np.array(f.normal))) for f in model.features
+        }
+        primary = model.feature()
+        held = next((g.arm for g in self._grasps.values() if g.object_name == name), None)
+        joined = tuple(sorted(other for pair in self._joins if name in pair for other in pair if other != name))
+        return SimObjectState(
+            name=name,
+            type=model.type,
+            colour=model.colour,
+            shape=model.shape,
+            pose=matrix_to_pose(t),
+            ap=features[primary.name][0],
+            an=features[primary.name][1],
+            ap_object=primary.point,
+            an_object=primary.normal,
+            features=features,
+            held_by=held,
+            attached_to=joined,
+        )
+
+    def object_states(self) -> dict[str, SimObjectState]:
+        """Every object's ground truth by name (robot base frame)."""
+        return {name: self.object_state(name) for name in self._bodies}
+
+    def contacts(self, name: str) -> set[str]:
+        """Names of what an object touches: other objects, ``"table"``, ``"robot"``."""
+        body = self._body(name).body_id
+        out: set[str] = set()
+        for contact in pybullet.getContactPoints(bodyA=body, physicsClientId=self.client):
+            other = contact[2]
+            if other == self.table_id:
+                out.add("table")
+            elif other == self.robot_id:
+                out.add("robot")
+            elif other in self._by_id:
+                out.add(self._by_id[other])
+        return out
+
+    # -- grasp -----------------------------------------------------------------------------------------------
+
+    def grasp(self, name: str, arm: str = "right", *, max_distance: float = 0.03) -> bool:
+        """Hold ``name`` in the arm's gripper by a fixed constraint at the current relative pose.
+
+        The gripper cannot open wide enough for a Mega Blok (4.62 cm < 6.1 cm), so a grasp is this constraint,
+        with collisions between the hand and the object off. Returns False (and holds nothing) when the
+        gripper frame is farther than ``max_distance`` from the object's surface or the arm already holds
+        something -- a physical failure the skill reports.
+        """
+        body = self._body(name)
+        if arm in self._grasps:
+            return False
+        if any(g.object_name == name for g in self._grasps.values()):
+            return False
+        end = self.link_index(self.robot.arm(arm).end_effector)
+        if self._distance_to_gripper(body.body_id, end) > max_distance:
+            return False
+        c = self.client
+        link_state = pybullet.getLinkState(self.robot_id, end, computeForwardKinematics=True, physicsClientId=c)
+        parent = _transform(link_state[0], link_state[1])  # constraint frames are relative to the link's COM frame
+        child = self.object_transform(name)
+        rel = np.linalg.inv(parent) @ child
+        for link in self._hand_links[arm]:
+            pybullet.setCollisionFilterPair(self.robot_id, body.body_id, link, -1, 0, physicsClientId=c)
+        self._pending_collision = [p for p in self._pending_collision if p[1] != name]
+        cid = pybullet.createConstraint(
+            self.robot_id,
+            end,
+            body.body_id,
+            -1,
+            pybullet.JOINT_FIXED,
+            [0.0, 0.0, 0.0],
+            list(rel[:3, 3]),
+            [0.0, 0.0, 0.0],
+            list(_quat(rel[:3, :3])),
+            [0.0, 0.0, 0.0, 1.0],
+            physicsClientId=c,
+        )
+        pybullet.changeConstraint(cid, maxForce=2000.0, physicsClientId=c)
+        self._grasps[arm] = _Grasp(arm, name, cid)
+        return True
+
+    def release(self, arm: str = "right") -> str | None:
+        """Let go of what the arm holds (its name, or ``None``). Hand-object collisions come back once they no
+        longer overlap, so the object does not get kicked out of the fingers."""
+        grasp = self._grasps.pop(arm, None)
+        if grasp is None:
+            return None
+        pybullet.removeConstraint(grasp.constraint_id, physicsClientId=self.client)
+        self._pending_collision.append((arm, grasp.object_name))
+        self._restore_collisions()
+        return grasp.object_name
+
+    def held(self, arm: str = "right") -> str | None:
+        grasp = self._grasps.get(arm)
+        return grasp.object_name if grasp else None
+
+    def _distance_to_gripper(self, body: int, end_link: int) -> float:
+        pos = pybullet.getLinkState(
+            self.robot_id, end_link, computeForwardKinematics=True, physicsClientId=self.client
+        )[4]
+        probe = pybullet.createCollisionShape(pybullet.GEOM_SPHERE, radius=1e-4, physicsClientId=self.client)
+        probe_body = pybullet.createMultiBody(0.0, probe, -1, list(pos), physicsClientId=self.client)
+        try:
+            points = pybullet.getClosestPoints(probe_body, body, 1.0, physicsClientId=self.client)
+        finally:
+            pybullet.removeBody(probe_body, physicsClientId=self.client)
+        if not points:
+            return math.inf
+        return max(0.0, min(p[8] for p in points) + 1e-4)
+
+    def _restore_collisions(self) -> None:
+        still: list[tuple[str, str]] = []
+        for arm, name in self._pending_collision:
+            if name not in self._bodies:
+                continue
+            body = self._bodies[name].body_id
+            links = self._hand_links[arm]
+            overlapping = any(
+                pybullet.getClosestPoints(self.robot_id, body, 0.0, linkIndexA=link, physicsClientId=self.client)
+                for link in links
+            )
+            if overlapping:
+                still.append((arm, name))
+                continue
+            for link in links:
+                pybullet.setCollisionFilterPair(self.robot_id, body, link, -1, 1, physicsClientId=self.client)
+        self._pending_collision = still
+
+    # -- magnetic attach -------------------------------------------------------------------------------------
+
+    def attachment_relation(self, active: str, reference: str) -> AttachmentRelation:
+        """R_p, R_n and the attach rule between two objects' primary features (base frame)."""
+        ap_a, an_a = self.feature(active)
+        ap_r, an_r = self.feature(reference)
+        return attachment_relation(
+            ap_a,
+            an_a,
+            ap_r,
+            an_r,
+            position_tolerance=self.attach_position_tolerance,
+            angle_tolerance=self.attach_angle_tolerance,
+        )
+
+    def try_attach(self, active: str, reference: str) -> bool:
+        """Join the two objects with a fixed constraint if the attach rule holds (or they are joined already)."""
+        pair = frozenset((active, reference))
+        if pair in self._joins:
+            return True
+        if not self.attachment_relation(active, reference).aligned:
+            return False
+        a, r = self._body(active), self._body(reference)
+        ta, tr = self.object_transform(active), self.object_transform(reference)
+        rel = np.linalg.inv(tr) @ ta
+        c = self.client
+        pybullet.setCollisionFilterPair(a.body_id, r.body_id, -1, -1, 0, physicsClientId=c)
+        cid = pybullet.createConstraint(
+            r.body_id,
+            -1,
+            a.body_id,
+            -1,
+            pybullet.JOINT_FIXED,
+            [0.0, 0.0, 0.0],
+            list(rel[:3, 3]),
+            [0.0, 0.0, 0.0],
+            list(_quat(rel[:3, :3])),
+            [0.0, 0.0, 0.0, 1.0],
+            physicsClientId=c,
+        )
+        pybullet.changeConstraint(cid, maxForce=2000.0, physicsClientId=c)
+        self._joins[pair] = cid
+        return True
+
+    def detach(self, a: str, b: str) -> bool:
+        """Undo a magnetic join (for resetting scenes); True if there was one."""
+        cid = self._joins.pop(frozenset((a, b)), None)
+        if cid is None:
+            return False
+        pybullet.removeConstraint(cid, physicsClientId=self.client)
+        pybullet.setCollisionFilterPair(
+            self._body(a).body_id, self._body(b).body_id, -1, -1, 1, physicsClientId=self.client
+        )
+        return True
+
+    def attachments(self) -> list[tuple[str, str]]:
+        """Joined pairs, each sorted by name."""
+        return sorted(tuple(sorted(p)) for p in self._joins)  # type: ignore[misc]
+
+    def _magnet_pairs(self) -> list[tuple[str, str]]:
+        actives = [n for n, b in self._bodies.items() if b.model.role == "active"]
+        references = [n for n, b in self._bodies.items() if b.model.role == "reference"]
+        return [(a, r) for a in actives for r in references]
+
+    # -- helpers ---------------------------------------------------------------------------------------------
+
+    def _body(self, name: str) -> _Body:
+        try:
+            return self._bodies[name]
+        except KeyError:
+            known = ", ".join(self._bodies) or "none"
+            raise SimulationError(f"no object named {name!r} in the simulation; objects: {known}") from None
+
+    @staticmethod
+    def _checked_pose(pose: Sequence[float], what: str) -> Pose6:
+        values = tuple(float(v) for v in pose)
+        if len(values) != 6 or not all(math.isfinite(v) for v in values):
+            raise SimulationError(f"{what}: a pose is 6 finite numbers (x, y, z, roll, pitch, yaw), got {pose!r}")
+        return values  # type: ignore[return-value]
+
+
+def _transform(pos: Sequence[float], quat: Sequence[float]) -> np.ndarray:
+    out = np.eye(4)
+    out[:3, :3] = np.array(pybullet.getMatrixFromQuaternion(quat)).reshape(3, 3)
+    out[:3, 3] = pos
+    return out
+
+
+def _quat(rot: np.ndarray) -> tuple[float, float, float, float]:
+    """(x, y, z, w) quaternion of a rotation matrix (Shepperd's method: stable for every rotation)."""
+    m = rot
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    if trace > 0.0:
+        s = 2.0 * math.sqrt(trace + 1.0)
+        w, x, y, z = 0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        w, x, y, z = (m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s
+    elif m[1, 1] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+        w, x, y, z = (m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s
+    else:
+        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+        w, x, y, z = (m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s
+    return (float(x), float(y), float(z), float(w))

@@ -1,0 +1,368 @@
+"""Scenes and their variants as data: which objects lie where on the table, read from ``trees/scenes/*.yaml``.
+
+A scene file names the scene, lists its objects (name, type, colour, pose) and its variants; a variant changes
+the nominal object list by ``override`` (new colour/type/pose for a named object), ``remove``, ``replace`` (one
+object by others, e.g. a 1x2 block by two 1x1s) and ``add``. Poses are ``[x, y, z, roll, pitch, yaw]`` in the
+robot base frame, metres and **degrees** (people write 90, not 1.5708); ``z`` may be ``table``: resting on the
+table top in that orientation. Every mistake is a :class:`~bt_meta.errors.ConfigError` at ``path:line:column``.
+
+Offers:
+
+* :func:`load_scene` -- a :class:`Scene` by shipped name (``"letters_A"``) or path
+* :func:`scene_names` / :func:`scenes_dir` -- the shipped scenes
+* :class:`Scene` -- ``objects_for(variant)``, ``build(sim, variant, seed)``, ``variant_names``
+* :class:`SceneObject` -- one object's name, type, colour, pose, and where the file says so
+* :class:`Variant` -- a variant's name, description and resolved object list
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from bt_meta.errors import ConfigError
+from bt_meta.resources import trees_dir
+from bt_meta.world.objects import COLOURS, OBJECT_TYPES, ObjectModel, make_model
+
+__all__ = ["Scene", "SceneObject", "Variant", "load_scene", "scene_names", "scenes_dir"]
+
+_SCENE_KEYS = {"scene", "description", "objects", "variants", "jitter"}
+_OBJECT_KEYS = {"name", "type", "colour", "pose", "description"}
+_VARIANT_KEYS = {"description", "override", "remove", "replace", "add"}
+_OVERRIDE_KEYS = {"type", "colour", "pose"}
+_JITTER_KEYS = {"position", "yaw"}
+
+
+@dataclass(frozen=True)
+class Location:
+    path: str
+    line: int
+    column: int
+
+    def error(self, message: str) -> ConfigError:
+        return ConfigError(message, self.path, self.line, self.column)
+
+
+@dataclass(frozen=True)
+class SceneObject:
+    """One object of a scene. ``pose`` is in metres and radians; ``z`` is ``None`` for "resting on the table"."""
+
+    name: str
+    type: str
+    colour: str | None
+    position: tuple[float, float, float | None]
+    rpy: tuple[float, float, float]
+    location: Location | None = field(default=None, compare=False)
+
+    def model(self) -> ObjectModel:
+        return make_model(self.type, self.colour)
+
+    @property
+    def on_table(self) -> bool:
+        return self.position[2] is None
+
+    def pose(self) -> tuple[float, float, float, float, float, float]:
+        """The pose with ``z`` 0 when it rests on the table (the simulator then computes it)."""
+        x, y, z = self.position
+        return (x, y, 0.0 if z is None else z, *self.rpy)
+
+
+@dataclass(frozen=True)
+class Variant:
+    name: str
+    description: str
+    objects: tuple[SceneObject, ...]
+
+
+@dataclass(frozen=True)
+class Scene:
+    name: str
+    description: str
+    path: Path
+    objects: tuple[SceneObject, ...]
+    variants: dict[str, Variant]
+    jitter_position: float = 0.0
+    """Uniform noise (m) added to x and y of every object when built with a seed."""
+    jitter_yaw: float = 0.0
+    """Uniform noise (rad) added to yaw."""
+
+    @property
+    def variant_names(self) -> tuple[str, ...]:
+        return tuple(self.variants)
+
+    def objects_for(self, variant: str | None = None) -> tuple[SceneObject, ...]:
+        """The nominal objects, or those of a named variant."""
+        if variant is None or variant == "nominal":
+            return self.objects
+        try:
+            return self.variants[variant].objects
+        except KeyError:
+            known = ", ".join(self.variants) or "none"
+            raise ConfigError(f"scene {self.name!r} has no variant {variant!r}; variants: {known}", self.path) from None
+
+    def build(self, sim: Any, variant: str | None = None, *, seed: int | None = None, settle_steps: int = 120) -> None:
+        """Spawn the (variant's) objects into a :class:`~bt_meta.world.sim.Simulation` and let them settle.
+
+        With ``seed`` (default: the simulation's) and a ``jitter`` in the file, poses get seeded noise. An object
+        off the table top raises :class:`ConfigError` at its line in the file.
+        """
+        objects = self.objects_for(variant)
+        rng = np.random.default_rng(sim.seed if seed is None else seed)
+        (x_lo, x_hi), (y_lo, y_hi) = sim.table.bounds
+        for obj in objects:
+            x, y, z = obj.position
+            roll, pitch, yaw = obj.rpy
+            if self.jitter_position > 0.0 or self.jitter_yaw > 0.0:
+                dx, dy = rng.uniform(-self.jitter_position, self.jitter_position, size=2)
+                x, y = x + float(dx), y + float(dy)
+                yaw += float(rng.uniform(-self.jitter_yaw, self.jitter_yaw))
+            if not (x_lo <= x <= x_hi and y_lo <= y <= y_hi):
+                message = (
+                    f"object {obj.name!r} at ({x:.3f}, {y:.3f}) is off the table"
+                    f" (x {x_lo:.3f}..{x_hi:.3f}, y {y_lo:.3f}..{y_hi:.3f})"
+                )
+                raise obj.location.error(message) if obj.location else ConfigError(message, self.path)
+            pose = (x, y, 0.0 if z is None else z, roll, pitch, yaw)
+            sim.spawn(obj.name, obj.model(), pose, on_table=z is None)
+        if settle_steps:
+            sim.step(settle_steps)
+
+
+def scenes_dir() -> Path:
+    return trees_dir() / "scenes"
+
+
+def scene_names() -> list[str]:
+    return sorted(p.stem for p in scenes_dir().glob("*.yaml"))
+
+
+def load_scene(name: str | Path) -> Scene:
+    """A scene by shipped name (``letters_A``) or by the path of a YAML file."""
+    path = Path(name)
+    if path.suffix not in (".yaml", ".yml"):
+        path = scenes_dir() / f"{name}.yaml"
+        if not path.is_file():
+            raise ConfigError(f"no scene {str(name)!r}; shipped scenes: {', '.join(scene_names()) or 'none'}")
+    if not path.is_file():
+        raise ConfigError("scene file not found", path)
+    return _SceneFile(path).load()
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Reading, with every node's position
+
+
+class _SceneFile:
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def at(self, node: yaml.Node) -> Location:
+        return Location(str(self.path), node.start_mark.line + 1, node.start_mark.column + 1)
+
+    def error(self, message: str, node: yaml.Node | None) -> ConfigError:
+        if node is None:
+            return ConfigError(message, self.path)
+        return self.at(node).error(message)
+
+    def load(self) -> Scene:
+        text = self.path.read_text(encoding="utf-8")
+        try:
+            root = yaml.compose(text, Loader=yaml.SafeLoader)
+        except yaml.MarkedYAMLError as error:
+            mark = error.problem_mark or error.context_mark
+            line = mark.line + 1 if mark else None
+            column = mark.column + 1 if mark else None
+            raise ConfigError(f"not valid YAML: {error.problem or error}", self.path, line, column) from None
+        if root is None:
+            raise ConfigError("the scene file is empty", self.path, 1, 1)
+        top = self.mapping(root, "a scene file", _SCENE_KEYS)
+        name = self.string(self.require(top, "scene", root, "a scene file"), "scene")
+        description = self.string(top["description"][1], "description") if "description" in top else ""
+        objects_node = self.require(top, "objects", root, "a scene file")
+        objects = self.object_list(objects_node, "objects", require_pose=True)
+        if not objects:
+            raise self.error("objects: a scene needs at least one object", objects_node)
+        self.check_unique(objects, objects_node)
+        jitter_position, jitter_yaw = 0.0, 0.0
+        if "jitter" in top:
+            jitter = self.mapping(top["jitter"][1], "jitter", _JITTER_KEYS)
+            if "position" in jitter:
+                jitter_position = self.number(jitter["position"][1], "jitter position (m)", minimum=0.0)
+            if "yaw" in jitter:
+                jitter_yaw = math.radians(self.number(jitter["yaw"][1], "jitter yaw (degrees)", minimum=0.0))
+        variants: dict[str, Variant] = {}
+        if "variants" in top:
+            for key, (key_node, value) in self.mapping(top["variants"][1], "variants", None).items():
+                if key == "nominal":
+                    raise self.error("a variant cannot be called 'nominal' (that is the scene itself)", key_node)
+                variants[key] = self.variant(key, value, objects)
+        return Scene(name, description, self.path, objects, variants, jitter_position, jitter_yaw)
+
+    # -- parts -----------------------------------------------------------------------------------------------
+
+    def object_list(self, node: yaml.Node, what: str, *, require_pose: bool) -> tuple[SceneObject, ...]:
+        if not isinstance(node, yaml.SequenceNode):
+            raise self.error(f"{what} must be a list of objects", node)
+        return tuple(self.scene_object(item, f"{what}[{i}]", require_pose) for i, item in enumerate(node.value))
+
+    def scene_object(self, node: yaml.Node, what: str, require_pose: bool) -> SceneObject:
+        entries = self.mapping(node, what, _OBJECT_KEYS)
+        name = self.string(self.require(entries, "name", node, what), f"{what} name")
+        type_node = self.require(entries, "type", node, f"object {name!r}")
+        type_name = self.string(type_node, f"object {name!r} type")
+        if type_name not in OBJECT_TYPES:
+            raise self.error(
+                f"object {name!r}: unknown type {type_name!r}; known: {', '.join(OBJECT_TYPES)}", type_node
+            )
+        colour = self.colour(entries["colour"][1], name) if "colour" in entries else None
+        if "pose" in entries:
+            position, rpy = self.pose(entries["pose"][1], name)
+        elif require_pose:
+            raise self.error(f"object {name!r}: missing key 'pose'", node)
+        else:
+            position, rpy = (math.nan, math.nan, None), (0.0, 0.0, 0.0)  # inherited by replace
+        return SceneObject(name, type_name, colour, position, rpy, self.at(node))
+
+    def colour(self, node: yaml.Node, name: str) -> str:
+        colour = self.string(node, f"object {name!r} colour")
+        if colour not in COLOURS:
+            raise self.error(f"object {name!r}: unknown colour {colour!r}; known: {', '.join(COLOURS)}", node)
+        return colour
+
+    def pose(self, node: yaml.Node, name: str) -> tuple[tuple[float, float, float | None], tuple[float, float, float]]:
+        what = f"object {name!r} pose"
+        if not isinstance(node, yaml.SequenceNode) or len(node.value) != 6:
+            got = f"{len(node.value)} values" if isinstance(node, yaml.SequenceNode) else "not a list"
+            raise self.error(
+                f"{what} must be [x, y, z, roll, pitch, yaw] (m, m, m or 'table', deg, deg, deg); got {got}", node
+            )
+        values: list[float | None] = []
+        for i, item in enumerate(node.value):
+            if i == 2 and isinstance(item, yaml.ScalarNode) and item.value == "table":
+                values.append(None)
+                continue
+            values.append(self.number(item, f"{what}[{i}]" + (" (a number or 'table')" if i == 2 else "")))
+        x, y, z, roll, pitch, yaw = values
+        assert x is not None and y is not None and roll is not None and pitch is not None and yaw is not None
+        return (x, y, z), (math.radians(roll), math.radians(pitch), math.radians(yaw))
+
+    def variant(self, name: str, node: yaml.Node, nominal: tuple[SceneObject, ...]) -> Variant:
+        entries = self.mapping(node, f"variant {name!r}", _VARIANT_KEYS)
+        description = self.string(entries["description"][1], "description") if "description" in entries else ""
+        if not any(k in entries for k in ("override", "remove", "replace", "add")):
+            raise self.error(f"variant {name!r} changes nothing: give override, remove, replace or add", node)
+        objects = list(nominal)
+
+        def index(obj_name: str, at: yaml.Node) -> int:
+            for i, obj in enumerate(objects):
+                if obj.name == obj_name:
+                    return i
+            known = ", ".join(o.name for o in objects)
+            raise self.error(f"variant {name!r}: no object {obj_name!r} to change; objects: {known}", at)
+
+        if "override" in entries:
+            for obj_name, (key_node, value) in self.mapping(entries["override"][1], "override", None).items():
+                i = index(obj_name, key_node)
+                changes = self.mapping(value, f"override of {obj_name!r}", _OVERRIDE_KEYS)
+                obj = objects[i]
+                if "type" in changes:
+                    type_node = changes["type"][1]
+                    type_name = self.string(type_node, "type")
+                    if type_name not in OBJECT_TYPES:
+                        raise self.error(f"unknown type {type_name!r}; known: {', '.join(OBJECT_TYPES)}", type_node)
+                    obj = replace(obj, type=type_name)
+                if "colour" in changes:
+                    obj = replace(obj, colour=self.colour(changes["colour"][1], obj_name))
+                if "pose" in changes:
+                    position, rpy = self.pose(changes["pose"][1], obj_name)
+                    obj = replace(obj, position=position, rpy=rpy)
+                objects[i] = replace(obj, location=self.at(value))
+        if "remove" in entries:
+            remove_node = entries["remove"][1]
+            if not isinstance(remove_node, yaml.SequenceNode):
+                raise self.error("remove must be a list of object names", remove_node)
+            for item in remove_node.value:
+                del objects[index(self.string(item, "an object name to remove"), item)]
+        if "replace" in entries:
+            for obj_name, (key_node, value) in self.mapping(entries["replace"][1], "replace", None).items():
+                i = index(obj_name, key_node)
+                old = objects[i]
+                new = self.object_list(value, f"replacement of {obj_name!r}", require_pose=False)
+                if not new:
+                    raise self.error(f"replace {obj_name!r}: give at least one object (or use remove)", value)
+                inherit = [math.isnan(o.position[0]) for o in new]
+                if sum(inherit) > 1:
+                    raise self.error(f"replace {obj_name!r}: only one replacement may omit its pose", value)
+                new = tuple(
+                    replace(o, position=old.position, rpy=old.rpy) if flag else o
+                    for o, flag in zip(new, inherit, strict=True)
+                )
+                objects[i : i + 1] = list(new)
+        if "add" in entries:
+            objects += list(self.object_list(entries["add"][1], "add", require_pose=True))
+        self.check_unique(objects, node)
+        return Variant(name, description, tuple(objects))
+
+    def check_unique(self, objects: Sequence[SceneObject], node: yaml.Node) -> None:
+        seen: dict[str, SceneObject] = {}
+        for obj in objects:
+            if obj.name in seen:
+                first = seen[obj.name].location
+                where = f" (first at line {first.line})" if first else ""
+                if obj.location is not None:
+                    raise obj.location.error(f"duplicate object name {obj.name!r}{where}")
+                raise self.error(f"duplicate object name {obj.name!r}{where}", node)
+            seen[obj.name] = obj
+
+    # -- YAML node helpers -----------------------------------------------------------------------------------
+
+    def mapping(self, node: yaml.Node, what: str, allowed: set[str] | None) -> dict[str, tuple[yaml.Node, yaml.Node]]:
+        if not isinstance(node, yaml.MappingNode):
+            raise self.error(f"{what} must be a mapping", node)
+        out: dict[str, tuple[yaml.Node, yaml.Node]] = {}
+        for key, value in node.value:
+            if not isinstance(key, yaml.ScalarNode):
+                raise self.error(f"{what}: keys must be plain names", key)
+            if key.value in out:
+                raise self.error(f"{what}: duplicate key {key.value!r}", key)
+            if allowed is not None and key.value not in allowed:
+                raise self.error(
+                    f"{what}: unknown key {key.value!r}; expected one of {', '.join(sorted(allowed))}", key
+                )
+            out[key.value] = (key, value)
+        return out
+
+    def require(self, entries: dict[str, tuple[yaml.Node, yaml.Node]], key: str, parent: yaml.Node, what: str):
+        if key not in entries:
+            raise self.error(f"{what}: missing key {key!r}", parent)
+        return entries[key][1]
+
+    def scalar(self, node: yaml.Node, what: str) -> Any:
+        if not isinstance(node, yaml.ScalarNode):
+            raise self.error(f"{what} must be a single value", node)
+        return yaml.safe_load(yaml.serialize(node))
+
+    def string(self, node: yaml.Node, what: str) -> str:
+        value = self.scalar(node, what)
+        if not isinstance(value, str) or not value:
+            raise self.error(f"{what} must be a non-empty string", node)
+        return value
+
+    def number(self, node: yaml.Node, what: str, *, minimum: float | None = None) -> float:
+        value = self.scalar(node, what)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise self.error(
+                f"{what} must be a number, got {node.value!r}"
+                if isinstance(node, yaml.ScalarNode)
+                else f"{what} must be a number",
+                node,
+            )
+        if minimum is not None and value < minimum:
+            raise self.error(f"{what} must be at least {minimum}", node)
+        return float(value)

@@ -1,0 +1,274 @@
+"""Scenes and variants as data: the shipped files load and settle; bad files fail at path:line:column."""
+
+from __future__ import annotations
+
+import math
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bt_meta.errors import ConfigError
+from bt_meta.world.scenes import load_scene, scene_names
+from bt_meta.world.sim import Simulation
+
+SHIPPED = ["housing_insertion", "letters_A", "letters_H", "magnetic_attach"]
+
+
+def write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "scene.yaml"
+    path.write_text(textwrap.dedent(text).lstrip("\n"), encoding="utf-8")
+    return path
+
+
+def test_shipped_scenes_and_their_variants():
+    assert scene_names() == SHIPPED
+    letters = load_scene("letters_A")
+    assert letters.variant_names == ("blue_1x2", "two_red_1x1", "red_and_blue_1x1")
+    nominal = {o.name: o for o in letters.objects_for(None)}
+    assert (nominal["b0"].type, nominal["b0"].colour) == ("megablok_1x2", "red")
+    assert all(nominal[f"b{i}"].type == "megablok_1x1" and nominal[f"b{i}"].colour == "blue" for i in range(1, 5))
+    blue = {o.name: o for o in letters.objects_for("blue_1x2")}
+    assert "b0" not in blue and (blue["b5"].type, blue["b5"].colour) == ("megablok_1x2", "blue")
+    assert blue["b5"].position == nominal["b0"].position and blue["b5"].rpy == nominal["b0"].rpy  # inherited
+    mixed = {o.name: o for o in letters.objects_for("red_and_blue_1x1")}
+    assert {mixed["b5"].colour, mixed["b6"].colour} == {"red", "blue"} and "b0" not in mixed
+    housing = load_scene("housing_insertion")
+    upside = {o.name: o for o in housing.objects_for("housing_upside_down")}
+    assert upside["housing"].rpy[0] == pytest.approx(math.pi) and upside["housing"].on_table
+    assert {o.type for o in housing.objects_for("shaft_instead")} == {"task_board", "shaft"}
+    magnets = load_scene("magnetic_attach")
+    assert len(magnets.variant_names) >= 2
+    assert {o.name for o in magnets.objects_for("nominal")} == {"active", "reference"}
+
+
+def test_unknown_scene_and_variant():
+    with pytest.raises(ConfigError, match="no scene 'nope'; shipped scenes: housing_insertion"):
+        load_scene("nope")
+    with pytest.raises(ConfigError, match="has no variant 'upside'; variants: blue_1x2"):
+        load_scene("letters_A").objects_for("upside")
+
+
+GOOD_OBJECT = "  - {name: b0, type: megablok_1x1, colour: red, pose: [0.6, -0.3, table, 0, 0, 0]}"
+
+
+@pytest.mark.parametrize(
+    ("text", "line", "column", "message"),
+    [
+        (
+            """
+            scene: s
+            objects:
+              - {name: b0, type: brick, pose: [0.6, -0.3, table, 0, 0, 0]}
+            """,
+            3,
+            22,
+            "object 'b0': unknown type 'brick'; known: megablok_1x1",
+        ),
+        (
+            """
+            scene: s
+            objects:
+              - name: b0
+                type: megablok_1x1
+                pose: [0.6, -0.3, 0, 0]
+            """,
+            5,
+            11,
+            "pose must be [x, y, z, roll, pitch, yaw] (m, m, m or 'table', deg, deg, deg); got 4 values",
+        ),
+        (
+            f"""
+            scene: s
+            objects:
+            {GOOD_OBJECT}
+              - {{name: b0, type: megablok_1x2, pose: [0.7, -0.3, table, 0, 0, 0]}}
+            """,
+            4,
+            5,
+            "duplicate object name 'b0' (first at line 3)",
+        ),
+        (
+            """
+            scene: s
+            objects:
+              - {name: b0, type: shaft, pose: [0.6, table, 0, 0, 0, 0]}
+            """,
+            3,
+            41,
+            "object 'b0' pose[1] must be a number, got 'table'",
+        ),
+        (
+            """
+            scene: s
+            objects:
+              - {name: b0, type: shaft, colour: purple, pose: [0.6, -0.3, table, 0, 0, 0]}
+            """,
+            3,
+            37,
+            "unknown colour 'purple'",
+        ),
+        (
+            f"""
+            scene: s
+            objects:
+            {GOOD_OBJECT}
+            variants:
+              v:
+                override:
+                  b9: {{pose: [0.6, -0.3, table, 0, 0, 0]}}
+            """,
+            7,
+            7,
+            "variant 'v': no object 'b9' to change; objects: b0",
+        ),
+        (
+            f"""
+            scene: s
+            objects:
+            {GOOD_OBJECT}
+            variants:
+              v:
+                add:
+                  - {{name: b0, type: shaft, pose: [0.7, -0.3, table, 0, 0, 0]}}
+            """,
+            7,
+            9,
+            "duplicate object name 'b0' (first at line 3)",
+        ),
+        (
+            f"""
+            scene: s
+            objects:
+            {GOOD_OBJECT}
+            variants:
+              v:
+                replace:
+                  b0:
+                    - {{name: b5, type: megablok_1x1}}
+                    - {{name: b6, type: megablok_1x1}}
+            """,
+            8,
+            9,
+            "only one replacement may omit its pose",
+        ),
+        (
+            f"""
+            scene: s
+            objects:
+            {GOOD_OBJECT}
+            variants:
+              v:
+                recolour: {{b0: blue}}
+            """,
+            6,
+            5,
+            "unknown key 'recolour'; expected one of add, description, override, remove, replace",
+        ),
+        (
+            f"""
+            scene: s
+            objects:
+            {GOOD_OBJECT}
+            variants:
+              v: {{description: nothing}}
+            """,
+            5,
+            6,
+            "variant 'v' changes nothing",
+        ),
+        (
+            """
+            objects: []
+            """,
+            1,
+            1,
+            "a scene file: missing key 'scene'",
+        ),
+        (
+            """
+            scene: s
+            objects: [
+            """,
+            3,
+            1,
+            "not valid YAML",
+        ),
+    ],
+)
+def test_bad_scene_files_fail_at_their_line(tmp_path, text, line, column, message):
+    path = write(tmp_path, text)
+    with pytest.raises(ConfigError) as info:
+        load_scene(path)
+    error = info.value
+    assert message in error.message
+    assert (error.path, error.line, error.column) == (str(path), line, column), error.location_message()
+    assert str(error).startswith(f"{path}:{line}:{column}: ")
+
+
+@pytest.fixture(scope="module")
+def sim():
+    with Simulation(seed=0) as s:
+        yield s
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("scene", "variant"),
+    [(name, v) for name in SHIPPED for v in (None, *load_scene(name).variant_names)],
+)
+def test_every_scene_and_variant_builds_and_stays_put(sim, scene, variant):
+    sim.clear_objects()
+    spec = load_scene(scene)
+    spec.build(sim, variant, settle_steps=0)
+    objects = spec.objects_for(variant)
+    assert set(sim.object_names()) == {o.name for o in objects}
+    start = {o.name: np.array(sim.object_pose(o.name)) for o in objects}
+    for obj in objects:
+        assert start[obj.name][:2] == pytest.approx(obj.position[:2], abs=1e-9)
+        if not obj.on_table:
+            assert start[obj.name][2] == pytest.approx(obj.position[2], abs=1e-9)
+    sim.step(480)
+    for obj in objects:
+        now = np.array(sim.object_pose(obj.name))
+        assert np.abs(now[:3] - start[obj.name][:3]).max() < 1.5e-3, obj.name
+    if scene == "magnetic_attach":
+        assert sim.attachments() == []  # nothing joins before the robot acts
+    sim.clear_objects()
+
+
+@pytest.mark.slow
+def test_jitter_is_seeded_and_off_table_objects_are_located(sim, tmp_path):
+    path = write(
+        tmp_path,
+        """
+        scene: s
+        jitter: {position: 0.01, yaw: 5}
+        objects:
+          - {name: b0, type: megablok_1x1, pose: [0.6, -0.3, table, 0, 0, 0]}
+          - {name: b1, type: megablok_1x1, pose: [0.6, -0.1, table, 0, 0, 0]}
+        variants:
+          off:
+            override:
+              b1: {pose: [2.0, -0.1, table, 0, 0, 0]}
+        """,
+    )
+    spec = load_scene(path)
+
+    def poses(seed: int) -> list[tuple[float, ...]]:
+        sim.clear_objects()
+        spec.build(sim, seed=seed, settle_steps=0)
+        return [sim.object_pose("b0"), sim.object_pose("b1")]
+
+    first, again, other = poses(1), poses(1), poses(2)
+    assert first == again and first != other
+    assert abs(first[0][0] - 0.6) <= 0.01 and first[0][0] != 0.6
+    sim.clear_objects()
+    with pytest.raises(
+        ConfigError,
+        match=r"object 'b1' at \(1\.99\d, -0\.09\d\) is off the table \(x 0\.450\.\.1\.050, y -0\.650\.\.0\.450\)",
+    ) as info:
+        spec.build(sim, "off")
+    assert info.value.line == 9
+    sim.clear_objects()

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from bt_meta.htn.axioms import Axiom, AxiomSet
 from bt_meta.htn.conditions import Condition, ExternalPredicateError, Var
-from bt_meta.htn.loader import load_task_file, load_task_text
+from bt_meta.htn.loader import load_task_file, load_task_text, problem_from_atoms
 from bt_meta.htn.model import Domain, GroundPrimitive, Method, Primitive, Problem, TaskDecl, TaskFile
 from bt_meta.htn.planner import GroundAction, PlanResult, plan
 from bt_meta.htn.replan import replan
@@ -45,5 +45,6 @@ __all__ = [
     "load_task_file",
     "load_task_text",
     "plan",
+    "problem_from_atoms",
     "replan",
 ]

@@ -12,12 +12,20 @@ Offers:
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from bt_meta.htn.conditions import DNEG, DPOS, Condition, Step, Term, Var, ground, match_clause
+from bt_meta.htn.conditions import DNEG, DPOS, Condition, Step, Term, Var, candidates, ground, match_clause
 from bt_meta.htn.state import Atom, State
+
+MAX_DEPTH = 200  # nested top-down proofs before falling back to the bottom-up extension
+
+_IN_PROGRESS = object()
+
+
+class _Fallback(Exception):
+    """A top-down proof met a cycle or got too deep: use the bottom-up extension instead."""
 
 
 class StratificationError(Exception):
@@ -42,20 +50,21 @@ class Axiom:
 class DerivedIndex:
     """The atoms of one derived predicate; offers the lookups the matcher uses on a State."""
 
-    __slots__ = ("_all", "_by_first", "_order")
+    __slots__ = ("_all", "_by_arg", "_order")
 
     def __init__(self) -> None:
         self._all: set[Atom] = set()
         self._order: list[Atom] = []
-        self._by_first: dict[str, list[Atom]] = {}
+        self._by_arg: dict[int, dict[str, list[Atom]]] = {}
 
     def add(self, atom: Atom) -> bool:
         if atom in self._all:
             return False
         self._all.add(atom)
         self._order.append(atom)
-        if len(atom) > 1:
-            self._by_first.setdefault(atom[1], []).append(atom)
+        for position, index in self._by_arg.items():
+            if len(atom) > position:
+                index.setdefault(atom[position], []).append(atom)
         return True
 
     def __contains__(self, atom: object) -> bool:
@@ -67,8 +76,18 @@ class DerivedIndex:
     def atoms_of(self, pred: str) -> Sequence[Atom]:
         return self._order
 
+    def with_arg(self, pred: str, position: int, value: str) -> Sequence[Atom]:
+        index = self._by_arg.get(position)
+        if index is None:
+            index = {}
+            for atom in self._order:
+                if len(atom) > position:
+                    index.setdefault(atom[position], []).append(atom)
+            self._by_arg[position] = index
+        return index.get(value, ())
+
     def with_first(self, pred: str, first: str) -> Sequence[Atom]:
-        return self._by_first.get(first, ())
+        return self.with_arg(pred, 1, first)
 
 
 def _unify(args: Sequence[Term], atom: Atom, env: dict[str, str]) -> dict[str, str] | None:
@@ -123,6 +142,15 @@ class AxiomSet:
                 raise StratificationError(
                     f"derived predicate {head} depends on itself through 'not {dep}(...)'; recursion through "
                     "negation has no well-defined meaning (stratify the axioms)", axiom)
+        # Predicates whose rules use their own component positively: free queries on them are answered from the
+        # full (bottom-up) extension; every other query is answered top-down (see :meth:`holds`, :meth:`query`).
+        self.recursive: set[str] = set()
+        for axiom in self.axioms:
+            for clause in axiom.condition.clauses:
+                if any(step[0] == DPOS and step[1] in self.group[axiom.head_pred] for step in clause):
+                    self.recursive.update(self.group[axiom.head_pred])
+        self._memo_key = (self._key, "memo")
+        self._depth = 0
         # Semi-naive join plans: for each rule clause, each positive literal of the same component first.
         self._recursive: dict[str, list[tuple[Axiom, int, Step, list[Step]]]] = {}
         for axiom in self.axioms:
@@ -142,6 +170,97 @@ class AxiomSet:
             found = cache[key]
         return found
 
+    def holds(self, state: State, atom: Atom) -> bool:
+        """Truth of one ground derived atom, top-down with a per-state memo.
+
+        Deep or cyclic derivations (an atom needed to prove itself, or more than ``MAX_DEPTH`` nested atoms)
+        fall back to the bottom-up extension of the predicate, which is exact and needs no Python recursion
+        beyond the number of strata.
+        """
+        cache = state._derived
+        pred = atom[0]
+        extension = cache.get((self._key, pred))
+        if extension is not None:
+            return atom in extension
+        memo = cache.get(self._memo_key)
+        if memo is None:
+            memo = cache[self._memo_key] = {}
+        known = memo.get(atom)
+        if known is not None:
+            if known is _IN_PROGRESS:
+                raise _Fallback
+            return known  # type: ignore[no-any-return]
+        outermost = self._depth == 0
+        try:
+            if self._depth >= MAX_DEPTH:
+                raise _Fallback
+            memo[atom] = _IN_PROGRESS
+            self._depth += 1
+            try:
+                result = self._prove(state, atom)
+            finally:
+                self._depth -= 1
+                if memo.get(atom) is _IN_PROGRESS:
+                    del memo[atom]
+            memo[atom] = result
+            return result
+        except _Fallback:
+            if not outermost:
+                raise
+            return atom in self.extension(state, pred)
+
+    def _prove(self, state: State, atom: Atom) -> bool:
+        for axiom in self.rules[atom[0]]:
+            env = _unify(axiom.head_args, atom, {})
+            if env is None:
+                continue
+            for clause in axiom.condition.clauses:
+                for _ in match_clause(clause, state, env, None, self):
+                    return True
+        return False
+
+    def query(self, state: State, pred: str, args: Sequence[Term], env: dict[str, str]) -> Iterable[dict[str, str]]:
+        """Extensions of ``env`` under which ``pred(args)`` (some arguments unbound) is derived, lazily."""
+        extension = state._derived.get((self._key, pred))
+        if extension is None and pred in self.recursive:
+            extension = self.extension(state, pred)
+        if extension is not None:
+            return candidates(extension, pred, args, env)
+        return self._stream(state, pred, args, env)
+
+    def _stream(self, state: State, pred: str, args: Sequence[Term], env: dict[str, str]
+                ) -> Iterator[dict[str, str]]:
+        pattern: list[str | None] = [
+            (env.get(a.name) if isinstance(a, Var) else a) for a in args  # type: ignore[misc]
+        ]
+        seen: set[Atom] = set()
+        for axiom in self.rules[pred]:
+            head_env: dict[str, str] | None = {}
+            for term, value in zip(axiom.head_args, pattern, strict=True):
+                if value is None:
+                    continue
+                if isinstance(term, Var):
+                    prior = head_env.get(term.name)  # type: ignore[union-attr]
+                    if prior is None:
+                        head_env[term.name] = value  # type: ignore[index]
+                    elif prior != value:
+                        head_env = None
+                        break
+                elif term != value:
+                    head_env = None
+                    break
+            if head_env is None:
+                continue
+            for clause in axiom.condition.clauses:
+                for body_env in match_clause(clause, state, head_env, None, self):
+                    atom = ground(pred, axiom.head_args, body_env)
+                    if atom in seen:
+                        continue
+                    seen.add(atom)
+                    result = _unify(args, atom, env)
+                    if result is not None:
+                        yield result
+
     def derived_atoms(self, state: State) -> list[Atom]:
         """Every derived atom true in ``state`` (for display and tests)."""
         atoms: list[Atom] = []
@@ -150,21 +269,22 @@ class AxiomSet:
         return atoms
 
     def _evaluate(self, state: State, component: frozenset[str]) -> None:
-        known = {p: DerivedIndex() for p in component}
+        order = sorted(component)  # deterministic derivation order, whatever the string hash seed
+        known = {p: DerivedIndex() for p in order}
 
         def source(pred: str) -> Any:
             index = known.get(pred)
             return index if index is not None else self.extension(state, pred)
 
         pending: list[Atom] = []
-        for pred in component:
+        for pred in order:
             for axiom in self.rules[pred]:
                 for clause in axiom.condition.clauses:
                     if any(step[0] == DPOS and step[1] in component for step in clause):
                         continue  # needs atoms of its own component: handled by the delta rounds
                     for env in match_clause(clause, state, {}, None, self, source):
                         pending.append(ground(axiom.head_pred, axiom.head_args, env))
-        delta = {p: [] for p in component}
+        delta: dict[str, list[Atom]] = {p: [] for p in order}
         for atom in pending:
             if known[atom[0]].add(atom):
                 delta[atom[0]].append(atom)
@@ -178,7 +298,7 @@ class AxiomSet:
                             continue
                         for result in match_clause(rest, state, env, None, self, source):
                             pending.append(ground(axiom.head_pred, axiom.head_args, result))
-            delta = {p: [] for p in component}
+            delta = {p: [] for p in order}
             for atom in pending:
                 if known[atom[0]].add(atom):
                     delta[atom[0]].append(atom)

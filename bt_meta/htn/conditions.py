@@ -475,7 +475,7 @@ def _value(term: Term, env: dict[str, str]) -> str:
     return env[term.name] if term.__class__ is Var else term  # type: ignore[union-attr,return-value]
 
 
-def _candidates(source: Any, pred: str, args: Sequence[Term], env: dict[str, str]) -> Iterable[dict[str, str]]:
+def candidates(source: Any, pred: str, args: Sequence[Term], env: dict[str, str]) -> Iterable[dict[str, str]]:
     """Extensions of ``env`` matching ``pred(args)`` against ``source`` (a State or a derived index)."""
     vals: list[Any] = [pred]
     free: list[tuple[int, str]] | None = None
@@ -493,12 +493,16 @@ def _candidates(source: Any, pred: str, args: Sequence[Term], env: dict[str, str
             vals.append(arg)
     if free is None:
         return (env,) if tuple(vals) in source else ()
-    if len(vals) > 1 and vals[1] is not None:
-        pool: Iterable[Atom] = source.with_first(pred, vals[1])
-        fixed = [(i, v) for i, v in enumerate(vals) if i > 1 and v is not None]
+    length = len(vals)
+    for position in range(1, length):
+        value = vals[position]
+        if value is not None:
+            pool: Iterable[Atom] = source.with_arg(pred, position, value)
+            fixed = [(i, v) for i, v in enumerate(vals) if i > position and v is not None]
+            break
     else:
         pool = source.atoms_of(pred)
-        fixed = [(i, v) for i, v in enumerate(vals) if i > 0 and v is not None]
+        fixed = []
     return _extend(pool, len(vals), fixed, free, env)
 
 
@@ -531,7 +535,7 @@ def _step_results(step: Step, state: State, env: dict[str, str], external: Exter
                   axioms: Any, derived_source: Callable[[str], Any] | None) -> Iterable[dict[str, str]]:
     kind = step[0]
     if kind == POS:
-        return _candidates(state, step[1], step[2], env)
+        return candidates(state, step[1], step[2], env)
     if kind == NEG:
         return () if ground(step[1], step[2], env) in state else (env,)
     if kind == EQ:
@@ -539,10 +543,17 @@ def _step_results(step: Step, state: State, env: dict[str, str], external: Exter
     if kind == NEQ:
         return (env,) if _value(step[1], env) != _value(step[2], env) else ()
     if kind in (DPOS, DNEG):
-        source = derived_source(step[1]) if derived_source is not None else axioms.extension(state, step[1])
-        if kind == DPOS:
-            return _candidates(source, step[1], step[2], env)
-        return () if ground(step[1], step[2], env) in source else (env,)
+        if derived_source is not None:  # inside a bottom-up fixpoint
+            source = derived_source(step[1])
+            if kind == DPOS:
+                return candidates(source, step[1], step[2], env)
+            return () if ground(step[1], step[2], env) in source else (env,)
+        if kind == DNEG:
+            return () if axioms.holds(state, ground(step[1], step[2], env)) else (env,)
+        for arg in step[2]:
+            if arg.__class__ is Var and arg.name not in env:  # type: ignore[union-attr]
+                return axioms.query(state, step[1], step[2], env)
+        return (env,) if axioms.holds(state, ground(step[1], step[2], env)) else ()
     # external
     if external is None:
         raise ExternalPredicateError(

@@ -15,7 +15,7 @@ and splits it at the top-level commas itself.
 from __future__ import annotations
 
 import bisect
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -305,6 +305,13 @@ class _Loader:
                 return
             lead = len(cleaned) - len(cleaned.lstrip())
             begin = item_start + lead
+            if len(stripped) >= 2 and stripped[0] in "'\"" and stripped[-1] == stripped[0] \
+                    and _skip_quoted(stripped, 0) == len(stripped):
+                # a quoted item inside an atom list, e.g. ["?x", "?y"]
+                inner = stripped[1:-1]
+                inner = inner.replace("''", "'") if stripped[0] == "'" else inner.replace('\\"', '"')
+                items.append(Src(inner, lambda off, b=begin: self.at_index(b + 1 + off)))
+                return
             one_line = " ".join(stripped.split())
             if "\n" in stripped:
                 items.append(Src(one_line, lambda off, b=begin: self.at_index(b)))
@@ -776,3 +783,50 @@ def load_task_file(path: str | Path) -> TaskFile:
     except (OSError, UnicodeDecodeError) as exc:
         raise TaskFileError(f"cannot read the task file: {exc}", str(path)) from None
     return _Loader(text, str(path), file_path.resolve().parent).load()
+
+
+def problem_from_atoms(domain: Domain, name: str, *, init: Iterable[Sequence[str]], tasks: Iterable[Sequence[str]],
+                       goal: Iterable[Sequence[str]] = (), objects: dict[str, list[str]] | None = None) -> Problem:
+    """Build and validate a problem from atoms given as tuples (generated problems, benchmarks).
+
+    Raises :class:`~bt_meta.errors.TaskFileError` (without a position) naming the offending atom.
+    """
+    where = f"<problem {name}>"
+    context = domain.context
+
+    def check(atom: Sequence[str], what: str, allowed_derived: bool) -> Atom:
+        atom_t = tuple(str(a) for a in atom)
+        if not atom_t:
+            raise TaskFileError(f"empty atom in the {what}", where)
+        pred = atom_t[0]
+        if pred in context.external or (pred in context.derived and not allowed_derived):
+            raise TaskFileError(f"{pred} cannot appear in the {what}", where)
+        arity = context.arities.get(pred)
+        if arity is None:
+            raise TaskFileError(f"unknown predicate {pred!r} in the {what}", where)
+        if arity != len(atom_t) - 1:
+            raise TaskFileError(f"predicate {pred} takes {arity} argument(s), got {len(atom_t) - 1} in the {what}",
+                                where)
+        return atom_t
+
+    facts: list[Atom] = []
+    for type_name, names in (objects or {}).items():
+        if type_name not in domain.types:
+            raise TaskFileError(f"unknown type {type_name!r} in the objects", where)
+        for obj in names:
+            cursor: str | None = type_name
+            while cursor is not None:
+                facts.append((cursor, str(obj)))
+                cursor = domain.types.get(cursor)
+    init_atoms = [check(a, "initial facts", False) for a in init]
+    goal_atoms = [check(a, "goal", True) for a in goal]
+    task_atoms: list[Atom] = []
+    for task in tasks:
+        task_t = tuple(str(a) for a in task)
+        decl = domain.primitives.get(task_t[0]) or domain.tasks.get(task_t[0])
+        if decl is None:
+            raise TaskFileError(f"unknown task or primitive {task_t[0]!r} in the tasks", where)
+        if len(decl.parameters) != len(task_t) - 1:
+            raise TaskFileError(f"{task_t[0]} takes {len(decl.parameters)} argument(s), got {len(task_t) - 1}", where)
+        task_atoms.append(task_t)
+    return Problem(name, dict(objects or {}), init_atoms, task_atoms, goal_atoms, State([*facts, *init_atoms]))

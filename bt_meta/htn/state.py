@@ -16,7 +16,7 @@ from typing import Any
 Atom = tuple[str, ...]
 
 _MASK = (1 << 64) - 1
-_EMPTY: frozenset[Atom] = frozenset()
+_EMPTY: dict[Atom, None] = {}
 
 
 def atom_text(atom: Iterable[str]) -> str:
@@ -27,43 +27,45 @@ def atom_text(atom: Iterable[str]) -> str:
 class State:
     """An immutable set of ground atoms.
 
-    The hash is the sum of the atoms' hashes, maintained incrementally by :meth:`apply`, so loop detection
-    can compare states in O(1) expected time. Derived atoms (axioms) are cached per state in ``_derived`` by
-    the axiom evaluator, which is sound because a state never changes.
+    Atoms of each predicate are kept in insertion order (initial facts in the order given, effects appended),
+    which makes matching, and so planning, deterministic whatever the string hash seed. The hash is the sum of
+    the atoms' hashes, maintained incrementally by :meth:`apply`, so loop detection compares states in O(1)
+    expected time. Derived atoms (axioms) are cached per state in ``_derived`` by the axiom evaluator, which is
+    sound because a state never changes.
     """
 
-    __slots__ = ("_by_first", "_derived", "_hash", "_len", "_preds")
+    __slots__ = ("_by_arg", "_derived", "_hash", "_len", "_preds")
 
     def __init__(self, atoms: Iterable[Iterable[str]] = ()) -> None:
-        preds: dict[str, set[Atom]] = {}
+        preds: dict[str, dict[Atom, None]] = {}
         for atom in atoms:
             atom_tuple = tuple(str(part) for part in atom)
             if not atom_tuple:
                 raise ValueError("an atom needs at least a predicate name")
-            preds.setdefault(atom_tuple[0], set()).add(atom_tuple)
-        self._preds: dict[str, frozenset[Atom]] = {p: frozenset(s) for p, s in preds.items()}
+            preds.setdefault(atom_tuple[0], {})[atom_tuple] = None
+        self._preds: dict[str, dict[Atom, None]] = preds
         self._len = sum(len(s) for s in self._preds.values())
         total = 0
         for atoms_of in self._preds.values():
             for atom in atoms_of:
                 total += hash(atom)
         self._hash = total & _MASK
-        self._by_first: dict[str, dict[str, tuple[Atom, ...]]] = {}
+        self._by_arg: dict[tuple[str, int], dict[str, tuple[Atom, ...]]] = {}
         self._derived: dict[Any, Any] = {}
 
     @classmethod
     def _make(
         cls,
-        preds: dict[str, frozenset[Atom]],
+        preds: dict[str, dict[Atom, None]],
         length: int,
         hash_: int,
-        by_first: dict[str, dict[str, tuple[Atom, ...]]],
+        by_arg: dict[tuple[str, int], dict[str, tuple[Atom, ...]]],
     ) -> State:
         state = cls.__new__(cls)
         state._preds = preds
         state._len = length
         state._hash = hash_
-        state._by_first = by_first
+        state._by_arg = by_arg
         state._derived = {}
         return state
 
@@ -79,21 +81,30 @@ class State:
         atoms_of = self._preds.get(atom[0])
         return atoms_of is not None and atom in atoms_of
 
-    def atoms_of(self, pred: str) -> frozenset[Atom]:
-        """Every atom of one predicate."""
-        return self._preds.get(pred, _EMPTY)
+    def atoms_of(self, pred: str) -> Iterable[Atom]:
+        """Every atom of one predicate, in insertion order (do not mutate)."""
+        return self._preds.get(pred, _EMPTY).keys()
 
-    def with_first(self, pred: str, first: str) -> tuple[Atom, ...]:
-        """Atoms of ``pred`` whose first argument is ``first`` (index built once per state and predicate)."""
-        index = self._by_first.get(pred)
+    def with_arg(self, pred: str, position: int, value: str) -> tuple[Atom, ...]:
+        """Atoms of ``pred`` whose argument ``position`` (1-based, as in the tuple) is ``value``.
+
+        The index of a (predicate, position) is built the first time it is asked for in a state and updated
+        incrementally by :meth:`apply`, so successors inherit it.
+        """
+        key = (pred, position)
+        index = self._by_arg.get(key)
         if index is None:
             built: dict[str, list[Atom]] = {}
             for atom in self._preds.get(pred, _EMPTY):
-                if len(atom) > 1:
-                    built.setdefault(atom[1], []).append(atom)
-            index = {key: tuple(value) for key, value in built.items()}
-            self._by_first[pred] = index
-        return index.get(first, ())
+                if len(atom) > position:
+                    built.setdefault(atom[position], []).append(atom)
+            index = {k: tuple(v) for k, v in built.items()}
+            self._by_arg[key] = index
+        return index.get(value, ())
+
+    def with_first(self, pred: str, first: str) -> tuple[Atom, ...]:
+        """Atoms of ``pred`` whose first argument is ``first``."""
+        return self.with_arg(pred, 1, first)
 
     def predicates(self) -> list[str]:
         return sorted(self._preds)
@@ -113,7 +124,9 @@ class State:
             return NotImplemented
         if self is other:
             return True
-        return self._hash == other._hash and self._len == other._len and self._preds == other._preds
+        if self._hash != other._hash or self._len != other._len or self._preds.keys() != other._preds.keys():
+            return False
+        return all(atoms.keys() == other._preds[p].keys() for p, atoms in self._preds.items())
 
     def __repr__(self) -> str:
         shown = ", ".join(atom_text(a) for a in sorted(self)[:8])
@@ -147,34 +160,40 @@ class State:
         if not removed and not added:
             return self
         new_preds = dict(preds)
-        new_by_first = dict(self._by_first)
+        by_arg = self._by_arg
+        new_by_arg = dict(by_arg) if by_arg else {}
         hash_ = self._hash
         length = self._len
         for pred in removed.keys() | added.keys():
-            gone = removed.get(pred, set())
-            new = added.get(pred, set())
-            updated = (preds.get(pred, _EMPTY) - gone) | new
+            gone = removed.get(pred, ())
+            new = sorted(added[pred]) if pred in added else ()
+            updated = dict(preds.get(pred, _EMPTY))
+            for atom in gone:
+                del updated[atom]
+                hash_ -= hash(atom)
+            for atom in new:
+                updated[atom] = None
+                hash_ += hash(atom)
             if updated:
                 new_preds[pred] = updated
             else:
                 new_preds.pop(pred, None)
-            for atom in gone:
-                hash_ -= hash(atom)
-            for atom in new:
-                hash_ += hash(atom)
             length += len(new) - len(gone)
-            index = self._by_first.get(pred)
-            if index is not None:
-                index = dict(index)
-                for atom in gone:
-                    if len(atom) > 1:
-                        remaining = tuple(a for a in index.get(atom[1], ()) if a != atom)
-                        if remaining:
-                            index[atom[1]] = remaining
-                        else:
-                            index.pop(atom[1], None)
-                for atom in new:
-                    if len(atom) > 1:
-                        index[atom[1]] = (*index.get(atom[1], ()), atom)
-                new_by_first[pred] = index
-        return State._make(new_preds, length, hash_ & _MASK, new_by_first)
+            if by_arg:
+                for key, index in by_arg.items():
+                    if key[0] != pred:
+                        continue
+                    position = key[1]
+                    index = dict(index)
+                    for atom in gone:
+                        if len(atom) > position:
+                            remaining = tuple(a for a in index.get(atom[position], ()) if a != atom)
+                            if remaining:
+                                index[atom[position]] = remaining
+                            else:
+                                index.pop(atom[position], None)
+                    for atom in new:
+                        if len(atom) > position:
+                            index[atom[position]] = (*index.get(atom[position], ()), atom)
+                    new_by_arg[key] = index
+        return State._make(new_preds, length, hash_ & _MASK, new_by_arg)

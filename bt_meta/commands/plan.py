@@ -1,0 +1,65 @@
+"""``bt-meta plan FILE``: plan a problem of a task file and print the plan and its decomposition tree.
+
+Offers:
+
+* :func:`register` -- adds ``plan FILE [--problem NAME] [--json] [--states] [--max-nodes N] [--max-seconds S]``
+
+Exit status 0 with a plan, 1 when there is no plan or the budget ran out (with the reason), 2 on a file that
+does not load or a missing/unknown ``--problem``.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from bt_meta.commands._common import print_json
+from bt_meta.errors import UserInputError
+from bt_meta.htn import load_task_file, plan
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser("plan", help="plan a problem of a YAML task file (plan + decomposition tree)")
+    parser.add_argument("file", help="YAML task file")
+    parser.add_argument("--problem", help="problem name (required when the file has several)")
+    parser.add_argument("--json", action="store_true", help="print one JSON object: plan, tree, stats")
+    parser.add_argument("--states", action="store_true", help="with --json: include each node's state_before")
+    parser.add_argument("--max-nodes", type=int, default=None, help="node budget (task expansions)")
+    parser.add_argument("--max-seconds", type=float, default=None, help="time budget in seconds")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.max_nodes is not None and args.max_nodes < 1:
+        raise UserInputError("--max-nodes must be at least 1")
+    if args.max_seconds is not None and args.max_seconds <= 0:
+        raise UserInputError("--max-seconds must be positive")
+    taskfile = load_task_file(args.file)
+    problem = taskfile.problem(args.problem)
+    result = plan(taskfile.domain, problem, max_nodes=args.max_nodes, max_seconds=args.max_seconds)
+    if args.json:
+        payload: dict[str, Any] = {
+            "file": str(args.file),
+            "problem": problem.name,
+            "status": result.status,
+            "message": result.message,
+            "plan": [action.as_list() for action in result.plan],
+            "tree": result.tree.to_dict(states=args.states) if result.tree is not None else None,
+            "stats": result.stats,
+        }
+        print_json(payload)
+    else:
+        print(f"{args.file}: problem {problem.name}: {result.message}")
+        if result.ok:
+            print("plan:")
+            for index, action in enumerate(result.plan):
+                print(f"  {index:>3}  {action}")
+            print("decomposition tree:")
+            assert result.tree is not None
+            for line in result.tree.pretty().splitlines():
+                print(f"  {line}")
+    if not result.ok:
+        if not args.json:
+            print(f"bt-meta plan: {result.status}: {result.message}")
+        return 1
+    return 0

@@ -21,6 +21,7 @@ A monitored action reports its Monitor's status (what the tree sees); pass ``raw
 
 from __future__ import annotations
 
+import re
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
@@ -36,6 +37,7 @@ from bt_meta.errors import BtMetaError
 __all__ = ["HarnessError", "TreeHarness", "bt_blackboard", "bt_harness", "bt_plugins"]
 
 _BT_META_KEYS = (RUN_KEY, WORLD_KEY, STATE_KEY, FAILURES_KEY)
+_POLICY_KEY = re.compile(r"^/p\d+_")
 
 
 class HarnessError(BtMetaError):
@@ -55,7 +57,7 @@ def clear_blackboard() -> None:
     """Remove bt-meta's keys (and bindings written by policy guards) from py_trees' process-wide blackboard."""
     storage = py_trees.blackboard.Blackboard.storage
     for key in list(storage):
-        if key in _BT_META_KEYS or key.startswith("/bt_meta/"):
+        if key in _BT_META_KEYS or key.startswith("/bt_meta/") or _POLICY_KEY.match(key):
             del storage[key]
 
 

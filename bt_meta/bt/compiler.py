@@ -9,7 +9,8 @@ Two modes:
   (``"n3 place(b0, 2, 1)"``), so a failure maps back to the HTN node.
 * **policy** -- the whole method library, without a plan: a compound task becomes a ``Fallback`` over its
   methods, each a ``Sequence`` behind a guard that binds the method's variables at run time and writes them to the
-  blackboard (``{p<k>_<var>}``) for the subtasks' ports. Recursive methods are expanded to ``max_depth`` levels;
+  blackboard (``{p<k>_<var>}``) for the subtasks' ports; the method's nodes are named ``p<k> ...``.
+  Recursive methods are expanded to ``max_depth`` levels;
   deeper branches are ``AlwaysFailure`` nodes named ``... depth limit``. Unordered methods run in written order.
 
 Every behaviour is built through the node registry (:func:`~bt_meta.bt.domain_nodes.domain_registry`), so it
@@ -172,7 +173,7 @@ def compile_policy(
             condition = method.precondition.source
             if checks:
                 condition = " and ".join([*checks, f"({condition})"])
-            children = [create(CHECK_CONDITION, name=f"{method.name} guard", ports={
+            children = [create(CHECK_CONDITION, name=f"{scope[:-1]} guard {method.name}", ports={
                 "condition": condition, "bindings": format_bindings(bindings), "method": method.name,
                 "output_prefix": scope, "record": "false",
             })]
@@ -186,7 +187,7 @@ def compile_policy(
                     else:
                         sub_args.append(str(term))
                 children.append(expand(subtask[0], sub_args, depth + 1))
-            options.append(create("Sequence", name=f"{method.name} for {label}", children=children))
+            options.append(create("Sequence", name=f"{scope[:-1]} {method.name} for {label}", children=children))
         if not options:
             return create("AlwaysFailure", name=f"{label} no method fits")
         return create("Fallback", name=label, children=options)

@@ -9,7 +9,9 @@ run log, after which the meta-reasoner hook runs. A failing child's own failure 
 same way. A plugin that raises fails the node with kind ``internal``; the tree keeps ticking.
 
 Fast path: while the child is RUNNING the monitor only relays the tick; the bound precondition and ground effects
-are computed once when the arguments are literals; hooks nobody implements are not called.
+are computed once when the arguments are literals; hooks nobody implements are not called; a plain leaf child is
+ticked through its ``initialise``/``update``/``terminate`` directly (py_trees' leaf protocol, without its per-tick
+debug formatting), and still yielded so visitors see it.
 
 Offers:
 
@@ -32,6 +34,8 @@ from bt_meta.bt.failures import Failure, FailureKind, parse_kind
 from bt_meta.errors import BtMetaError
 from bt_meta.htn.state import atom_text
 
+_BEHAVIOUR_TICK = py_trees.behaviour.Behaviour.tick
+_BEHAVIOUR_STOP = py_trees.behaviour.Behaviour.stop
 _RUNNING = Status.RUNNING
 _SUCCESS = Status.SUCCESS
 _FAILURE = Status.FAILURE
@@ -57,8 +61,14 @@ class Monitor(py_trees.decorators.Decorator):
         condition: Any = None,
         bindings: dict[str, str] | None = None,
         effects: tuple[list[tuple[str, ...]], list[tuple[str, ...]]] | None = None,
+        inline_leaf: bool = True,
     ) -> None:
         super().__init__(name=name or f"Monitor<{child.name}>", child=child)
+        # A plain leaf (py_trees' own tick() and stop()) is ticked through its initialise/update/terminate
+        # directly: the same protocol without py_trees' per-tick debug formatting and generator creation.
+        cls = type(child)
+        self._inline = (inline_leaf and not child.children and cls.tick is _BEHAVIOUR_TICK
+                        and cls.stop is _BEHAVIOUR_STOP)
         self.action = child if isinstance(child, PrimitiveAction) else None
         if self.action is not None:
             self.action.monitored = True
@@ -101,8 +111,20 @@ class Monitor(py_trees.decorators.Decorator):
                 self._finish(_FAILURE)
                 yield self
                 return
-        yield from self.decorated.tick()
-        child_status = self.decorated.status
+        child = self.decorated
+        if self._inline:
+            if child.status is not _RUNNING:
+                child.initialise()
+            child_status = child.update()
+            if child_status.__class__ is not Status:
+                child_status = Status.INVALID
+            if child_status is not _RUNNING:
+                child.terminate(child_status)
+            child.status = child_status
+            yield child
+        else:
+            yield from child.tick()
+            child_status = child.status
         if child_status is _RUNNING:
             self.status = _RUNNING
             yield self

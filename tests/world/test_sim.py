@@ -237,3 +237,49 @@ def test_own_client_is_closed():
     s.close()
     s.close()  # idempotent
     assert not pybullet.isConnected(physicsClientId=client)
+
+
+def move_in_line(sim: Simulation, target, waypoints: int = 8, steps: int = 60) -> float:
+    """Drive the right arm along a straight line (pybullet IK per waypoint, pointing down); final error (m)."""
+    end = sim.link_index("right_gripper")
+    start = np.array(sim.gripper_pose()[:3])
+    joints = sim.robot.arm("right").joints
+    for k in range(1, waypoints + 1):
+        point = start + (np.asarray(target) - start) * k / waypoints
+        q = pybullet.calculateInverseKinematics(
+            sim.robot_id,
+            end,
+            list(point),
+            pybullet.getQuaternionFromEuler(DOWN),
+            maxNumIterations=300,
+            residualThreshold=1e-6,
+            physicsClientId=sim.client,
+        )
+        values = dict(zip(sim.movable_joints, q, strict=True))
+        sim.set_joint_targets({j: values[j] for j in joints})
+        sim.step(steps)
+    return float(np.linalg.norm(np.array(sim.gripper_pose()[:3]) - np.asarray(target)))
+
+
+@pytest.mark.parametrize("variant", [None, "housing_upside_down"])
+def test_housing_goes_into_the_board_narrow_end_first_only(world, variant):
+    from bt_meta.world.scenes import load_scene
+
+    load_scene("housing_insertion").build(world, variant)
+    state = world.object_state("housing")
+    top = max(point[2] for point, _ in state.features.values())
+    x, y = state.pose[:2]
+    assert move_in_line(world, (x, y, top + 0.1)) < 1e-3
+    assert move_in_line(world, (x, y, top + 0.002)) < 1e-3
+    assert world.grasp("housing")
+    insert_end, _ = world.feature("housing", "insert_end")
+    offset = np.array(world.gripper_pose()[:3]) - insert_end
+    hole, _ = world.feature("board")
+    move_in_line(world, (x, y, top + 0.15))
+    move_in_line(world, hole + offset + (0.0, 0.0, 0.1))
+    move_in_line(world, hole + offset + (0.0, 0.0, 0.001), waypoints=10, steps=80)
+    insert_end, _ = world.feature("housing", "insert_end")
+    if variant is None:
+        assert np.linalg.norm(insert_end - hole) < 2e-3  # down at the bottom of the hole
+    else:
+        assert np.linalg.norm(insert_end - hole) > 0.03  # the flange meets the socket: it never gets in

@@ -42,8 +42,6 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-import yaml
-
 from bt_meta.commands._common import print_json
 from bt_meta.errors import BtMetaError, UserInputError
 
@@ -547,21 +545,13 @@ class OurPlanner:
         self.domains: dict[str, Any] = {}
         self.problems: dict[str, Any] = {}
         for family, filename in (("blocks", "blocks_htn.yaml"), ("childsnack", "childsnack.yaml")):
-            path = PROBLEMS_DIR / filename
-            members = [p for p in problems if p.family == family]
-            document = yaml.safe_load(path.read_text(encoding="utf-8"))
-            document["problems"] = {
-                p.name: {
-                    "init": [_atom_text(a) for a in p.init],
-                    "tasks": [_atom_text(a) for a in p.tasks],
-                    "goal": [_atom_text(a) for a in p.goal],
-                }
-                for p in members
-            }
-            taskfile = htn.load_task_text(yaml.safe_dump(document, sort_keys=False), path=f"{path} (+ bench problems)")
-            self.domains[family] = taskfile.domain
-            for p in members:
-                self.problems[p.name] = taskfile.problems[p.name]
+            domain = htn.load_task_file(PROBLEMS_DIR / filename).domain
+            self.domains[family] = domain
+            for p in problems:
+                if p.family == family:
+                    self.problems[p.name] = htn.problem_from_atoms(
+                        domain, p.name, init=p.init, tasks=p.tasks, goal=p.goal
+                    )
 
     def run_once(self, problem: BenchProblem, max_seconds: float | None) -> dict[str, Any]:
         domain, ours = self.domains[problem.family], self.problems[problem.name]
@@ -597,10 +587,6 @@ class OurPlanner:
 
 def _failure(status: str, seconds: float, message: str) -> dict[str, Any]:
     return {"status": status, "seconds": seconds, "plan_length": None, "valid": None, "message": message}
-
-
-def _atom_text(atom: Atom) -> str:
-    return f"{atom[0]}({', '.join(atom[1:])})"
 
 
 def run_benchmark(

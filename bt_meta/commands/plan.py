@@ -58,8 +58,4 @@ def run(args: argparse.Namespace) -> int:
             assert result.tree is not None
             for line in result.tree.pretty().splitlines():
                 print(f"  {line}")
-    if not result.ok:
-        if not args.json:
-            print(f"bt-meta plan: {result.status}: {result.message}")
-        return 1
-    return 0
+    return 0 if result.ok else 1

@@ -11,7 +11,6 @@ from bt_meta.bt.expectations import Comparison, Expectation
 from bt_meta.bt.failures import FailureKind
 from bt_meta.bt.monitor import Monitor
 from bt_meta.plugins import hookimpl
-from bt_meta.testing import TreeHarness
 
 DOMAIN = """
 domain:
@@ -223,7 +222,7 @@ def test_custom_expectation_kind_and_trace_events(harness):
     assert failure.action == "put" and failure.message == "colour changed"
     types = [e["type"] for e in events]
     assert types[:2] == ["step_start", "step_end"] and "failure" in types and types[-1] == "tick"
-    end = [e for e in events if e["type"] == "step_end"][0]
+    end = next(e for e in events if e["type"] == "step_end")
     assert end["action"] == "pick" and end["status"] == "SUCCESS" and "held(b0)" in end["state"]
 
 

@@ -28,11 +28,11 @@ import yaml
 
 from bt_meta.errors import ConfigError
 from bt_meta.resources import trees_dir
-from bt_meta.world.objects import COLOURS, OBJECT_TYPES, ObjectModel, make_model
+from bt_meta.world.objects import COLOURS, OBJECT_TYPES, ObjectModel, make_model, pose_to_matrix
 
 __all__ = ["Scene", "SceneObject", "Variant", "load_scene", "scene_names", "scenes_dir"]
 
-_SCENE_KEYS = {"scene", "description", "objects", "variants", "jitter"}
+_SCENE_KEYS = {"scene", "description", "objects", "variants", "jitter", "anchors"}
 _OBJECT_KEYS = {"name", "type", "colour", "pose", "description"}
 _VARIANT_KEYS = {"description", "override", "remove", "replace", "add"}
 _OVERRIDE_KEYS = {"type", "colour", "pose"}
@@ -91,6 +91,19 @@ class Scene:
     """Uniform noise (m) added to x and y of every object when built with a seed."""
     jitter_yaw: float = 0.0
     """Uniform noise (rad) added to yaw."""
+    anchors: dict[str, tuple[tuple[float, float, float | None], tuple[float, float, float]]] = field(
+        default_factory=dict
+    )
+    """Named frames on the table (position with ``z`` None = table top, rpy in radians), e.g. where a letter's
+    origin cell is and which way its axes point."""
+
+    def anchor_transform(self, name: str, table_top_z: float) -> np.ndarray:
+        """4x4 pose of a named anchor in the robot base frame."""
+        if name not in self.anchors:
+            known = ", ".join(self.anchors) or "none"
+            raise ConfigError(f"scene {self.name!r} has no anchor {name!r}; anchors: {known}", self.path)
+        (x, y, z), rpy = self.anchors[name]
+        return pose_to_matrix((x, y, table_top_z if z is None else z, *rpy))
 
     @property
     def variant_names(self) -> tuple[str, ...]:
@@ -202,7 +215,11 @@ class _SceneFile:
                 if key == "nominal":
                     raise self.error("a variant cannot be called 'nominal' (that is the scene itself)", key_node)
                 variants[key] = self.variant(key, value, objects)
-        return Scene(name, description, self.path, objects, variants, jitter_position, jitter_yaw)
+        anchors = {}
+        if "anchors" in top:
+            for key, (_, value) in self.mapping(top["anchors"][1], "anchors", None).items():
+                anchors[key] = self.pose(value, key, what=f"anchor {key!r}")
+        return Scene(name, description, self.path, objects, variants, jitter_position, jitter_yaw, anchors)
 
     # -- parts -----------------------------------------------------------------------------------------------
 
@@ -235,8 +252,10 @@ class _SceneFile:
             raise self.error(f"object {name!r}: unknown colour {colour!r}; known: {', '.join(COLOURS)}", node)
         return colour
 
-    def pose(self, node: yaml.Node, name: str) -> tuple[tuple[float, float, float | None], tuple[float, float, float]]:
-        what = f"object {name!r} pose"
+    def pose(
+        self, node: yaml.Node, name: str, what: str | None = None
+    ) -> tuple[tuple[float, float, float | None], tuple[float, float, float]]:
+        what = what or f"object {name!r} pose"
         if not isinstance(node, yaml.SequenceNode) or len(node.value) != 6:
             got = f"{len(node.value)} values" if isinstance(node, yaml.SequenceNode) else "not a list"
             raise self.error(

@@ -10,6 +10,9 @@ import numpy as np
 import pytest
 
 from bt_meta.errors import ConfigError
+from bt_meta.htn.loader import load_task_file
+from bt_meta.resources import trees_dir
+from bt_meta.world.objects import LB
 from bt_meta.world.scenes import load_scene, scene_names
 from bt_meta.world.sim import Simulation
 
@@ -25,15 +28,15 @@ def write(tmp_path: Path, text: str) -> Path:
 def test_shipped_scenes_and_their_variants():
     assert scene_names() == SHIPPED
     letters = load_scene("letters_A")
-    assert letters.variant_names == ("blue_1x2", "two_red_1x1", "red_and_blue_1x1")
+    assert letters.variant_names == ("A_bar_other_colour", "A_two_1x1_same_colour", "A_two_1x1_different_colours")
     nominal = {o.name: o for o in letters.objects_for(None)}
-    assert (nominal["b0"].type, nominal["b0"].colour) == ("megablok_1x2", "red")
-    assert all(nominal[f"b{i}"].type == "megablok_1x1" and nominal[f"b{i}"].colour == "blue" for i in range(1, 5))
-    blue = {o.name: o for o in letters.objects_for("blue_1x2")}
-    assert "b0" not in blue and (blue["b5"].type, blue["b5"].colour) == ("megablok_1x2", "blue")
-    assert blue["b5"].position == nominal["b0"].position and blue["b5"].rpy == nominal["b0"].rpy  # inherited
-    mixed = {o.name: o for o in letters.objects_for("red_and_blue_1x1")}
-    assert {mixed["b5"].colour, mixed["b6"].colour} == {"red", "blue"} and "b0" not in mixed
+    assert (nominal["b5"].type, nominal["b5"].colour) == ("megablok_1x2", "blue")
+    assert all(nominal[f"b{i}"].type == "megablok_1x1" and nominal[f"b{i}"].colour == "blue" for i in range(5))
+    red = {o.name: o for o in letters.objects_for("A_bar_other_colour")}
+    assert (red["b5"].type, red["b5"].colour) == ("megablok_1x2", "red")
+    assert red["b5"].position == nominal["b5"].position and red["b5"].rpy == nominal["b5"].rpy
+    mixed = {o.name: o for o in letters.objects_for("A_two_1x1_different_colours")}
+    assert {mixed["b5"].colour, mixed["b6"].colour} == {"red", "blue"} and mixed["b5"].type == "megablok_1x1"
     housing = load_scene("housing_insertion")
     upside = {o.name: o for o in housing.objects_for("housing_upside_down")}
     assert upside["housing"].rpy[0] == pytest.approx(math.pi) and upside["housing"].on_table
@@ -43,10 +46,45 @@ def test_shipped_scenes_and_their_variants():
     assert {o.name for o in magnets.objects_for("nominal")} == {"active", "reference"}
 
 
+# trees/letters.yaml problem -> (scene, variant): the blocks on the table are the problem's blocks.
+LETTER_PROBLEMS = {
+    "A": ("letters_A", None),
+    "H": ("letters_H", None),
+    "A_bar_other_colour": ("letters_A", "A_bar_other_colour"),
+    "A_two_1x1_same_colour": ("letters_A", "A_two_1x1_same_colour"),
+    "A_two_1x1_different_colours": ("letters_A", "A_two_1x1_different_colours"),
+}
+
+
+def test_letter_scenes_hold_the_blocks_of_the_letter_problems():
+    problems = load_task_file(trees_dir() / "letters.yaml").problems
+    assert set(LETTER_PROBLEMS) <= set(problems)
+    for problem, (scene, variant) in LETTER_PROBLEMS.items():
+        init = problems[problem].init
+        shapes = {atom[1]: atom[2] for atom in init if atom[0] == "shape"}
+        colours = {atom[1]: atom[2] for atom in init if atom[0] == "colour"}
+        expected = {(b, shapes[b], colours[b]) for b in shapes}
+        objects = load_scene(scene).objects_for(variant)
+        assert {(o.name, o.model().shape, o.model().colour) for o in objects} == expected, problem
+
+
+def test_letter_origin_anchor_maps_letter_cells_onto_the_free_table():
+    scene = load_scene("letters_A")
+    origin = scene.anchor_transform("letter_origin", table_top_z=-0.2)
+    far_corner = origin @ np.array([3 * LB, 2 * LB, 0.0, 1.0])  # the letter's top-right cell
+    assert np.allclose(origin[:3, 3], (0.55, 0.10, -0.2))
+    assert np.allclose(origin[:3, 0], (0, -1, 0), atol=1e-12) and np.allclose(origin[:3, 1], (1, 0, 0), atol=1e-12)
+    assert far_corner[:3] == pytest.approx((0.55 + 2 * LB, 0.10 - 3 * LB, -0.2))
+    supply_y = max(o.position[1] for o in scene.objects)
+    assert far_corner[1] - LB > supply_y + LB  # the letter never overlaps the supply
+    with pytest.raises(ConfigError, match="no anchor 'corner'; anchors: letter_origin"):
+        scene.anchor_transform("corner", -0.2)
+
+
 def test_unknown_scene_and_variant():
     with pytest.raises(ConfigError, match="no scene 'nope'; shipped scenes: housing_insertion"):
         load_scene("nope")
-    with pytest.raises(ConfigError, match="has no variant 'upside'; variants: blue_1x2"):
+    with pytest.raises(ConfigError, match="has no variant 'upside'; variants: A_bar_other_colour"):
         load_scene("letters_A").objects_for("upside")
 
 

@@ -134,6 +134,15 @@ class CollisionChecker:
                     continue
                 geometry.addCollisionPair(pin.CollisionPair(i, j))
                 kinds.append("scene")
+            # A carried object can hit the other objects; fixed objects never move relative to each other.
+            for i in range(n_robot, j):
+                other = objects[i].parentJoint
+                if (carried_by == 0 and other == 0) or carried_by == other:
+                    continue
+                if frozenset((objects[i].name, objects[j].name)) in self._allowed:
+                    continue
+                geometry.addCollisionPair(pin.CollisionPair(i, j))
+                kinds.append("scene")
         self._pair_kinds = kinds
         self._masks = {}
         self._geometry_data = None
@@ -234,13 +243,19 @@ class CollisionChecker:
         self._allowed.clear()
         self._rebuild_pairs()
 
-    def allow(self, name: str, links: Iterable[str]) -> None:
-        """Stop checking ``name`` against these robot links (e.g. a block between the fingers that hold it)."""
+    def allow(self, name: str, others: Iterable[str]) -> None:
+        """Stop checking ``name`` against these robot links or scene objects.
+
+        E.g. a block against the fingers that hold it, or a carried block against the block it is placed on.
+        """
         self._index(name)
-        for link in links:
-            if link not in self._link_of:
-                raise KinematicsError(f"unknown collision link {link!r}; links: {', '.join(self.links)}")
-            self._allowed.add(frozenset((name, link)))
+        for other in others:
+            if other not in self._link_of and other not in self._objects:
+                raise KinematicsError(
+                    f"unknown collision link or scene object {other!r}; links: {', '.join(self.links)}; "
+                    f"objects: {', '.join(self._objects) or 'none'}"
+                )
+            self._allowed.add(frozenset((name, other)))
         self._rebuild_pairs()
 
     def disallow(self, name: str) -> None:
@@ -249,11 +264,14 @@ class CollisionChecker:
         self._allowed = {pair for pair in self._allowed if name not in pair}
         self._rebuild_pairs()
 
-    def attach(self, name: str, frame: str, q: np.ndarray) -> None:
+    def attach(self, name: str, frame: str, q: np.ndarray, allow: Iterable[str] = ()) -> None:
         """Carry an object with robot ``frame``, keeping its current pose relative to that frame at ``q``.
 
-        The object is then no longer checked against geometries rigidly joined to the carrying link.
+        The object is then no longer checked against geometries rigidly joined to the carrying link, nor against
+        the links or objects in ``allow`` (typically the gripper's fingers, which move on their own joints).
         """
+        if allow:
+            self.allow(name, allow)
         index = self._index(name)
         fid = self.kinematics.frame_id(frame)
         world = self.pose(name, q)
@@ -266,8 +284,16 @@ class CollisionChecker:
         self._objects[name] = SceneObject(name, self._objects[name].shape, self._objects[name].dimensions, frame)
         self._rebuild_pairs()
 
-    def detach(self, name: str, pose: Pose) -> None:
+    def detach(self, name: str, pose: Pose | None = None, q: np.ndarray | None = None) -> None:
+        """Fix a carried object in the base frame: at ``pose``, or where it is at configuration ``q``.
+
+        Links and objects it was allowed to touch stay allowed; :meth:`disallow` forgets them.
+        """
         index = self._index(name)
+        if pose is None:
+            if q is None:
+                raise KinematicsError(f"detach({name!r}) needs the pose to leave it at, or the configuration q")
+            pose = self.pose(name, q)
         obj = self.geometry.geometryObjects[index]
         obj.parentJoint = 0
         obj.parentFrame = 0

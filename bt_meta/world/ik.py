@@ -18,6 +18,7 @@ collided (naming the pair), ``reachability`` otherwise (with the target and the 
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -210,17 +211,21 @@ class InverseKinematics:
         task, body = self._task(solver, arm, frame)
         base = kin.home.copy() if q_start is None else kin.check_q(q_start).copy()
         target_se3 = as_se3(target)
-        task.set_target(mink.SE3.from_matrix(target_se3.homogeneous))
+        quaternion = pin.Quaternion(target_se3.rotation)
+        task.set_target(
+            mink.SE3(np.array([quaternion.w, quaternion.x, quaternion.y, quaternion.z, *target_se3.translation]))
+        )
         target_rotation_t = target_se3.rotation.T
         target_position = target_se3.translation
-        rng = np.random.default_rng(settings.seed if seed is None else seed)
+        rng: np.random.Generator | None = None  # made on the first random restart: most solves never need it
         configuration = solver.configuration
         data = configuration.data
         mj = solver.mj
         tol_p, tol_r = settings.position_tolerance, settings.orientation_tolerance
 
         def residual() -> tuple[float, float]:
-            position = float(np.linalg.norm(data.xpos[body] - target_position))
+            offset = data.xpos[body] - target_position
+            position = math.sqrt(offset @ offset)
             rotation = float(np.linalg.norm(pin.log3(target_rotation_t @ data.xmat[body].reshape(3, 3))))
             return position, rotation
 
@@ -236,6 +241,8 @@ class InverseKinematics:
             if attempt <= len(starts):
                 configuration.update(starts[attempt - 1])
             else:
+                if rng is None:
+                    rng = np.random.default_rng(settings.seed if seed is None else seed)
                 avoid = base if colliding and check_collisions else None
                 self._random_start(solver, body, target_se3, rng, avoid)
             history: list[float] = []
@@ -261,7 +268,12 @@ class InverseKinematics:
                 iterations += 1
             if not converged:
                 continue
-            q = mj.to_pinocchio(np.clip(data.qpos, solver.lower, solver.upper), base)
+            qpos = np.clip(data.qpos, solver.lower, solver.upper)
+            q = mj.to_pinocchio(qpos, base)
+            if not np.array_equal(qpos, data.qpos):  # mink's limits keep steps inside; this is rounding at most
+                position, rotation = kin.pose_error(kin.frame_pose(q, frame), target_se3)
+                if position > tol_p or rotation > tol_r:
+                    continue
             if check_collisions and self.collision is not None:
                 contact = self.collision.check(q)
                 if contact is not None:
@@ -269,7 +281,6 @@ class InverseKinematics:
                     if len(colliding) >= settings.max_colliding_solutions:
                         break
                     continue
-            position, rotation = kin.pose_error(kin.frame_pose(q, frame), target_se3)
             return IKResult(
                 True,
                 q,

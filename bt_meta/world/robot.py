@@ -61,7 +61,7 @@ class IKSettings:
     orientation_tolerance: float = 1e-3
     lm_damping: float = 1e-2
     orientation_cost: float = 1.0
-    max_iterations: int = 40
+    max_iterations: int = 15
     max_attempts: int = 40
     stall_iterations: int = 5
     stall_ratio: float = 0.5

@@ -1,0 +1,158 @@
+"""Self-collision with the SRDF's pairs removed, and a run-time scene of named objects."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from bt_meta.world.collision import CollisionChecker, as_se3, pose_from_xyz_rpy
+from bt_meta.world.kinematics import Kinematics, KinematicsError
+from bt_meta.world.robot import load_robot
+
+# Right shoulder swung in and raised, elbow bent: the elbow goes into the head's collision sphere.
+ELBOW_IN_HEAD = {"right_s0": 1.0, "right_s1": -1.5, "right_e0": 0.0, "right_e1": 1.5, "right_w0": 0.0, "right_w1": 0.0}
+
+
+@pytest.fixture(scope="module")
+def kin() -> Kinematics:
+    return Kinematics(load_robot("baxter"))
+
+
+@pytest.fixture(scope="module")
+def checker(kin) -> CollisionChecker:
+    return CollisionChecker(kin)
+
+
+@pytest.fixture
+def scene(checker):
+    """The module's checker, emptied after each test so scene objects never leak between tests."""
+    yield checker
+    checker.clear_scene()
+
+
+def test_no_self_collision_at_home_and_reference(checker, kin):
+    assert checker.check(kin.home) is None
+    assert checker.check(kin.reference) is None
+    assert checker.all_contacts(kin.home) == []
+
+
+def test_srdf_pairs_are_removed(checker):
+    pairs = {
+        frozenset((checker._name_of(p.first), checker._name_of(p.second))) for p in checker.geometry.collisionPairs
+    }
+    assert frozenset(("collision_head_link_1", "collision_head_link_2")) not in pairs  # SRDF: adjacent
+    assert frozenset(("collision_head_link_1", "right_lower_elbow")) in pairs
+    assert checker.n_self_pairs == 547
+    assert checker.n_scene_pairs == 0
+
+
+def test_known_colliding_configuration(checker, kin):
+    q = kin.q_from_dict(ELBOW_IN_HEAD, kin.home)
+    contact = checker.check(q)
+    assert contact is not None
+    assert contact.pair == ("collision_head_link_1", "right_lower_elbow")
+    assert contact.kind == "self"
+    assert contact.penetration == pytest.approx(0.0326, abs=1e-3)
+    assert str(contact) == "collision_head_link_1 <-> right_lower_elbow (penetration 32.6 mm)"
+    assert contact in checker.all_contacts(q)
+    assert checker.check(q, self_collision=False) is None  # no scene: nothing else to hit
+
+
+def test_broad_phase_agrees_with_the_ordered_pass(checker, kin):
+    rng = np.random.default_rng(12)
+    colliding = 0
+    for _ in range(200):
+        q = kin.random_q(rng, "right")
+        first = checker.check(q)
+        every = checker.all_contacts(q)
+        assert (first is None) == (not every)
+        if first is not None:
+            colliding += 1
+            assert first.pair == every[0].pair
+    assert 30 < colliding < 120  # about a third of random right-arm configurations self-collide
+
+
+def test_box_at_the_gripper_is_reported_by_name(scene, kin):
+    gripper = kin.end_effector_pose(kin.home, "right")
+    scene.add_box("block", (0.05, 0.05, 0.05), gripper)
+    contact = scene.check(kin.home)
+    assert contact is not None and contact.second == "block" and contact.kind == "scene"
+    assert contact.first.startswith("r_gripper") or contact.first.startswith("right_")
+    assert scene.check(kin.home, scene=False) is None
+    assert scene.objects["block"].shape == "box" and scene.objects["block"].dimensions == (0.05, 0.05, 0.05)
+
+
+def test_moving_and_removing_objects(scene, kin):
+    gripper = kin.end_effector_pose(kin.home, "right")
+    scene.add_cylinder("shaft", 0.01, 0.1, (2.0, 0.0, 0.0))
+    assert scene.check(kin.home) is None
+    scene.move("shaft", gripper)
+    assert scene.check(kin.home).second == "shaft"
+    assert scene.pose("shaft").isApprox(gripper)
+    scene.move("shaft", (2.0, 0.0, 0.0, 0.0, 0.0, 0.3))
+    assert scene.check(kin.home) is None
+    scene.move("shaft", gripper.homogeneous)
+    assert scene.check(kin.home) is not None
+    scene.remove("shaft")
+    assert scene.check(kin.home) is None
+    assert "shaft" not in scene.objects
+    with pytest.raises(KinematicsError, match="unknown scene object 'shaft'; scene objects: none"):
+        scene.move("shaft", gripper)
+
+
+def test_table_distance_and_errors(scene, kin):
+    scene.add_box("table", (0.8, 1.4, 0.1), (0.8, 0.0, -0.2))
+    assert scene.check(kin.home) is None
+    distance, link = scene.distance(kin.home, "table")
+    assert 0.0 < distance < 0.5 and link
+    scene.add_sphere("ball", 0.02, (0.8, 0.0, -0.13))  # resting on the table: fixed objects are not paired
+    assert scene.check(kin.home) is None
+    with pytest.raises(KinematicsError, match="already exists"):
+        scene.add_box("table", (1, 1, 1), (0, 0, 0))
+    with pytest.raises(KinematicsError, match="box size must be 3 positive numbers"):
+        scene.add_box("slab", (1, 0, 1), (0, 0, 0))
+    with pytest.raises(KinematicsError, match="a pose is an SE3"):
+        scene.add_box("slab", (1, 1, 1), (0, 0))
+    with pytest.raises(KinematicsError, match="unknown collision link or scene object 'thumb'"):
+        scene.allow("table", ["thumb"])
+
+
+def test_allowed_pairs(scene, kin):
+    gripper = kin.end_effector_pose(kin.home, "right")
+    scene.add_box("held", (0.03, 0.03, 0.03), gripper * pin.SE3(np.eye(3), np.array([0.0, 0.0, -0.03])))
+    contacts = {c.first for c in scene.all_contacts(kin.home)}
+    assert contacts and all(c.startswith("r_gripper") for c in contacts)
+    scene.allow("held", contacts)
+    assert scene.check(kin.home) is None
+    scene.disallow("held")
+    assert scene.check(kin.home) is not None
+
+
+def test_attached_object_moves_with_the_arm(scene, kin):
+    gripper = kin.end_effector_pose(kin.home, "right")
+    scene.add_box("table", (1.0, 1.4, 0.1), (0.7, 0.0, -0.1))  # top at z = -0.05
+    scene.add_box("held", (0.04, 0.04, 0.04), gripper * pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.1])))
+    fingers = {c.first for c in scene.all_contacts(kin.home)}
+    scene.attach("held", "right_gripper", kin.home, allow=fingers)
+    assert scene.objects["held"].attached_to == "right_gripper"
+    assert scene.check(kin.home) is None
+    lowered = kin.q_from_dict({"right_s1": -0.3}, kin.home)
+    expected = kin.end_effector_pose(lowered, "right") * pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.1]))
+    assert scene.pose("held", lowered).isApprox(expected, 1e-9)
+    assert expected.translation[2] < -0.05  # the carried box is pushed into the table, the hand is not
+    contact = scene.check(lowered)
+    assert contact is not None and contact.pair == ("table", "held")
+    assert scene.check(kin.q_from_dict({"right_s1": -0.3}, kin.home), scene=False) is None
+    scene.detach("held", q=lowered)
+    assert scene.objects["held"].attached_to is None
+    assert scene.pose("held").isApprox(expected, 1e-9)
+    with pytest.raises(KinematicsError, match="needs the pose"):
+        scene.detach("held")
+
+
+def test_pose_helpers():
+    pose = pose_from_xyz_rpy(1, 2, 3, 0.1, 0.2, 0.3)
+    assert np.allclose(pin.rpy.matrixToRpy(pose.rotation), [0.1, 0.2, 0.3])
+    assert as_se3(pose.homogeneous).isApprox(pose)
+    assert as_se3((1, 2, 3)).translation.tolist() == [1, 2, 3]

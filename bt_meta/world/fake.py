@@ -104,6 +104,7 @@ class FakeSkill:
         self.failure: SkillFailure | None = None
         self.outcome: str | None = None
         self.cancelled = False
+        self.external: Any = None
 
     def start(self, args: Sequence[str], ctx: Any = None) -> None:
         self.args = tuple(args)
@@ -112,6 +113,8 @@ class FakeSkill:
                 f"{self.primitive.name} takes {len(self.primitive.parameters)} arguments, got {len(self.args)}"
             )
         self.fault = self.world._next_fault(self.primitive.name, self.args)
+        run = getattr(ctx, "run", None)
+        self.external = None if run is None else run.external
         self.ticks = 0
         self.failure = None
         self.outcome = None
@@ -134,7 +137,7 @@ class FakeSkill:
                 evidence={"fault": "fail", "ticks": self.ticks},
             )
             return FAILURE
-        effects = ground_effects(self.primitive, self.args, self.world.symbolic_state())
+        effects = ground_effects(self.primitive, self.args, self.world.symbolic_state(), self.external)
         if effects is None:
             self.outcome = FAILURE
             self.failure = SkillFailure(

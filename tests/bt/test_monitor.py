@@ -231,3 +231,51 @@ def test_monitor_without_a_run_just_relays():
     monitor = Monitor(child)
     monitor.tick_once()
     assert monitor.status is Status.SUCCESS and monitor.is_monitor
+
+
+EXTERNAL = """
+domain:
+  name: reach
+  predicates:
+    on_table: [block]
+    held: [block]
+  external:
+    reachable: [block]
+  primitives:
+    grab:
+      parameters: [?b]
+      precondition: on_table(?b) and reachable(?b)
+      add: [held(?b)]
+      delete: [on_table(?b)]
+problems:
+  one:
+    init: [on_table(b0)]
+    tasks: [grab(b0)]
+"""
+
+
+class Reach:
+    def __init__(self) -> None:
+        self.answer: bool | Exception = True
+
+    @hookimpl
+    def bt_meta_external_predicate(self, name, args, state):
+        if isinstance(self.answer, Exception):
+            raise self.answer
+        return self.answer if name == "reachable" else None
+
+
+def test_external_predicates_in_preconditions_come_from_plugins(bt_harness):
+    reach = Reach()
+    h = bt_harness(EXTERNAL, "one", extra_plugins=[("reach", reach)])
+    assert h.tick() is Status.SUCCESS and h.failures == []
+    reach.answer = False
+    h.world.apply_symbolic(add=[("on_table", "b0")], delete=[("held", "b0")])
+    h.run.state = h.world.symbolic_state()
+    assert h.tick() is Status.FAILURE
+    assert h.failure_kinds == ["precondition"]
+    reach.answer = ConnectionError("IK server down")
+    assert h.tick() is Status.FAILURE
+    failure = h.failures[-1]
+    assert failure.kind is FailureKind.INTERNAL and failure.plugin == "reach"
+    assert "IK server down" in failure.message

@@ -179,3 +179,35 @@ def test_project_plugins_folder_is_next_to_the_task_file(tmp_path):
     # Giving the same folder with --plugins does not load it twice.
     host = create_plugin_host([tmp_path / "plugins"], project_file=task, entry_points=False)
     assert host.plugin_names().count("mine") == 1
+
+
+def test_register_nodes_hook_adds_node_types_usable_in_xml(tmp_path, bt_blackboard):
+    from py_trees.common import Status
+
+    from bt_meta.testing import TreeHarness
+
+    (tmp_path / "plugins").mkdir()
+    (tmp_path / "plugins" / "beeper.py").write_text(textwrap.dedent('''
+        import py_trees
+        from bt_meta.bt.registry import NodeType, PortSpec
+        from bt_meta.plugins import hookimpl
+
+        class Beep(py_trees.behaviour.Behaviour):
+            count = 0
+
+            def update(self):
+                Beep.count += 1
+                return py_trees.common.Status.SUCCESS
+
+        @hookimpl
+        def bt_meta_register_nodes(registry, domain):
+            registry.register(NodeType("Beep", "Action", [PortSpec("times", "input", "int", "1")],
+                                       lambda name, ports, children: Beep(name)))
+    '''))
+    (tmp_path / "beep.xml").write_text(
+        '<root BTCPP_format="4"><BehaviorTree ID="Main"><Sequence><Beep times="2"/><Beep/></Sequence>'
+        "</BehaviorTree></root>")
+    harness = TreeHarness.from_file(tmp_path / "beep.xml", world=None)
+    assert harness.tick() is Status.SUCCESS
+    assert "beeper" in harness.run.plugins.plugin_names()
+    assert harness.root.children[0].is_monitor  # a plugin's custom action is monitored like a primitive

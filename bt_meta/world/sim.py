@@ -366,6 +366,23 @@ class Simulation:
     def joint_targets(self) -> dict[str, float]:
         return dict(self._targets)
 
+    def target_error(self, names: Sequence[str] | None = None) -> float:
+        """Largest |target - position| over the named joints (all driven joints by default): has a move arrived?"""
+        names = list(self._targets) if names is None else list(names)
+        now = self.joint_positions(names)
+        return max((abs(self._targets.get(n, now[n]) - now[n]) for n in names), default=0.0)
+
+    def set_gripper(self, arm: str, state: str) -> None:
+        """Drive the fingers ``"open"`` or ``"closed"`` (the robot description's values). Cosmetic for holding:
+        a grasp is a constraint (see :meth:`grasp`), but the fingers show what the gripper does."""
+        gripper = self.robot.arm(arm).gripper
+        if gripper is None:
+            raise SimulationError(f"arm {arm!r} has no gripper")
+        if state not in ("open", "closed"):
+            raise SimulationError(f"a gripper is 'open' or 'closed', not {state!r}")
+        values = gripper.open if state == "open" else gripper.closed
+        self.set_joint_targets(dict(zip(gripper.joints, values, strict=True)))
+
     def link_transform(self, link: str) -> np.ndarray:
         """4x4 pose of a robot link's URDF frame in the base frame."""
         index = self.link_index(link)
@@ -477,7 +494,16 @@ class Simulation:
             if grasp.object_name == name:
                 self.release(arm)
         for pair in [p for p in self._joins if name in p]:
-            pybullet.removeConstraint(self._joins.pop(pair), physicsClientId=self.client)
+            a, b = tuple(pair)
+            self.detach(a, b)
+        # pybullet reuses body ids and keeps collision filter pairs: switch every pair back on before the id goes,
+        # or the next object with this id would pass through the hand.
+        for arm, links in self._hand_links.items():
+            if (arm, name) in self._pending_collision:
+                for link in links:
+                    pybullet.setCollisionFilterPair(
+                        self.robot_id, body.body_id, link, -1, 1, physicsClientId=self.client
+                    )
         self._pending_collision = [p for p in self._pending_collision if p[1] != name]
         pybullet.removeBody(body.body_id, physicsClientId=self.client)
         del self._bodies[name]
@@ -623,6 +649,29 @@ class Simulation:
     def held(self, arm: str = "right") -> str | None:
         grasp = self._grasps.get(arm)
         return grasp.object_name if grasp else None
+
+    def grasp_transform(self, arm: str = "right") -> np.ndarray | None:
+        """4x4 pose of the held object in the end-effector frame (``None`` if nothing is held): the kinematic
+        relation that turns a wanted object pose into a gripper pose (object = gripper @ this)."""
+        grasp = self._grasps.get(arm)
+        if grasp is None:
+            return None
+        return np.linalg.inv(self.link_transform(self.robot.arm(arm).end_effector)) @ self.object_transform(
+            grasp.object_name
+        )
+
+    def robot_contacts(self) -> list[tuple[str, str]]:
+        """(robot link, object name or ``"table"``) for every contact of the robot with the world, sorted."""
+        names = {index: name for name, index in self._link_index.items()}
+        out: set[tuple[str, str]] = set()
+        for contact in pybullet.getContactPoints(bodyA=self.robot_id, physicsClientId=self.client):
+            other = contact[2]
+            if other == self.robot_id:
+                continue
+            what = "table" if other == self.table_id else self._by_id.get(other)
+            if what is not None:
+                out.add((names.get(contact[3], str(contact[3])), what))
+        return sorted(out)
 
     def _distance_to_gripper(self, body: int, end_link: int) -> float:
         pos = pybullet.getLinkState(

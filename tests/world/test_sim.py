@@ -138,6 +138,8 @@ def test_grasp_holds_while_the_arm_moves_and_release_drops(world):
     assert np.linalg.norm(np.array(moved[:3]) - np.array(grip[:3])) > 0.05  # the arm really moved
     drift = relative(world, "b")
     assert np.linalg.norm(drift[:3, 3] - before[:3, 3]) < 1e-4
+    assert np.allclose(world.grasp_transform(), drift)
+    assert world.target_error(list(target)) < 1e-3
     assert world.release() == "b" and world.held() is None
     world.step(480)
     z_rest = world.table.top_z + block.lowest_z(0, 0)
@@ -283,3 +285,35 @@ def test_housing_goes_into_the_board_narrow_end_first_only(world, variant):
         assert np.linalg.norm(insert_end - hole) < 2e-3  # down at the bottom of the hole
     else:
         assert np.linalg.norm(insert_end - hole) > 0.03  # the flange meets the socket: it never gets in
+
+
+def test_gripper_fingers_and_robot_contacts(world):
+    world.set_gripper("right", "open")
+    world.step(120)
+    fingers = world.robot.arm("right").gripper
+    q = world.joint_positions(fingers.joints)
+    assert [q[j] for j in fingers.joints] == pytest.approx(list(fingers.open), abs=1e-3)
+    with pytest.raises(SimulationError, match="'open' or 'closed'"):
+        world.set_gripper("right", "ajar")
+    assert world.robot_contacts() == []
+    world.spawn("b", make_model("megablok_1x1"), (0.6, -0.3, 0, 0, 0, 0), on_table=True)
+    top = world.object_state("b").features["top"][0]
+    assert reach(world, (0.6, -0.3, top[2] - 0.025)) < 1e-3  # open fingertips 2.5 cm into the block
+    world.step(1)
+    touching = world.robot_contacts()
+    assert any(other == "b" for _, other in touching) and all(link.startswith("r_gripper") for link, _ in touching)
+    assert world.grasp_transform() is None
+
+
+def test_a_removed_held_object_leaves_no_collision_hole(world):
+    """pybullet reuses body ids: the next object must collide with the hand again."""
+    world.spawn("x", make_model("megablok_1x1"), (0.6, -0.3, 0, 0, 0, 0), on_table=True)
+    top = world.object_state("x").features["top"][0]
+    assert reach(world, (0.6, -0.3, top[2] - 0.025)) < 1e-3
+    assert world.grasp("x")
+    old_id = world.body_id("x")
+    world.remove("x")
+    world.spawn("y", make_model("megablok_1x1"), (0.6, -0.3, 0, 0, 0, 0), on_table=True)
+    assert world.body_id("y") == old_id  # the id was reused
+    world.step(1)
+    assert any(other == "y" for _, other in world.robot_contacts())

@@ -390,10 +390,19 @@ class Condition:
         env = dict(bindings) if bindings else {}
         clauses = self.clauses
         if len(clauses) == 1:
-            yield from match_clause(clauses[0], state, env, external, self.context.axioms)
-            return
+            return iter(match_clause(clauses[0], state, env, external, self.context.axioms))
+        return self._union(state, env, external)
+
+    def satisfiers_of(self, state: State, env: dict[str, str], external: ExternalFn | None) -> Iterable[dict]:
+        """Like :meth:`satisfiers` but ``env`` is the caller's fresh dict, not copied (planner fast path)."""
+        clauses = self.clauses
+        if len(clauses) == 1:
+            return match_clause(clauses[0], state, env, external, self.context.axioms)
+        return self._union(state, env, external)
+
+    def _union(self, state: State, env: dict[str, str], external: ExternalFn | None) -> Iterator[dict[str, str]]:
         seen: set[tuple] = set()
-        for clause in clauses:
+        for clause in self.clauses:
             for result in match_clause(clause, state, env, external, self.context.axioms):
                 key = tuple(sorted(result.items()))
                 if key not in seen:
@@ -566,15 +575,20 @@ def _step_results(step: Step, state: State, env: dict[str, str], external: Exter
 
 
 def match_clause(steps: Sequence[Step], state: State, env: dict[str, str], external: ExternalFn | None,
-                 axioms: Any, derived_source: Callable[[str], Any] | None = None) -> Iterator[dict[str, str]]:
-    """Iterative left-to-right matching of one clause; yields each complete binding."""
+                 axioms: Any, derived_source: Callable[[str], Any] | None = None) -> Iterable[dict[str, str]]:
+    """Left-to-right matching of one clause: an iterable of each complete binding (lazy when it matters)."""
     count = len(steps)
     if count == 0:
-        yield env
-        return
+        return (env,)
     if count == 1:
-        yield from _step_results(steps[0], state, env, external, axioms, derived_source)
-        return
+        return _step_results(steps[0], state, env, external, axioms, derived_source)
+    return _match_many(steps, state, env, external, axioms, derived_source)
+
+
+def _match_many(steps: Sequence[Step], state: State, env: dict[str, str], external: ExternalFn | None,
+                axioms: Any, derived_source: Callable[[str], Any] | None) -> Iterator[dict[str, str]]:
+    """Iterative backtracking over the literals of a clause (no recursion)."""
+    count = len(steps)
     iters: list[Iterator[dict[str, str]]] = [iter(())] * count
     iters[0] = iter(_step_results(steps[0], state, env, external, axioms, derived_source))
     depth = 0

@@ -15,7 +15,7 @@ Atom templates (effects, subtasks, task heads) are tuples ``(name, term, ...)`` 
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -59,6 +59,15 @@ class Primitive:
     expectations: dict[str, Any] = field(default_factory=dict)
     line: int | None = None
     column: int | None = None
+
+    def __post_init__(self) -> None:
+        self._typed = any(t is not None for t in self.types)
+
+    def fast_satisfiers(self, state: State, args: Sequence[str], external: ExternalFn | None) -> Iterable[dict]:
+        """Planner fast path: arguments already checked against the arity at load time."""
+        if self._typed and not types_hold(self.types, args, state):
+            return ()
+        return self.precondition.satisfiers_of(state, dict(zip(self.parameters, args, strict=True)), external)
 
     def ground(self, args: Sequence[str]) -> GroundPrimitive:
         return GroundPrimitive(self, tuple(str(a) for a in args),

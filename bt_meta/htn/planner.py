@@ -105,13 +105,13 @@ class Search:
             env = _unify_head(method, task)
             if env is None:
                 continue
-            for satisfier in method.precondition.satisfiers(state, env, external):
+            for satisfier in method.precondition.satisfiers_of(state, env, external):
                 if exclude is not None and (method.name, frozenset(satisfier.items())) == exclude:
                     continue
                 yield method, satisfier
 
     def _dead_end(self, plan_len: int, description: str) -> None:
-        if self.deepest is None or plan_len > self.deepest[0]:
+        if self.deepest is None or plan_len >= self.deepest[0]:
             self.deepest = (plan_len, description)
 
     def _explain(self, task: tuple[str, ...], state: State) -> str:
@@ -237,7 +237,7 @@ class Search:
                 task = item[1]
                 name = task[0]
                 if name in primitives:
-                    alternatives = primitives[name].satisfiers(state, task[1:], external)
+                    alternatives = iter(primitives[name].fast_satisfiers(state, task[1:], external))
                 else:
                     decl = tasks_decl[name]
                     key = (task, hash(state))

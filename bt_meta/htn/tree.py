@@ -17,8 +17,10 @@ from typing import Any
 
 from bt_meta.htn.state import State, atom_text
 
+MAX_INDENT = 40  # deeper levels print their depth instead of ever more indentation
 
-@dataclass
+
+@dataclass(slots=True)
 class DecompositionNode:
     id: str
     task: tuple[str, ...]
@@ -105,6 +107,7 @@ class DecompositionTree:
         return {"roots": list(self.roots), "nodes": [node.to_dict(states) for node in self.walk()]}
 
     def pretty(self, indent: str = "  ") -> str:
+        """Indented text, one node a line; below depth ``MAX_INDENT`` the depth is written instead of indented."""
         lines: list[str] = []
         stack: list[tuple[str, int]] = [(root, 0) for root in reversed(self.roots)]
         while stack:
@@ -115,6 +118,8 @@ class DecompositionTree:
             else:
                 shown = ", ".join(f"?{k}={v}" for k, v in node.bindings.items())
                 detail = f"  [method {node.method}{'; ' + shown if shown else ''}]"
-            lines.append(f"{indent * level}{node.id} {node.label()}{detail}")
+            shown_level = min(level, MAX_INDENT)
+            deeper = f"[depth {level}] " if level > MAX_INDENT else ""
+            lines.append(f"{indent * shown_level}{deeper}{node.id} {node.label()}{detail}")
             stack.extend((child, level + 1) for child in reversed(node.children))
         return "\n".join(lines)

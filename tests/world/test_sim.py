@@ -10,6 +10,7 @@ import pytest
 
 from bt_meta.world.kinematics import Kinematics, pose_matrix
 from bt_meta.world.objects import OBJECT_TYPES, make_model, pose_to_matrix
+from bt_meta.world.scenes import load_scene
 from bt_meta.world.sim import Simulation, SimulationError
 
 pytestmark = pytest.mark.slow
@@ -265,8 +266,6 @@ def move_in_line(sim: Simulation, target, waypoints: int = 8, steps: int = 60) -
 
 @pytest.mark.parametrize("variant", [None, "housing_upside_down"])
 def test_housing_goes_into_the_board_narrow_end_first_only(world, variant):
-    from bt_meta.world.scenes import load_scene
-
     load_scene("housing_insertion").build(world, variant)
     state = world.object_state("housing")
     top = max(point[2] for point, _ in state.features.values())
@@ -317,3 +316,23 @@ def test_a_removed_held_object_leaves_no_collision_hole(world):
     assert world.body_id("y") == old_id  # the id was reused
     world.step(1)
     assert any(other == "y" for _, other in world.robot_contacts())
+
+
+@pytest.mark.parametrize(("variant", "joins"), [(None, True), ("active_on_side", False), ("active_upside_down", False)])
+def test_nominal_magnetic_attach_motion_joins_only_in_the_nominal_scene(world, variant, joins):
+    """Replay the nominal gripper motion (top grasp, carry the grasp point 6.2 cm above the reference's magnet):
+    it attaches the upright part, and misses with the variant poses (paper, section 7.5, Figure 10)."""
+    load_scene("magnetic_attach").build(world, variant)
+    state = world.object_state("active")
+    top = pybullet.getAABB(world.body_id("active"), physicsClientId=world.client)[1][2]
+    x, y = state.pose[:2]
+    assert move_in_line(world, (x, y, top + 0.1)) < 1e-3
+    assert move_in_line(world, (x, y, top + 0.002)) < 1e-3
+    assert world.grasp("active")
+    move_in_line(world, (x, y, top + 0.15))
+    ref_ap, _ = world.feature("reference")
+    move_in_line(world, ref_ap + np.array([0.0, 0.0, 0.15]))
+    move_in_line(world, ref_ap + np.array([0.0, 0.0, 0.062]), waypoints=10)
+    world.release()
+    world.step(120)
+    assert (world.attachments() == [("active", "reference")]) is joins

@@ -9,7 +9,8 @@ It fills a fresh memory in a temporary folder with ``n`` seeded block-like grid-
 with two object states, one grid-map and its PNG crop, and one expectation), timing every trace write. It then
 times ``EpisodicMemory.nearest_grid_maps`` (k=5, four rotations) over many seeded queries and, in the same run,
 two baselines computing the same distance without vectorisation: a plain Python loop over the maps held in memory
-and a per-row scan of the SQL rows. The ratios are baseline time / vectorised time; the top-k distances of every
+as bit-packed Python ints (XOR and ``int.bit_count``), and the naive per-row scan of the SQL rows with a numpy
+distance per row. The ratios are baseline time / vectorised time; the top-k distances of every
 baseline query are compared with the vectorised ones.
 """
 
@@ -132,10 +133,6 @@ def _trace(rng: np.random.Generator, number: int) -> Trace:
     return Trace(episode=episode, steps=tuple(steps), expectations=tuple(expectations))
 
 
-def _top_distances(distances: list[tuple[int, int]]) -> list[int]:
-    return [d for d, _ in sorted(distances)[:K]]
-
-
 def run(n: int, *, queries: int = 200, baseline_queries: int = 5, seed: int = 0) -> dict[str, Any]:
     rng = np.random.default_rng(seed)
     traces = n // STEPS_PER_TRACE
@@ -161,23 +158,29 @@ def run(n: int, *, queries: int = 200, baseline_queries: int = 5, seed: int = 0)
                 memory.nearest_grid_maps(grid, K)
                 timings.append(time.perf_counter() - start)
 
-            # Baseline 1: the obvious loop over maps already held in memory, one distance call per map.
+            # Baseline 1: a plain Python loop over the maps held in memory as Python ints (bit-packed once),
+            # popcount of XOR per map and rotation: the fastest code that does not vectorise.
             held = [
-                np.frombuffer(row[0], dtype=np.uint8).reshape(6, 6)
+                int.from_bytes(np.packbits(np.frombuffer(row[0], dtype=np.uint8) != 0).tobytes(), "big")
                 for row in memory._connection.execute(
                     "SELECT g.occupancy FROM expectations x JOIN grid_maps g ON g.id = x.grid_map_id ORDER BY x.id"
                 )
             ]
             loop_times = []
             agree = True
-            for number, grid in enumerate(query_grids[:baseline_queries]):
+            for grid in query_grids[:baseline_queries]:
                 start = time.perf_counter()
-                distances = [grid_distance(grid, stored_map) for stored_map in held]
-                top = _top_distances(distances)
+                turned = [
+                    int.from_bytes(np.packbits(np.rot90(grid != 0, t).reshape(-1)).tobytes(), "big") for t in range(4)
+                ]
+                distances = []
+                for stored_map in held:
+                    distances.append(min((stored_map ^ q).bit_count() for q in turned))
+                top = sorted(distances)[:K]
                 loop_times.append(time.perf_counter() - start)
-                agree &= top == [m.distance for m in memory.nearest_grid_maps(query_grids[number], K)]
+                agree &= top == [m.distance for m in memory.nearest_grid_maps(grid, K)]
 
-            # Baseline 2: a per-row scan of the SQL rows for every query.
+            # Baseline 2: the naive implementation, a per-row scan of the SQL rows with a numpy distance per row.
             scan_times = []
             for number, grid in enumerate(query_grids[:baseline_queries]):
                 start = time.perf_counter()
@@ -186,7 +189,7 @@ def run(n: int, *, queries: int = 200, baseline_queries: int = 5, seed: int = 0)
                     "SELECT g.occupancy FROM expectations x JOIN grid_maps g ON g.id = x.grid_map_id"
                 ):
                     distances.append(grid_distance(grid, np.frombuffer(blob, dtype=np.uint8).reshape(6, 6)))
-                top = _top_distances(distances)
+                top = sorted(d for d, _ in distances)[:K]
                 scan_times.append(time.perf_counter() - start)
                 agree &= top == [m.distance for m in memory.nearest_grid_maps(query_grids[number], K)]
             file_bytes = path.stat().st_size + sum(
@@ -212,7 +215,8 @@ def run(n: int, *, queries: int = 200, baseline_queries: int = 5, seed: int = 0)
             "max_ms": float(ms.max()),
             "cache_build_ms": cache_ms,
             "target_ms": TARGET_MS,
-            "target_met": bool(np.percentile(ms, 95) <= TARGET_MS),
+            "target_met_mean": bool(mean_ms <= TARGET_MS),
+            "target_met_p95": bool(np.percentile(ms, 95) <= TARGET_MS),
         },
         "baselines": {
             "python_loop": {"count": len(loop_times), "mean_ms": loop_ms, "ratio": loop_ms / mean_ms},
@@ -241,7 +245,8 @@ def _print(result: dict[str, Any]) -> None:
     print(
         f"  NN query (vectorised): mean {query['mean_ms']:.3f} ms, p95 {query['p95_ms']:.3f} ms over "
         f"{query['count']} queries (cache build {query['cache_build_ms']:.1f} ms, once after writes); "
-        f"target <= {query['target_ms']:g} ms: {'met' if query['target_met'] else 'NOT met'}"
+        f"target <= {query['target_ms']:g} ms: mean {'met' if query['target_met_mean'] else 'NOT met'}, "
+        f"p95 {'met' if query['target_met_p95'] else 'NOT met'}"
     )
     print(
         f"  baseline python loop:  mean {loop['mean_ms']:.1f} ms over {loop['count']} queries -> "

@@ -113,8 +113,11 @@ def _outcome(value: str, where: str) -> str:
 class ObjectState:
     """The sub-symbolic state of one object (section 7.2.1), everything in the robot base frame except AN.
 
-    ``pose`` is (x, y, z, roll, pitch, yaw) in metres and radians; ``ap`` the attachment point (3); ``an`` the
-    attachment normal (3), expressed in the object frame as the paper's AA(obj) relative to P(obj).
+    ``pose`` is (x, y, z, roll, pitch, yaw) in metres and radians; ``ap`` the attachment point (3, base frame);
+    ``an`` the attachment normal (3), expressed in the object frame as the paper's AA(obj) relative to P(obj) --
+    an intrinsic affordance of the object. :attr:`an_base` turns it into the base frame (for R_n);
+    :meth:`from_base_normal` builds a state from a base-frame normal (e.g. ``SimObjectState.an``; or pass
+    ``SimObjectState.an_object`` straight as ``an``).
     """
 
     name: str
@@ -128,6 +131,35 @@ class ObjectState:
         object.__setattr__(self, "pose", _floats(self.pose, 6, f"object {self.name}: pose"))
         object.__setattr__(self, "ap", _floats(self.ap, 3, f"object {self.name}: AP"))
         object.__setattr__(self, "an", _floats(self.an, 3, f"object {self.name}: AN"))
+
+    @classmethod
+    def from_base_normal(
+        cls, name: str, pose: Sequence[float], ap: Sequence[float], an_base: Sequence[float]
+    ) -> ObjectState:
+        """Build from a normal expressed in the robot base frame (what a simulator or detector usually gives)."""
+        state = cls(name, tuple(pose), tuple(ap), (0.0, 0.0, 1.0))  # type: ignore[arg-type]
+        normal = state.rotation().T @ np.asarray(_floats(an_base, 3, f"object {name}: AN (base)"))
+        return cls(name, state.pose, state.ap, tuple(float(v) for v in normal))  # type: ignore[arg-type]
+
+    def rotation(self) -> np.ndarray:
+        """The object's orientation as a 3x3 matrix, R = Rz(yaw) Ry(pitch) Rx(roll) (pybullet's and ROS's RPY)."""
+        roll, pitch, yaw = self.pose[3:]
+        cr, sr = math.cos(roll), math.sin(roll)
+        cp, sp = math.cos(pitch), math.sin(pitch)
+        cy, sy = math.cos(yaw), math.sin(yaw)
+        return np.array(
+            [
+                [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                [-sp, cp * sr, cp * cr],
+            ]
+        )
+
+    @property
+    def an_base(self) -> tuple[float, float, float]:
+        """The attachment normal in the robot base frame, where R_n = arccos(AN_a . AN_r) compares two objects."""
+        normal = self.rotation() @ np.asarray(self.an)
+        return (float(normal[0]), float(normal[1]), float(normal[2]))
 
 
 @dataclass(frozen=True, eq=False)

@@ -234,3 +234,24 @@ def test_nn_cache_sees_writes_from_this_and_other_connections(memory, tmp_path):
     with EpisodicMemory.open(memory.path) as other:
         other.write(trace())
     assert len(memory.nearest_grid_maps(grid, 5)) == 2
+
+
+def test_popcount_fallback_and_multi_word_grids(memory, monkeypatch):
+    from bt_meta.memory import store
+
+    rng = np.random.default_rng(7)
+    words = rng.integers(0, 2**63, (50, 3), dtype=np.uint64)
+    expected = np.array([sum(bin(int(w)).count("1") for w in row) for row in words])
+    assert np.array_equal(store._popcount_rows(words), expected)
+    monkeypatch.delattr(np, "bitwise_count", raising=False)  # numpy < 2 has no bitwise_count
+    assert np.array_equal(store._popcount_rows(words), expected)
+    monkeypatch.undo()
+    # 10 x 10 grids need two 64-bit words per map.
+    grids = [(rng.random((10, 10)) < 0.5).astype(np.uint8) for _ in range(30)]
+    steps = tuple(Step(i, "place", state=State(grid_maps=(GridMap(g),))) for i, g in enumerate(grids))
+    expectations = tuple(Expectation(i, "place", grid_map_index=0) for i in range(len(grids)))
+    memory.write(Trace(Episode("t", "f", "p", 1.0, "success"), steps, expectations=expectations))
+    query = (rng.random((10, 10)) < 0.5).astype(np.uint8)
+    matches = memory.nearest_grid_maps(query, 4)
+    brute = sorted((grid_distance(query, g)[0], i) for i, g in enumerate(grids))[:4]
+    assert [(m.distance, m.step_index) for m in matches] == brute

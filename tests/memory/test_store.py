@@ -200,3 +200,14 @@ def test_foreign_key_cascade_is_declared(memory, make_trace):
             " VALUES (?, 0, 'x', '[]', '[]', 'success', 0, 0)",
             (episode_id + 100,),
         )
+
+
+def test_attachment_normal_frames_agree_with_the_world_convention():
+    from bt_meta.world.objects import rpy_to_matrix
+
+    pose = (0.6, -0.2, 0.05, 0.3, -1.1, 2.4)
+    state = ObjectState("housing", pose, (0.61, -0.2, 0.08), (0.0, 0.0, 1.0))
+    assert np.allclose(state.rotation(), rpy_to_matrix(*pose[3:]))
+    assert np.allclose(state.an_base, rpy_to_matrix(*pose[3:])[:, 2])
+    rebuilt = ObjectState.from_base_normal("housing", pose, state.ap, state.an_base)
+    assert np.allclose(rebuilt.an, (0.0, 0.0, 1.0))

@@ -247,13 +247,13 @@ class Simulation:
                 self._limits[name] = (info[8], info[9])
         self.movable_joints: tuple[str, ...] = tuple(self._joint_index)
         self._targets: dict[str, float] = {}
-        self.set_joint_positions(self.robot.home)
-        self.table_id = self._make_table()
         self._bodies: dict[str, _Body] = {}
         self._by_id: dict[int, str] = {}
         self._grasps: dict[str, _Grasp] = {}
         self._joins: dict[frozenset[str], int] = {}
         self._pending_collision: list[tuple[str, str]] = []
+        self.set_joint_positions(self.robot.home)
+        self.table_id = self._make_table()
         self._hand_links: dict[str, tuple[int, ...]] = {
             arm: self._descendants(self.link_index(self._hand_root(arm))) for arm in self.robot.arms
         }
@@ -329,12 +329,43 @@ class Simulation:
         return {n: float(s[0]) for n, s in zip(names, states, strict=True)}
 
     def set_joint_positions(self, q: Mapping[str, float]) -> None:
-        """Teleport joints (zero velocity) and make the values the motors' targets, so they stay."""
+        """Teleport joints (zero velocity) and make the values the motors' targets, so they stay.
+
+        Held objects (and what is magnetically joined to them) are carried along, so the grasp constraint does
+        not yank them across the table on the next step."""
+        carried: list[tuple[str, str, np.ndarray]] = []  # (object, arm, pose in the end-effector frame)
+        for arm, grasp in self._grasps.items():
+            end = self.link_transform(self.robot.arm(arm).end_effector)
+            for name in (grasp.object_name, *self._joined_to(grasp.object_name)):
+                carried.append((name, arm, np.linalg.inv(end) @ self.object_transform(name)))
         for name, value in q.items():
             pybullet.resetJointState(
                 self.robot_id, self.joint_index(name), float(value), 0.0, physicsClientId=self.client
             )
         self.set_joint_targets(q)
+        for name, arm, relative in carried:
+            pose = self.link_transform(self.robot.arm(arm).end_effector) @ relative
+            self.move_object(name, matrix_to_pose(pose))
+
+    def home(self) -> None:
+        """Let go of everything and put the robot in its home pose (the description's)."""
+        for arm in list(self._grasps):
+            self.release(arm)
+        self.set_joint_positions(self.robot.home)
+
+    def _joined_to(self, name: str) -> list[str]:
+        """Every object rigidly joined to ``name`` through magnetic joins (transitively)."""
+        seen, frontier = {name}, [name]
+        while frontier:
+            current = frontier.pop()
+            for pair in self._joins:
+                if current in pair:
+                    for other in pair:
+                        if other not in seen:
+                            seen.add(other)
+                            frontier.append(other)
+        seen.discard(name)
+        return sorted(seen)
 
     def set_joint_targets(self, q: Mapping[str, float], max_velocity: float | None = None) -> None:
         """Position targets the motors drive to while :meth:`step` runs (other joints keep their targets)."""

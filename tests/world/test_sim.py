@@ -336,3 +336,22 @@ def test_nominal_magnetic_attach_motion_joins_only_in_the_nominal_scene(world, v
     world.release()
     world.step(120)
     assert (world.attachments() == [("active", "reference")]) is joins
+
+
+def test_teleporting_the_arm_carries_what_it_holds(world):
+    assert reach(world, (0.6, -0.3, world.table.top_z + 0.15)) < 1e-3
+    grip = world.gripper_pose()
+    world.spawn("ref", make_model("magnet_reference"), (0.6, -0.1, 0, 0, 0, 0), on_table=True)
+    world.spawn("act", make_model("magnet_active"), (grip[0], grip[1], grip[2] - 0.03, 0, 0, 0))
+    assert world.grasp("act")
+    world.move_object("ref", (grip[0], grip[1], grip[2] - 0.06 - 0.02, 0, 0, 0))  # magnets touching
+    assert world.try_attach("act", "ref")
+    held = world.grasp_transform()
+    joined = np.linalg.inv(world.object_transform("act")) @ world.object_transform("ref")
+    world.set_joint_positions(world.robot.home)
+    assert np.allclose(world.grasp_transform(), held, atol=1e-9)
+    assert np.allclose(np.linalg.inv(world.object_transform("act")) @ world.object_transform("ref"), joined, atol=1e-9)
+    world.step(60)
+    assert np.allclose(world.grasp_transform()[:3, 3], held[:3, 3], atol=2e-4)
+    world.home()
+    assert world.held() is None

@@ -2,7 +2,8 @@
 
 Offers (re-exported here; each lives in its own module):
 
-* :func:`load_task_file`, :func:`load_task_text` -- YAML task files to a :class:`TaskFile` (``loader``)
+* :func:`load_task_file`, :func:`load_task_text` -- YAML task files to a :class:`TaskFile` (``loader``);
+  :func:`problem_from_atoms` and :func:`method_from_text` build checked problems and methods in code
 * :class:`State` -- immutable set of ground atoms (``state``)
 * :class:`Condition`, :class:`Var` -- the safe condition language (``conditions``)
 * :class:`Domain`, :class:`Primitive`, :class:`GroundPrimitive`, :class:`TaskDecl`, :class:`Method`,
@@ -16,7 +17,7 @@ from __future__ import annotations
 
 from bt_meta.htn.axioms import Axiom, AxiomSet
 from bt_meta.htn.conditions import Condition, ExternalPredicateError, Var
-from bt_meta.htn.loader import load_task_file, load_task_text, problem_from_atoms
+from bt_meta.htn.loader import load_task_file, load_task_text, method_from_text, problem_from_atoms
 from bt_meta.htn.model import Domain, GroundPrimitive, Method, Primitive, Problem, TaskDecl, TaskFile
 from bt_meta.htn.planner import GroundAction, PlanResult, plan
 from bt_meta.htn.replan import replan
@@ -44,6 +45,7 @@ __all__ = [
     "atom_text",
     "load_task_file",
     "load_task_text",
+    "method_from_text",
     "plan",
     "problem_from_atoms",
     "replan",

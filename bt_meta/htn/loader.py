@@ -211,15 +211,19 @@ class _Loader:
             if "\n" not in raw and (style == "'" or "\\" not in raw) and "''" not in raw:
                 return Src(value, lambda off: self.at_index(begin + off))
         elif style in ("|", ">"):
+            # Each content line of a block scalar adds its text plus one separator ("\n" or a folding " ").
             raw_lines = raw.split("\n")[1:]
             indent = next((len(x) - len(x.lstrip(" ")) for x in raw_lines if x.strip()), 0)
             first_line = node.start_mark.line + 2
+            starts: list[tuple[int, int]] = []  # (offset in value, 1-based line)
+            cursor = 0
+            for row, raw_line in enumerate(raw_lines):
+                starts.append((cursor, first_line + row))
+                cursor += len(raw_line[indent:]) + 1
 
             def locate(off: int) -> tuple[int, int]:
-                before = value[:off]
-                row = before.count("\n")
-                col = off - (before.rfind("\n") + 1)
-                return first_line + row, indent + col + 1
+                k = max(bisect.bisect_right([o for o, _ in starts], off) - 1, 0)
+                return starts[k][1], indent + off - starts[k][0] + 1
 
             return Src(value, locate)
         elif raw == value:
@@ -830,3 +834,36 @@ def problem_from_atoms(domain: Domain, name: str, *, init: Iterable[Sequence[str
             raise TaskFileError(f"{task_t[0]} takes {len(decl.parameters)} argument(s), got {len(task_t) - 1}", where)
         task_atoms.append(task_t)
     return Problem(name, dict(objects or {}), init_atoms, task_atoms, goal_atoms, State([*facts, *init_atoms]))
+
+
+def method_from_text(domain: Domain, *, name: str, task: str, precondition: str | Sequence[str] = "true",
+                     subtasks: Sequence[str] = (), unordered: bool = False) -> Method:
+    """Build and check a method written in the task-file syntax, e.g. a repaired plan saved as a refinement.
+
+    Add it with :meth:`~bt_meta.htn.model.Domain.add_method`. Errors are :class:`TaskFileError` located at
+    ``<method NAME>:1:column`` inside the offending string.
+    """
+    where = f"<method {name}>"
+    loader = _Loader("", where, None)
+
+    def src(text: str) -> Src:
+        return Src(text, lambda off: (1, off + 1))
+
+    head_src = src(task)
+    head = loader.parse_atom(head_src)
+    if head.pred not in domain.tasks:
+        known = ", ".join(sorted(domain.tasks)) or "none declared"
+        raise loader.error(f"unknown task {head.pred!r} in method {name} (declared tasks: {known})", (1, 1))
+    loader.check_call(head, head_src, domain.primitives, domain.tasks, f"method {name}")
+    if not isinstance(precondition, str):
+        precondition = " and ".join(f"({part})" for part in precondition) or "true"
+    condition = loader.compile(src(precondition), domain.context, {a.name for a in head.args if isinstance(a, Var)})
+    templates: list[tuple] = []
+    for text in subtasks:
+        sub_src = src(text)
+        atom = loader.parse_atom(sub_src)
+        loader.check_call(atom, sub_src, domain.primitives, domain.tasks, f"the subtasks of method {name}")
+        loader.check_bound(atom, condition.variables_bound, sub_src, f"subtask {atom.pred} of method {name}",
+                           "the task head or the precondition")
+        templates.append((atom.pred, *atom.args))
+    return Method(name, head.pred, head.args, condition, templates, not unordered)

@@ -147,10 +147,11 @@ def _merge(tree: DecompositionTree, keep: set[str], executed: list[Decomposition
     new_nodes: list[DecompositionNode] = result.extra["nodes"]
     for node in new_nodes:
         nodes[node.id] = node
+    new_ids = {node.id for node in new_nodes}
     for node in new_nodes:
         if node.parent is None:
             roots.append(node.id)
-        else:
+        elif node.parent not in new_ids:  # children among new nodes are already linked by the search
             nodes[node.parent].children.append(node.id)
     merged = DecompositionTree(nodes, roots)
     plan = [GroundAction(p.name, p.args, p.id) for p in executed] + result.plan

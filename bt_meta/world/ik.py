@@ -10,10 +10,13 @@ Offers:
 How a solve goes: a frame task on the arm's end effector (or another frame the arm moves) and the joint limits
 are handed to mink on a MuJoCo model of that arm; each step is one damped Gauss-Newton step (``dt = 1``). An
 attempt stops when the pose is within tolerance, when the error stalls, or after ``max_iterations``. Attempts
-start from ``q_start``, then from the home pose, then from seeded random configurations. A converged solution is
-checked for collisions (robot against itself and the scene, other joints as in ``q_start``): a colliding one is
-rejected and the search restarts. Failure is classified: ``collision`` if solutions were found but every one
-collided (naming the pair), ``reachability`` otherwise (with the target and the best residual reached).
+start from ``q_start``, then from the home pose, then from seeded random configurations (the best of
+``restart_samples`` draws, nearest the target). A converged solution is checked for collisions (robot against
+itself and the scene, other joints as in ``q_start``): a colliding one is rejected and the search restarts; once
+restarts have found ``escape_after`` colliding solutions, a colliding solution whose colliding link is not
+carried rigidly by the hand is walked along the arm's self-motion (null space) to a collision-free one. Failure
+is classified: ``collision`` if solutions were found but every one collided (naming the pair), ``reachability``
+otherwise (with the target and the best residual reached).
 """
 
 from __future__ import annotations
@@ -69,9 +72,13 @@ class _ArmSolver:
     lower: np.ndarray
     upper: np.ndarray
     tasks: dict[str, tuple[mink.FrameTask, int]]
-    eye: np.ndarray
+    damping: np.ndarray
+    """``_SOLVE_DAMPING`` times the identity."""
     no_constraints: np.ndarray
     sense: np.ndarray
+    gain: float
+    upper_step: np.ndarray
+    lower_step: np.ndarray
 
 
 class InverseKinematics:
@@ -103,9 +110,12 @@ class InverseKinematics:
                 self.kinematics.lower[idx],
                 self.kinematics.upper[idx],
                 {},
-                np.eye(n),
+                _SOLVE_DAMPING * np.eye(n),
                 np.zeros((0, n)),
                 np.zeros(n, dtype=np.intc),
+                limits[0].gain,
+                np.zeros(n),
+                np.zeros(n),
             )
             self._arms[arm] = solver
         return solver
@@ -139,11 +149,12 @@ class InverseKinematics:
         simple bounds. Calling DAQP directly skips qpsolvers' problem conversion: ~25 us per step instead of ~90.
         """
         H, c = task.compute_qp_objective(solver.configuration)
-        H = H + _SOLVE_DAMPING * solver.eye
+        H += solver.damping  # a fresh array from mink: safe to change in place
         q = solver.configuration.data.qpos
-        gain = solver.limits[0].gain
-        upper = gain * (solver.upper - q)
-        lower = gain * (solver.lower - q)
+        upper = np.subtract(solver.upper, q, out=solver.upper_step)
+        upper *= solver.gain
+        lower = np.subtract(solver.lower, q, out=solver.lower_step)
+        lower *= solver.gain
         x, _, exitflag, _ = daqp.solve(H, c, solver.no_constraints, upper, lower, solver.sense)
         if exitflag <= 0:
             return None
@@ -204,100 +215,186 @@ class InverseKinematics:
     ) -> IKResult:
         """Joint values putting ``frame`` (default the arm's end effector) at ``target`` in the base frame."""
         started = time.perf_counter()
-        settings = self.settings
         kin = self.kinematics
         frame = frame or kin.end_effector(arm)
         solver = self._arm(arm)
         task, body = self._task(solver, arm, frame)
         base = kin.home.copy() if q_start is None else kin.check_q(q_start).copy()
-        target_se3 = as_se3(target)
-        quaternion = pin.Quaternion(target_se3.rotation)
+        run = _Run(self, arm, solver, task, body, frame, as_se3(target), base, seed, check_collisions)
+        result = run.solve()
+        result.time = time.perf_counter() - started
+        return result
+
+
+class _Run:
+    """One IK solve: attempts from several starts, each converged solution checked, failures classified."""
+
+    def __init__(
+        self,
+        ik: InverseKinematics,
+        arm: str,
+        solver: _ArmSolver,
+        task: mink.FrameTask,
+        body: int,
+        frame: str,
+        target: pin.SE3,
+        base: np.ndarray,
+        seed: int | None,
+        check_collisions: bool,
+    ) -> None:
+        self.ik = ik
+        self.arm = arm
+        self.settings = ik.settings
+        self.solver = solver
+        self.task = task
+        self.body = body
+        self.frame = frame
+        self.target = target
+        self.base = base
+        self.seed = ik.settings.seed if seed is None else seed
+        self.collision = ik.collision if check_collisions else None
+        quaternion = pin.Quaternion(target.rotation)
         task.set_target(
-            mink.SE3(np.array([quaternion.w, quaternion.x, quaternion.y, quaternion.z, *target_se3.translation]))
+            mink.SE3(np.array([quaternion.w, quaternion.x, quaternion.y, quaternion.z, *target.translation]))
         )
-        target_rotation_t = target_se3.rotation.T
-        target_position = target_se3.translation
-        rng: np.random.Generator | None = None  # made on the first random restart: most solves never need it
-        configuration = solver.configuration
-        data = configuration.data
-        mj = solver.mj
+        self.target_rotation_t = target.rotation.T
+        self.target_position = target.translation.copy()
+        self.data = solver.configuration.data
+        self.iterations = 0
+        self.best: tuple[float, float, float, np.ndarray | None] = (np.inf, np.inf, np.inf, None)
+        self.colliding: list[tuple[Contact, np.ndarray]] = []
+        self.escapes_tried = 0
+        self.rigid_links = _links_moving_with(ik.kinematics, frame, ik.kinematics.robot.arm(arm).joints)
+
+    def residual(self) -> tuple[float, float]:
+        """(position error, orientation error) of the frame at the current configuration."""
+        offset = self.data.xpos[self.body] - self.target_position
+        axis = pin.log3(self.target_rotation_t @ self.data.xmat[self.body].reshape(3, 3))
+        return math.sqrt(offset @ offset), math.sqrt(axis @ axis)
+
+    def converge(self, max_steps: int, stall: bool) -> bool:
+        """Iterate from the current configuration until within tolerance (True), a stall, or ``max_steps``."""
+        settings = self.settings
         tol_p, tol_r = settings.position_tolerance, settings.orientation_tolerance
+        history: list[float] = []
+        window = settings.stall_iterations
+        for step in range(max_steps + 1):
+            position, rotation = self.residual()
+            score = max(position / tol_p, rotation / tol_r)
+            if score < self.best[0]:
+                self.best = (score, position, rotation, self.data.qpos.copy())
+            if position <= tol_p and rotation <= tol_r:
+                return True
+            if step == max_steps:
+                return False
+            history.append(score)
+            if stall and len(history) > window and history[-1] > settings.stall_ratio * history[-1 - window]:
+                return False
+            delta = self.ik._step(self.solver, self.task)
+            if delta is None:
+                return False
+            self.solver.configuration.integrate_inplace(delta, 1.0)
+            self.iterations += 1
+        return False  # pragma: no cover - the loop returns at step == max_steps
 
-        def residual() -> tuple[float, float]:
-            offset = data.xpos[body] - target_position
-            position = math.sqrt(offset @ offset)
-            rotation = float(np.linalg.norm(pin.log3(target_rotation_t @ data.xmat[body].reshape(3, 3))))
-            return position, rotation
+    def check(self) -> tuple[np.ndarray, Contact | None]:
+        """The full configuration of the current (converged) arm configuration, and its first collision."""
+        q = self.solver.mj.to_pinocchio(self.data.qpos, self.base)
+        return q, (self.collision.check(q) if self.collision is not None else None)
 
-        iterations = 0
-        best: tuple[float, float, float, np.ndarray | None] = (np.inf, np.inf, np.inf, None)
-        colliding: list[tuple[Contact, np.ndarray]] = []
-        starts = [np.clip(mj.to_mujoco(base), solver.lower, solver.upper)]
+    def escape(self, contact: Contact) -> np.ndarray | None:
+        """Slide along the arm's self-motion (the null space of the frame's Jacobian) out of a collision.
+
+        A 7-joint arm reaching a 6-D pose keeps one degree of freedom: the elbow can swing while the hand stays.
+        When the colliding link is not carried rigidly with the hand, walking that way (re-converging on the
+        target after each step) often finds a collision-free solution that random restarts keep missing (e.g.
+        an elbow in the head's collision sphere for targets just in front of the face).
+        """
+        settings = self.settings
+        if contact.first in self.rigid_links or contact.second in self.rigid_links:
+            return None
+        if len(self.colliding) < settings.escape_after or self.escapes_tried >= settings.escape_tries:
+            return None  # restarts first: they usually find a collision-free solution faster
+        self.escapes_tried += 1
+        configuration = self.solver.configuration
+        start = self.data.qpos.copy()
+        for direction in (1.0, -1.0):
+            configuration.update(start)
+            previous: np.ndarray | None = None
+            for _ in range(settings.escape_steps):
+                jacobian = configuration.get_frame_jacobian(self.frame, "body")
+                null = np.linalg.svd(jacobian)[2][-1]
+                if previous is None:
+                    null = direction * null
+                elif null @ previous < 0:
+                    null = -null
+                previous = null
+                moved = np.clip(self.data.qpos + settings.escape_step_size * null, self.solver.lower, self.solver.upper)
+                configuration.update(moved)
+                if not self.converge(settings.escape_converge_steps, stall=False):
+                    break  # left the self-motion manifold (a joint limit or a singularity)
+                q, found = self.check()
+                if found is None:
+                    return q
+        return None
+
+    def solve(self) -> IKResult:
+        settings = self.settings
+        kin = self.ik.kinematics
+        solver = self.solver
+        mj = solver.mj
+        starts = [np.clip(mj.to_mujoco(self.base), solver.lower, solver.upper)]
         home = np.clip(mj.to_mujoco(kin.home), solver.lower, solver.upper)
         if not np.array_equal(home, starts[0]):
             starts.append(home)
+        rng: np.random.Generator | None = None  # made on the first random restart: most solves never need it
         attempt = 0
         for attempt in range(1, settings.max_attempts + 1):
             if attempt <= len(starts):
-                configuration.update(starts[attempt - 1])
+                solver.configuration.update(starts[attempt - 1])
             else:
                 if rng is None:
-                    rng = np.random.default_rng(settings.seed if seed is None else seed)
-                avoid = base if colliding and check_collisions else None
-                self._random_start(solver, body, target_se3, rng, avoid)
-            history: list[float] = []
-            converged = False
-            for step in range(settings.max_iterations + 1):
-                position, rotation = residual()
-                score = max(position / tol_p, rotation / tol_r)
-                if score < best[0]:
-                    best = (score, position, rotation, data.qpos.copy())
-                if position <= tol_p and rotation <= tol_r:
-                    converged = True
-                    break
-                if step == settings.max_iterations:
-                    break
-                history.append(score)
-                k = settings.stall_iterations
-                if len(history) > k and history[-1] > settings.stall_ratio * history[-1 - k]:
-                    break
-                delta = self._step(solver, task)
-                if delta is None:
-                    break
-                configuration.integrate_inplace(delta, 1.0)
-                iterations += 1
-            if not converged:
+                    rng = np.random.default_rng(self.seed)
+                avoid = self.base if self.colliding else None
+                self.ik._random_start(solver, self.body, self.target, rng, avoid)
+            if not self.converge(settings.max_iterations, stall=True):
                 continue
-            qpos = np.clip(data.qpos, solver.lower, solver.upper)
-            q = mj.to_pinocchio(qpos, base)
-            if not np.array_equal(qpos, data.qpos):  # mink's limits keep steps inside; this is rounding at most
-                position, rotation = kin.pose_error(kin.frame_pose(q, frame), target_se3)
-                if position > tol_p or rotation > tol_r:
-                    continue
-            if check_collisions and self.collision is not None:
-                contact = self.collision.check(q)
-                if contact is not None:
-                    colliding.append((contact, q))
-                    if len(colliding) >= settings.max_colliding_solutions:
+            q, contact = self.check()
+            escaped = False
+            if contact is not None:
+                self.colliding.append((contact, q))
+                free = self.escape(contact)
+                if free is None:
+                    if len(self.colliding) >= settings.max_colliding_solutions:
                         break
                     continue
+                q, escaped = free, True
+            position, rotation = self.residual()
             return IKResult(
                 True,
                 q,
                 None,
-                f"solved {arm} arm IK for {frame} in {attempt} attempt(s)",
-                {"frame": frame, "attempt": attempt, "rejected_colliding": len(colliding)},
-                iterations,
+                f"solved {self.arm} arm IK for {self.frame} in {attempt} attempt(s)",
+                {
+                    "frame": self.frame,
+                    "attempt": attempt,
+                    "rejected_colliding": len(self.colliding) - int(escaped),
+                    "escaped_collision": escaped,
+                },
+                self.iterations,
                 attempt,
-                time.perf_counter() - started,
+                0.0,
                 position,
                 rotation,
             )
+        return self.failure(attempt)
 
-        target_xyz = [round(float(v), 6) for v in target_position]
-        target_rpy = [round(float(v), 6) for v in pin.rpy.matrixToRpy(target_se3.rotation)]
-        if colliding:
-            contact, q = colliding[0]
+    def failure(self, attempts: int) -> IKResult:
+        target_xyz = [round(float(v), 6) for v in self.target.translation]
+        target_rpy = [round(float(v), 6) for v in pin.rpy.matrixToRpy(self.target.rotation)]
+        frame = self.frame
+        if self.colliding:
+            contact, q = self.colliding[0]
             return IKResult(
                 False,
                 None,
@@ -310,20 +407,20 @@ class InverseKinematics:
                     "pair": list(contact.pair),
                     "collision_kind": contact.kind,
                     "penetration": contact.penetration,
-                    "colliding_solutions": len(colliding),
-                    "pairs": sorted({" <-> ".join(c.pair) for c, _ in colliding}),
+                    "colliding_solutions": len(self.colliding),
+                    "escapes_tried": self.escapes_tried,
+                    "pairs": sorted({" <-> ".join(c.pair) for c, _ in self.colliding}),
                     "q": [float(v) for v in q],
                 },
-                iterations,
-                attempt,
-                time.perf_counter() - started,
+                self.iterations,
+                attempts,
             )
-        _, position, rotation, qpos = best
+        _, position, rotation, qpos = self.best
         return IKResult(
             False,
             None,
             REACHABILITY,
-            f"no IK solution for {frame} at {target_xyz} rpy {target_rpy} after {attempt} attempts; "
+            f"no IK solution for {frame} at {target_xyz} rpy {target_rpy} after {attempts} attempts; "
             f"best residual {position * 1000:.2f} mm, {rotation:.4f} rad",
             {
                 "frame": frame,
@@ -331,15 +428,33 @@ class InverseKinematics:
                 "target_rpy": target_rpy,
                 "best_position_error": position,
                 "best_orientation_error": rotation,
-                "best_q": [float(v) for v in mj.to_pinocchio(qpos, base)] if qpos is not None else None,
-                "tolerance": [tol_p, tol_r],
+                "best_q": [float(v) for v in self.solver.mj.to_pinocchio(qpos, self.base)]
+                if qpos is not None
+                else None,
+                "tolerance": [self.settings.position_tolerance, self.settings.orientation_tolerance],
             },
-            iterations,
-            attempt,
-            time.perf_counter() - started,
+            self.iterations,
+            attempts,
+            0.0,
             position,
             rotation,
         )
+
+
+def _links_moving_with(kinematics: Kinematics, frame: str, arm_joints: tuple[str, ...]) -> frozenset[str]:
+    """Links that move rigidly with ``frame`` whatever the arm's joints do (hand, gripper base, fingers).
+
+    No self-motion can take them out of a collision, so an escape is not tried for them.
+    """
+    model = kinematics.model
+    joint = model.frames[kinematics.frame_id(frame)].parentJoint
+    arm_ids = {model.getJointId(name) for name in arm_joints}
+    rigid = set()
+    for j in range(model.njoints):
+        support = list(model.supports[j])
+        if joint in support and not set(support[support.index(joint) + 1 :]) & arm_ids:
+            rigid.add(j)
+    return frozenset(f.name for f in model.frames if f.parentJoint in rigid)
 
 
 def _moved_by(model: mujoco.MjModel, body: int) -> bool:

@@ -67,6 +67,11 @@ class IKSettings:
     stall_ratio: float = 0.5
     max_colliding_solutions: int = 20
     restart_samples: int = 16
+    escape_after: int = 2
+    escape_tries: int = 10
+    escape_steps: int = 12
+    escape_step_size: float = 0.15
+    escape_converge_steps: int = 4
     seed: int = 0
 
 
@@ -441,7 +446,14 @@ class _RobotFile:
                 values[key] = self.integer(value_node, f"ik.{key}")
             else:
                 values[key] = self.number(value_node, f"ik.{key}", positive=key != "lm_damping")
-        for key in ("max_iterations", "max_attempts", "stall_iterations", "max_colliding_solutions", "restart_samples"):
+        at_least_one = (
+            "max_iterations",
+            "max_attempts",
+            "stall_iterations",
+            "max_colliding_solutions",
+            "restart_samples",
+        )
+        for key in at_least_one:
             if key in values and values[key] < 1:
                 raise self.error(f"ik.{key} must be at least 1", entries[key][1])
         return IKSettings(**values)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from bt_meta.world.collision import CollisionChecker, pose_from_xyz_rpy
-from bt_meta.world.ik import COLLISION, REACHABILITY, InverseKinematics
+from bt_meta.world.ik import COLLISION, REACHABILITY, InverseKinematics, _Run
 from bt_meta.world.kinematics import Kinematics, KinematicsError
 from bt_meta.world.robot import load_robot
 
@@ -90,6 +90,7 @@ def test_target_inside_the_table_is_a_collision_failure_naming_the_pair(ik, tabl
     assert result.evidence["pair"][0].startswith("r_gripper")
     assert f"collides: {result.evidence['pair'][0]} <-> table" in result.message
     assert result.evidence["colliding_solutions"] >= 1
+    assert result.evidence["escapes_tried"] == 0  # fingers move rigidly with the hand: no self-motion frees them
     # The same target without collision checking is solvable: the rejection is what made it fail.
     unchecked = ik.solve("right", target, check_collisions=False)
     assert unchecked.success
@@ -97,6 +98,29 @@ def test_target_inside_the_table_is_a_collision_failure_naming_the_pair(ik, tabl
     assert contact is not None and contact.second == "table"
     # Just above the table it succeeds.
     assert ik.solve("right", pose_from_xyz_rpy(0.7, -0.2, -0.12, math.pi, 0.0, 0.0)).success
+
+
+def test_self_motion_escapes_an_elbow_collision(kin, checker, ik):
+    # A collision-free pose in front of the face: many IK solutions put the forearm into the head's sphere.
+    joints = kin.robot.arms["right"].joints
+    free = kin.q_from_dict(dict(zip(joints, [-0.82, -0.94, 2.53, 2.51, -2.49, 1.79, -1.43], strict=True)), kin.home)
+    assert checker.check(free) is None
+    target = kin.end_effector_pose(free, "right")
+    colliding = ik.solve("right", target, seed=0, check_collisions=False)
+    contact = checker.check(colliding.q)
+    assert contact is not None and contact.pair == ("collision_head_link_1", "right_lower_forearm")
+    solver = ik._arm("right")
+    task, body = ik._task(solver, "right", "right_gripper")
+    run = _Run(ik, "right", solver, task, body, "right_gripper", target, kin.home.copy(), 0, True)
+    run.colliding = [(contact, colliding.q)] * kin.robot.ik.escape_after
+    solver.configuration.update(solver.mj.to_mujoco(colliding.q))
+    escaped = run.escape(contact)
+    assert escaped is not None and checker.check(escaped) is None
+    position, rotation = kin.pose_error(kin.end_effector_pose(escaped, "right"), target)
+    assert position <= kin.robot.ik.position_tolerance and rotation <= kin.robot.ik.orientation_tolerance
+    # The whole solve finds a collision-free solution too.
+    result = ik.solve("right", target, seed=0)
+    assert result.success and checker.check(result.q) is None
 
 
 def test_same_seed_same_solution(kin, checker, ik):

@@ -166,7 +166,8 @@ def _print_trace(trace: Trace, out: TextIO) -> None:
     for step in trace.steps:
         args = ", ".join(json.dumps(a) for a in step.args)
         failure = f" ({step.failure_kind})" if step.failure_kind else ""
-        where = f"node {step.node_id or '-'}, task {step.parent_task or '-'}"
+        parent = f"{step.parent_task or '-'}" + (f" (node {step.parent_node})" if step.parent_node else "")
+        where = f"node {step.node_id or '-'}, task {parent}"
         out.write(f"  step {step.index}: {step.action}({args}) [{where}] {step.outcome}{failure}\n")
         _print_state(step.state, out, "    ")
     for expectation in trace.expectations:

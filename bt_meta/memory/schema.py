@@ -89,6 +89,7 @@ _V1 = (
         args TEXT NOT NULL,
         node_id TEXT,
         parent_task TEXT,
+        parent_node TEXT,
         facts TEXT NOT NULL,
         outcome TEXT NOT NULL CHECK (outcome IN ('success', 'failure', 'aborted')),
         failure_kind TEXT,
@@ -150,12 +151,14 @@ def _v1(connection: sqlite3.Connection) -> None:
 def _v2(connection: sqlite3.Connection) -> None:
     """Task-relative step positions (section 7.4's "task-step i") and the paper's P_a and E_db views."""
     connection.execute("ALTER TABLE steps ADD COLUMN task_index INTEGER")
-    rows = connection.execute("SELECT id, episode_id, parent_task FROM steps ORDER BY episode_id, step_index")
+    rows = connection.execute(
+        "SELECT id, episode_id, parent_task, parent_node FROM steps ORDER BY episode_id, step_index"
+    )
     updates = []
-    previous: tuple[int, str | None] | None = None
+    previous: tuple[int, str | None, str | None] | None = None
     position = 0
-    for step_id, episode_id, parent_task in rows.fetchall():
-        key = (episode_id, parent_task)
+    for step_id, episode_id, parent_task, parent_node in rows.fetchall():
+        key = (episode_id, parent_task, parent_node)
         position = position + 1 if key == previous else 0
         previous = key
         updates.append((position, step_id))
@@ -166,7 +169,7 @@ def _v2(connection: sqlite3.Connection) -> None:
             "CREATE INDEX steps_parent_task ON steps (parent_task, task_index)",
             """CREATE VIEW p_a AS
                SELECT e.id AS episode_id, e.task, e.problem, e.variant, s.step_index, s.task_index, s.action,
-                      s.args, s.node_id, s.parent_task, s.facts, s.outcome
+                      s.args, s.node_id, s.parent_task, s.parent_node, s.facts, s.outcome
                FROM steps s JOIN episodes e ON e.id = s.episode_id
                WHERE e.outcome = 'success'""",
             """CREATE VIEW e_db AS

@@ -88,6 +88,7 @@ class PlanStep:
     node_id: str | None
     parent_task: str | None
     facts: tuple[tuple[Any, ...], ...]
+    parent_node: str | None = None
 
 
 @dataclass(frozen=True)
@@ -314,8 +315,9 @@ class EpisodicMemory:
         previous_parent: object = object()
         task_index = 0
         for step in trace.steps:
-            task_index = task_index + 1 if step.parent_task == previous_parent else 0
-            previous_parent = step.parent_task
+            parent = (step.parent_task, step.parent_node)
+            task_index = task_index + 1 if parent == previous_parent else 0
+            previous_parent = parent
             step_rows.append(
                 (
                     step.index,
@@ -330,6 +332,7 @@ class EpisodicMemory:
                     len(step.state.objects),
                     len(step.state.grid_maps),
                     task_index,
+                    step.parent_node,
                 )
             )
         object_rows = [
@@ -383,8 +386,8 @@ class EpisodicMemory:
             ).lastrowid
             connection.executemany(
                 "INSERT INTO steps (episode_id, step_index, action, args, node_id, parent_task, facts, outcome,"
-                " failure_kind, duration, object_count, grid_map_count, task_index)"
-                " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                " failure_kind, duration, object_count, grid_map_count, task_index, parent_node)"
+                " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 [(episode_id, *row) for row in step_rows],
             )
             connection.executemany(
@@ -542,7 +545,7 @@ class EpisodicMemory:
         """P_a: every step of every successful episode (optionally of one root task), in plan order."""
         sql = (
             "SELECT episode_id, task, problem, variant, step_index, task_index, action, args, node_id, parent_task,"
-            " facts FROM p_a"
+            " facts, parent_node FROM p_a"
         )
         params: list[Any] = []
         if task is not None:
@@ -551,7 +554,9 @@ class EpisodicMemory:
         sql += " ORDER BY episode_id, step_index"
         rows = self._query(lambda c: c.execute(sql, params).fetchall())
         return [
-            PlanStep(r[0], r[1], r[2], r[3], r[4], r[5], r[6], tuple(json.loads(r[7])), r[8], r[9], _facts(r[10]))
+            PlanStep(
+                r[0], r[1], r[2], r[3], r[4], r[5], r[6], tuple(json.loads(r[7])), r[8], r[9], _facts(r[10]), r[11]
+            )
             for r in rows
         ]
 
@@ -580,7 +585,8 @@ class EpisodicMemory:
             " JOIN steps s ON s.episode_id = x.episode_id AND s.step_index = x.step_index"
             " LEFT JOIN grid_maps g ON g.id = x.grid_map_id"
             " WHERE s.parent_task = ? AND NOT EXISTS (SELECT 1 FROM steps n WHERE n.episode_id = s.episode_id"
-            " AND n.step_index = s.step_index + 1 AND n.parent_task IS s.parent_task) ORDER BY x.id"
+            " AND n.step_index = s.step_index + 1 AND n.parent_task IS s.parent_task"
+            " AND n.parent_node IS s.parent_node) ORDER BY x.id"
         )
         rows = self._query(lambda c: c.execute(sql, (parent_task,)).fetchall())
         return [_expectation(r[:9], {r[7]: (r[9], r[10])} if r[7] is not None else {}) for r in rows]
@@ -788,7 +794,7 @@ _EPISODE_COLUMNS = (
 )
 _STEP_COLUMNS = (
     "s.step_index, s.action, s.args, s.node_id, s.parent_task, s.facts, s.outcome, s.failure_kind, s.duration,"
-    " s.task_index"
+    " s.task_index, s.parent_node"
 )
 _MAP_COLUMNS = "id, rows, cols, occupancy, image_png, object_name, colour, shape, cx, cy"
 _EXPECTATION_COLUMNS = (
@@ -825,6 +831,7 @@ def _step(row: Sequence[Any], objects: dict[int, list[ObjectState]], maps: dict[
         args=json_tuple(json.loads(row[2]), "stored args"),
         node_id=row[3],
         parent_task=row[4],
+        parent_node=row[10],
         state=State(_facts(row[5]), tuple(objects.get(index, ())), tuple(maps.get(index, ()))),
         outcome=row[6],
         failure_kind=row[7],

@@ -276,9 +276,10 @@ class Step:
     """One executed primitive and the state it left behind.
 
     ``node_id`` is the decomposition-tree node of the primitive (so execution can backtrack to it);
-    ``parent_task`` the task that decomposed into it; ``failure_kind`` a taxonomy kind when ``outcome`` is not
-    success. ``task_index`` is filled by the store: the position of the step in its run of consecutive steps
-    under the same parent task (0-based), the paper's "task-step i" of section 7.4.
+    ``parent_task`` the name of the task that decomposed into it and ``parent_node`` that task's node id (which
+    tells two consecutive occurrences of the same task apart); ``failure_kind`` a taxonomy kind when ``outcome``
+    is not success. ``task_index`` is filled by the store: the position of the step among the consecutive steps
+    of the same parent task occurrence (0-based), the paper's "task-step i" of section 7.4.
     """
 
     index: int
@@ -286,6 +287,7 @@ class Step:
     args: tuple[Any, ...] = ()
     node_id: str | None = None
     parent_task: str | None = None
+    parent_node: str | None = None
     state: State = field(default_factory=State)
     outcome: str = "success"
     failure_kind: str | None = None
@@ -470,6 +472,7 @@ def trace_to_dict(trace: Trace) -> dict[str, Any]:
                 "args": list(s.args),
                 "node_id": s.node_id,
                 "parent_task": s.parent_task,
+                "parent_node": s.parent_node,
                 "task_index": s.task_index,
                 "outcome": s.outcome,
                 "failure_kind": s.failure_kind,
@@ -536,6 +539,7 @@ def trace_from_dict(data: Mapping[str, Any]) -> Trace:
                     args=tuple(s.get("args", ())),
                     node_id=s.get("node_id"),
                     parent_task=s.get("parent_task"),
+                    parent_node=s.get("parent_node"),
                     state=_state_from_dict(s.get("state", {})),
                     outcome=s.get("outcome", "success"),
                     failure_kind=s.get("failure_kind"),

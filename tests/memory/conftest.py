@@ -55,7 +55,8 @@ def build_trace(
     for index in range(steps):
         block = names[index % objects]
         x, y = (float(v) for v in rng.uniform(0.4, 0.8, 2))
-        parent = parent_tasks[(index * len(parent_tasks)) // steps]
+        occurrence = (index * len(parent_tasks)) // steps
+        parent = parent_tasks[occurrence]
         facts = (("placed", block, index), ("holding", None), ("gripper", "open"))
         failed = outcome == "failure" and index == steps - 1
         step_list.append(
@@ -65,6 +66,7 @@ def build_trace(
                 args=(block, x, y),
                 node_id=f"n{index + 3}",
                 parent_task=parent,
+                parent_node=f"t{occurrence}",
                 state=State(facts, objects_state(), (grid_map(block),)),
                 outcome="failure" if failed else "success",
                 failure_kind="unknown_entity" if failed else None,

@@ -255,3 +255,19 @@ def test_popcount_fallback_and_multi_word_grids(memory, monkeypatch):
     matches = memory.nearest_grid_maps(query, 4)
     brute = sorted((grid_distance(query, g)[0], i) for i, g in enumerate(grids))[:4]
     assert [(m.distance, m.step_index) for m in matches] == brute
+
+
+def test_consecutive_occurrences_of_a_task_are_told_apart_by_parent_node(memory):
+    """Two place_block tasks in a row (nodes t1, t2): task-step indices restart, each bubbles up its own last step."""
+    steps = tuple(
+        Step(i, action, (block,), node_id=f"n{i}", parent_task="place_block", parent_node=node)
+        for i, (action, block, node) in enumerate(
+            [("pick", "b0", "t1"), ("place", "b0", "t1"), ("pick", "b1", "t2"), ("place", "b1", "t2")]
+        )
+    )
+    expectations = tuple(Expectation(i, s.action, s.args, "place_block") for i, s in enumerate(steps))
+    episode_id = memory.write(Trace(Episode("draw_H", "f", "p", 1.0, "success"), steps, expectations=expectations))
+    assert [s.task_index for s in memory.trace(episode_id).steps] == [0, 1, 0, 1]
+    assert [s.parent_node for s in memory.plan_executions("draw_H")] == ["t1", "t1", "t2", "t2"]
+    assert [x.step_index for x in memory.expectation_of("place_block")] == [1, 3]
+    assert [r.step.args for r in memory.expected_states("place_block", 1, by="parent")] == [("b0",), ("b1",)]

@@ -5,6 +5,7 @@ Offers:
 * ``bt-meta memory ls [--task T] [--json]`` -- the stored episodes, newest first
 * ``bt-meta memory show ID [--json]`` -- one whole trace: steps, symbolic states, object states, grid-maps,
   expectations
+* ``bt-meta memory check [--json]`` -- SQLite's integrity check plus the completeness of every trace (exit 1 if not)
 * ``bt-meta memory export [--json] [-o FILE]`` -- every trace; JSON Lines (one trace per line, streamable) by
   default, one JSON document with ``--json``; grid-maps as nested lists, crops as base64 PNG
 
@@ -59,6 +60,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     export.add_argument("-o", "--output", metavar="FILE", help="write to FILE instead of standard output")
     add_memory_argument(export)
     export.set_defaults(func=_export)
+
+    check = memory_subparsers.add_parser("check", help="verify the file and that every stored trace is complete")
+    check.add_argument("--json", action="store_true", help="print JSON")
+    add_memory_argument(check)
+    check.set_defaults(func=_check)
 
     parser.set_defaults(func=lambda args: parser.print_help() or 2)
 
@@ -221,3 +227,26 @@ def _write_export(memory: EpisodicMemory, out: TextIO, as_document: bool) -> int
         out.write("\n")
         count += 1
     return count
+
+
+def _check(args: argparse.Namespace) -> int:
+    with _open(args) as memory:
+        integrity = memory.integrity_check()
+        problems = memory.check()
+        episodes = len(memory.episodes())
+        ok = integrity == "ok" and not problems
+        if args.json:
+            print_json(
+                {
+                    "memory": str(memory.path),
+                    "ok": ok,
+                    "integrity": integrity,
+                    "episodes": episodes,
+                    "problems": problems,
+                }
+            )
+        else:
+            print(f"{memory.path}: integrity {integrity}; {episodes} episodes; {len(problems)} incomplete traces")
+            for problem in problems:
+                print(f"  {problem}")
+    return 0 if ok else 1

@@ -160,3 +160,19 @@ def test_bench_memory_runs_small_and_reports_ratios(capsys):
     assert "NN query (vectorised)" in text and "baseline python loop" in text and "trace writes" in text
     assert main(["bench", "memory", "--n", "3"]) == 2
     assert "--n must be >= 10" in capsys.readouterr().err
+
+
+def test_check_reports_sound_and_incomplete_memories(stored, capsys):
+    path, ids = stored
+    assert main(["memory", "check", "--memory", str(path)]) == 0
+    assert capsys.readouterr().out.strip() == f"{path}: integrity ok; 3 episodes; 0 incomplete traces"
+    import sqlite3
+
+    connection = sqlite3.connect(path)
+    connection.execute("DELETE FROM object_states WHERE episode_id = ? AND step_index = 2", (ids[1],))
+    connection.commit()
+    connection.close()
+    assert main(["memory", "check", "--json", "--memory", str(path)]) == 1
+    report = json.loads(capsys.readouterr().out)
+    assert report["ok"] is False and report["integrity"] == "ok"
+    assert f"episode {ids[1]} step 2 declares 2 object states, has 0" in report["problems"]

@@ -3,14 +3,18 @@
 Offers:
 
 * :class:`EpisodicMemory` -- ``EpisodicMemory.open(path)``; ``write(trace)`` in one transaction; read back
-  (``trace``, ``episodes``, ``last_traces``); the paper's queries (``expected_states``, ``successful_states``,
-  ``plan_executions`` = P_a, ``expectations`` = E_db) and ``nearest_grid_maps``, vectorised NN retrieval
+  (``trace``, ``traces``, ``episodes``, ``last_traces``, ``grid_map``); the paper's queries
+  (``expected_states``, ``successful_states``, ``plan_executions`` = P_a, ``expectations`` and
+  ``expectation_of`` = E_db) and ``nearest_grid_maps``, vectorised NN retrieval; ``check`` and
+  ``integrity_check`` prove a file sound
 * :class:`EpisodeSummary`, :class:`StepRecord`, :class:`PlanStep`, :class:`GridMapMatch` -- query results
 * :func:`grid_distance` -- the grid-map distance used by ``nearest_grid_maps`` (for callers that compare two maps)
+* :func:`pack_bits` -- rows of 0/1 cells as 64-bit words, the form the NN cache keeps
 
 Durability: the file is in WAL mode with ``synchronous=NORMAL``, foreign keys on and a busy timeout, and a
 trace is written between ``BEGIN IMMEDIATE`` and ``COMMIT``: a process killed at any instant leaves either the
-whole trace or none of it. Every episode declares its counts, and :meth:`EpisodicMemory.check` proves them.
+whole trace or none of it (a power cut may lose the last committed traces, never leave half of one). Every
+episode and step declares its counts, and :meth:`EpisodicMemory.check` proves them.
 
 Grid-map distance: the number of cells whose occupancy differs (Hamming distance of the binary occupancy, equal
 to the L1 distance of 0/1 grids), minimised over the quarter-turn rotations of the query (four for square maps,
@@ -197,10 +201,6 @@ def _popcount_rows(words: np.ndarray) -> np.ndarray:
 
 def _and(mask: np.ndarray | None, other: np.ndarray) -> np.ndarray:
     return other if mask is None else mask & other
-
-
-def _loads(text: str | None) -> Any:
-    return None if text is None else json.loads(text)
 
 
 def _dumps(value: Any) -> str:

@@ -211,3 +211,30 @@ def test_attachment_normal_frames_agree_with_the_world_convention():
     assert np.allclose(state.an_base, rpy_to_matrix(*pose[3:])[:, 2])
     rebuilt = ObjectState.from_base_normal("housing", pose, state.ap, state.an_base)
     assert np.allclose(rebuilt.an, (0.0, 0.0, 1.0))
+
+
+def test_concurrent_writers_wait_for_each_other(tmp_path, make_trace):
+    import threading
+
+    path = tmp_path / "memory.sqlite"
+    EpisodicMemory.open(path).close()
+    traces = [make_trace(seed, steps=30, image=False) for seed in range(24)]
+    errors: list[BaseException] = []
+
+    def writer(part: int) -> None:
+        try:
+            with EpisodicMemory.open(path) as memory:
+                for trace in traces[part::3]:
+                    memory.write(trace)
+        except BaseException as error:  # reported below: a thread's exception would otherwise vanish
+            errors.append(error)
+
+    threads = [threading.Thread(target=writer, args=(part,)) for part in range(3)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert errors == []
+    with EpisodicMemory.open(path) as memory:
+        assert sorted(s.episode.seed for s in memory.episodes()) == list(range(24))
+        assert memory.check() == [] and memory.integrity_check() == "ok"

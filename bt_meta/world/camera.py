@@ -13,7 +13,8 @@ Offers:
   segmentation (H, W int32 pybullet body ids, -1 background), the intrinsics and the camera pose it was taken at
 * :class:`Camera` -- capture, pixel <-> point, pixel -> plane; :meth:`Camera.object_mask` by object name
 * :class:`TopViewCamera` -- looks straight down on the table; hides the robot while rendering (the paper's
-  top view comes from the wrist camera held over the table, which does not see the arm)
+  top view comes from the wrist camera held over the table, which does not see the arm); ``table_to_pixel``
+  and ``table_patch`` (a metric crop of the table, e.g. the 3 lb x 3 lb grid-map window)
 * :class:`HandCamera` -- follows an arm's camera link (``right_hand_camera_link``)
 """
 
@@ -229,6 +230,29 @@ class TopViewCamera(Camera):
 
     def pose(self) -> np.ndarray:
         return self._pose.copy()
+
+    def table_patch(
+        self, image: CameraImage, centre: Sequence[float], size: float, pixels: int, z: float | None = None
+    ) -> np.ndarray:
+        """A square metric crop of the table plane (height ``z``, default the table top), resampled from ``image``:
+        ``size`` metres wide centred on table point ``centre`` = (x, y), ``pixels`` x ``pixels``, oriented like
+        the image (up = +x, right = -y). Exact under perspective, e.g. the paper's 3 lb x 3 lb grid-map crop."""
+        import cv2
+
+        if size <= 0.0 or pixels <= 0:
+            raise SimulationError(f"a table patch needs a positive size and pixel count, got {size}, {pixels}")
+        z = self.sim.table.top_z if z is None else z
+        step = size / pixels
+        offsets = (np.arange(pixels) + 0.5) * step - size / 2.0
+        rows, cols = np.meshgrid(offsets, offsets, indexing="ij")
+        xs = centre[0] - rows  # row 0 is the far edge (+x)
+        ys = centre[1] - cols  # column 0 is the left edge (+y)
+        points = np.stack([xs, ys, np.full_like(xs, z), np.ones_like(xs)], axis=-1)
+        camera = points @ np.linalg.inv(image.pose).T
+        k = image.intrinsics
+        map_u = (k.fx * camera[..., 0] / camera[..., 2] + k.cx - 0.5).astype(np.float32)
+        map_v = (k.fy * camera[..., 1] / camera[..., 2] + k.cy - 0.5).astype(np.float32)
+        return cv2.remap(image.rgb, map_u, map_v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
 
     def table_to_pixel(self, x: float, y: float, z: float | None = None) -> tuple[float, float]:
         """Pixel (u, v) of a table point (z defaults to the table top)."""

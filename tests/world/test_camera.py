@@ -110,3 +110,26 @@ def test_camera_arguments_are_checked(sim):
         cam.object_mask(image, "b0")
     with pytest.raises(SimulationError, match="behind the camera"):
         cam.pixel_to_plane(160.0, 120.0, z=cam.pose()[2, 3] + 1.0)
+
+
+def test_table_patch_is_a_metric_crop_centred_on_the_block(sim):
+    from bt_meta.world.objects import LB
+
+    cam = TopViewCamera(sim)
+    image = cam.capture()
+    x, y = sim.object_pose("b1")[:2]
+    z_top = sim.object_pose("b1")[2] + sim.object_model("b1").info["body_height"] / 2.0
+    patch = cam.table_patch(image, (x, y), 3 * LB, 60, z=z_top)  # the paper's grid-map window, 3 lb
+    assert patch.shape == (60, 60, 3)
+    blue = (patch[..., 2] > 120) & (patch[..., 0] < 80)
+    rows, cols = np.nonzero(blue)
+    assert rows.mean() == pytest.approx(29.5, abs=1.5) and cols.mean() == pytest.approx(29.5, abs=1.5)
+    # a 1x1 block covers the middle third of a 3 lb window, the cells around it are table
+    assert blue[25:35, 25:35].all() and not blue[:15].any() and not blue[:, :15].any()
+    # the 1x2 (long axis along x, turned 0.3 rad) stands upright in the patch: up is +x
+    x, y = sim.object_pose("b0")[:2]
+    red = cam.table_patch(image, (x, y), 3 * LB, 60, z=z_top)
+    rows, cols = np.nonzero((red[..., 0] > 120) & (red[..., 2] < 80))
+    assert rows.std() > 1.5 * cols.std()
+    with pytest.raises(SimulationError, match="positive size"):
+        cam.table_patch(image, (x, y), 0.0, 10)

@@ -20,12 +20,38 @@ from bt_meta.htn.conditions import DNEG, DPOS, Condition, Step, Term, Var, candi
 from bt_meta.htn.state import Atom, State
 
 MAX_DEPTH = 200  # nested top-down proofs before falling back to the bottom-up extension
+INHERIT_DEPTH = 16  # how far up the parent chain a state looks for a memo to inherit
 
 _IN_PROGRESS = object()
 
 
 class _Fallback(Exception):
     """A top-down proof met a cycle or got too deep: use the bottom-up extension instead."""
+
+
+class _Recorder:
+    """A view of a state that records what a proof reads, so the proof can be reused by successor states."""
+
+    __slots__ = ("deps", "keys", "state", "volatile")
+
+    def __init__(self, state: State) -> None:
+        self.state = state
+        self.keys: set[tuple[str, str | None]] = set()
+        self.deps: list[Atom] = []
+        self.volatile = False
+
+    def __contains__(self, atom: object) -> bool:
+        assert isinstance(atom, tuple)
+        self.keys.add((atom[0], atom[1] if len(atom) > 1 else None))
+        return atom in self.state
+
+    def with_arg(self, pred: str, position: int, value: str) -> Sequence[Atom]:
+        self.keys.add((pred, value) if position == 1 else (pred, None))
+        return self.state.with_arg(pred, position, value)
+
+    def atoms_of(self, pred: str) -> Iterable[Atom]:
+        self.keys.add((pred, None))
+        return self.state.atoms_of(pred)
 
 
 class StratificationError(Exception):
@@ -162,6 +188,9 @@ class AxiomSet:
                         self._recursive.setdefault(step[1], []).append((axiom, j, step, rest))
 
     def extension(self, state: State, pred: str) -> DerivedIndex:
+        if isinstance(state, _Recorder):
+            state.volatile = True
+            state = state.state
         cache: dict[Any, Any] = state._derived
         key = (self._key, pred)
         found = cache.get(key)
@@ -171,12 +200,18 @@ class AxiomSet:
         return found
 
     def holds(self, state: State, atom: Atom) -> bool:
-        """Truth of one ground derived atom, top-down with a per-state memo.
+        """Truth of one ground derived atom, top-down with a per-state memo inherited from the parent state.
 
-        Deep or cyclic derivations (an atom needed to prove itself, or more than ``MAX_DEPTH`` nested atoms)
-        fall back to the bottom-up extension of the predicate, which is exact and needs no Python recursion
-        beyond the number of strata.
+        Each memo entry records which facts its proof read (as (predicate, first argument) keys) and which
+        derived atoms it used; a successor state inherits every entry that no changed fact and no invalidated
+        dependency touches, so a move of one block re-proves only what depends on that block. Deep or cyclic
+        derivations (an atom needed to prove itself, or more than ``MAX_DEPTH`` nested atoms) fall back to the
+        bottom-up extension of the predicate, which is exact and needs no Python recursion beyond the number
+        of strata.
         """
+        if isinstance(state, _Recorder):
+            state.deps.append(atom)
+            state = state.state
         cache = state._derived
         pred = atom[0]
         extension = cache.get((self._key, pred))
@@ -184,12 +219,12 @@ class AxiomSet:
             return atom in extension
         memo = cache.get(self._memo_key)
         if memo is None:
-            memo = cache[self._memo_key] = {}
+            memo = cache[self._memo_key] = self._inherit(state)
         known = memo.get(atom)
         if known is not None:
             if known is _IN_PROGRESS:
                 raise _Fallback
-            return known  # type: ignore[no-any-return]
+            return known[0]  # type: ignore[no-any-return]
         outermost = self._depth == 0
         try:
             if self._depth >= MAX_DEPTH:
@@ -197,19 +232,49 @@ class AxiomSet:
             memo[atom] = _IN_PROGRESS
             self._depth += 1
             try:
-                result = self._prove(state, atom)
+                recorder = _Recorder(state)
+                result = self._prove(recorder, atom)
             finally:
                 self._depth -= 1
                 if memo.get(atom) is _IN_PROGRESS:
                     del memo[atom]
-            memo[atom] = result
+            memo[atom] = (result, frozenset(recorder.keys), tuple(recorder.deps), recorder.volatile)
             return result
         except _Fallback:
             if not outermost:
                 raise
             return atom in self.extension(state, pred)
 
-    def _prove(self, state: State, atom: Atom) -> bool:
+    def _inherit(self, state: State) -> dict[Atom, Any]:
+        """The memo of ``state``: the nearest ancestor's entries that the changes since then leave valid."""
+        changed: set[tuple[str, str | None]] = set()
+        cursor = state
+        for _ in range(INHERIT_DEPTH):
+            parent = cursor._parent
+            if parent is None:
+                return {}
+            for atom in cursor._delta:
+                changed.add((atom[0], None))
+                if len(atom) > 1:
+                    changed.add((atom[0], atom[1]))
+            parent_memo = parent._derived.get(self._memo_key)
+            if parent_memo is not None:
+                break
+            cursor = parent
+        else:
+            return {}
+        memo: dict[Atom, Any] = {}
+        for atom, entry in parent_memo.items():
+            if entry is _IN_PROGRESS or entry[3] or not changed.isdisjoint(entry[1]):
+                continue
+            for dep in entry[2]:
+                if dep not in memo:  # invalidated, or answered from an extension: re-prove
+                    break
+            else:
+                memo[atom] = entry
+        return memo
+
+    def _prove(self, state: Any, atom: Atom) -> bool:
         for axiom in self.rules[atom[0]]:
             env = _unify(axiom.head_args, atom, {})
             if env is None:
@@ -221,6 +286,9 @@ class AxiomSet:
 
     def query(self, state: State, pred: str, args: Sequence[Term], env: dict[str, str]) -> Iterable[dict[str, str]]:
         """Extensions of ``env`` under which ``pred(args)`` (some arguments unbound) is derived, lazily."""
+        if isinstance(state, _Recorder):
+            state.volatile = True
+            state = state.state
         extension = state._derived.get((self._key, pred))
         if extension is None and pred in self.recursive:
             extension = self.extension(state, pred)

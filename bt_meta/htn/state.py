@@ -34,7 +34,7 @@ class State:
     sound because a state never changes.
     """
 
-    __slots__ = ("_by_arg", "_derived", "_hash", "_len", "_preds")
+    __slots__ = ("_by_arg", "_delta", "_derived", "_hash", "_len", "_parent", "_preds")
 
     def __init__(self, atoms: Iterable[Iterable[str]] = ()) -> None:
         preds: dict[str, dict[Atom, None]] = {}
@@ -52,6 +52,8 @@ class State:
         self._hash = total & _MASK
         self._by_arg: dict[tuple[str, int], dict[str, tuple[Atom, ...]]] = {}
         self._derived: dict[Any, Any] = {}
+        self._parent: State | None = None
+        self._delta: tuple[Atom, ...] = ()
 
     @classmethod
     def _make(
@@ -67,6 +69,8 @@ class State:
         state._hash = hash_
         state._by_arg = by_arg
         state._derived = {}
+        state._parent = None
+        state._delta = ()
         return state
 
     # -- queries -------------------------------------------------------------------------------------------
@@ -196,4 +200,9 @@ class State:
                         if len(atom) > position:
                             index[atom[position]] = (*index.get(atom[position], ()), atom)
                     new_by_arg[key] = index
-        return State._make(new_preds, length, hash_ & _MASK, new_by_arg)
+        successor = State._make(new_preds, length, hash_ & _MASK, new_by_arg)
+        # parent and changed atoms let axiom memos be inherited (see AxiomSet.holds)
+        successor._parent = self
+        successor._delta = (*(a for atoms in removed.values() for a in atoms), *(a for atoms in added.values()
+                                                                                  for a in atoms))
+        return successor

@@ -17,18 +17,17 @@ import sys
 import time
 
 import numpy as np
-import pytest
 
 KILLS = 30
 STEPS = 150
 OBJECTS = 3
 
 
-def writer_trace(run: int):
-    """The large, fully deterministic trace the writer of run ``run`` stores over and over."""
+def writer_trace():
+    """The large, fully deterministic trace every writer stores over and over under new headers."""
     from bt_meta.memory import Episode, Expectation, GridMap, ObjectState, State, Step, Trace
 
-    rng = np.random.default_rng(run)
+    rng = np.random.default_rng(20240607)
     poses = rng.uniform(-1, 1, (STEPS, OBJECTS, 12))
     grids = (rng.random((STEPS, 6, 6)) < 0.4).astype(np.uint8)
     crop = np.repeat(np.repeat(grids[0][..., None] * 200, 8, axis=0), 8, axis=1).repeat(3, axis=2)
@@ -66,7 +65,7 @@ def writer_trace(run: int):
 def _writer(path: str, run: int) -> None:
     from bt_meta.memory import EpisodicMemory
 
-    base = writer_trace(run)
+    base = writer_trace()
     with EpisodicMemory.open(path) as memory:
         print("ready", flush=True)
         number = 0
@@ -91,6 +90,12 @@ def numbered(trace, run: int, number: int):
     return replace(trace, episode=episode)
 
 
+if __name__ == "__main__":  # the writer: runs until it is killed, without importing pytest (faster start)
+    _writer(sys.argv[1], int(sys.argv[2]))
+
+import pytest  # noqa: E402
+
+
 @pytest.mark.slow
 def test_sigkill_never_leaves_half_a_trace(tmp_path):
     from bt_meta.memory import EpisodicMemory
@@ -98,6 +103,7 @@ def test_sigkill_never_leaves_half_a_trace(tmp_path):
     path = tmp_path / "memory.sqlite"
     rng = random.Random(20240607)
     committed_total = 0
+    base = writer_trace()
     killed_mid_write = 0
     started = time.monotonic()
     for run in range(KILLS):
@@ -107,7 +113,6 @@ def test_sigkill_never_leaves_half_a_trace(tmp_path):
             stderr=subprocess.PIPE,
             text=True,
         )
-        base = writer_trace(run)  # while the writer starts up
         assert process.stdout is not None
         ready = process.stdout.readline().strip()
         assert ready == "ready", process.stderr.read() if process.stderr else ""
@@ -142,7 +147,3 @@ def test_sigkill_never_leaves_half_a_trace(tmp_path):
     assert committed_total > KILLS  # the writers really wrote, across the runs
     assert killed_mid_write >= KILLS // 3, f"only {killed_mid_write} kills landed inside a write"
     print(f"{KILLS} kills in {elapsed:.1f} s, {killed_mid_write} inside a write, {committed_total} traces stored")
-
-
-if __name__ == "__main__":
-    _writer(sys.argv[1], int(sys.argv[2]))

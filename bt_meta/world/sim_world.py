@@ -1,0 +1,602 @@
+"""SimWorld: the :class:`~bt_meta.world.base.World` of a task file's problem in the pybullet simulator.
+
+A SimWorld owns a :class:`~bt_meta.world.sim.Simulation` with the problem's scene (and variant) built in it, the
+Baxter's kinematics, a collision checker whose scene mirrors the simulator's objects, and mink IK. HTN primitives
+map onto skills (:mod:`bt_meta.world.skills`) through a **grounding file** -- data, not code: ``poses/<domain>.yaml``
+next to the task file or in the shipped ``trees/poses/``. It says, per problem, which scene and variant to build;
+per primitive, which skill runs it; how the task file's symbols become numbers (letter cells in lb from a scene
+anchor, named gripper poses).
+
+Symbolic state: the problem's initial facts, updated by the add/delete effects of every primitive whose skill
+succeeded (the world does not re-derive facts from poses; perception plugins compare it with the object states).
+
+Offers:
+
+* :class:`SimWorld` -- the world; :meth:`SimWorld.from_task_file` builds it from a file, a problem, a variant, a seed
+* :class:`Grounding` / :func:`load_grounding` -- the grounding file
+* :class:`PrimitiveSkill` -- a skill run for a primitive: applies the primitive's effects on success
+* :func:`quiet_stdout` -- silences what pybullet prints on the C level (keeps ``--json`` output clean)
+* :func:`bt_meta_make_world` -- hook implementation for ``--world sim`` (register this module as a plugin)
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import sys
+import time
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from bt_meta.bt.failures import FailureKind
+from bt_meta.errors import BtMetaError, ConfigError
+from bt_meta.hookspecs import hookimpl
+from bt_meta.htn.state import State
+from bt_meta.resources import trees_dir
+from bt_meta.world.base import FAILURE, SUCCESS, Atom, SkillFailure, ground_effects
+from bt_meta.world.objects import Box, Cylinder, ObjectModel, pose_to_matrix, rpy_to_matrix
+from bt_meta.world.skills import SKILLS
+from bt_meta.world.skills.base import SimSkill, SkillAbort
+
+__all__ = ["Grounding", "PrimitiveSkill", "SimWorld", "load_grounding", "quiet_stdout"]
+
+_PART = "~"  # collision geometry names: "<object>" for the first part, "<object>~<k>" for the others
+
+
+@contextlib.contextmanager
+def quiet_stdout() -> Iterator[None]:
+    """Send file descriptor 1 to /dev/null (pybullet's C code prints build info and URDF warnings there)."""
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):
+        yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(fd)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), fd)
+            yield
+    finally:
+        sys.stdout.flush()
+        os.dup2(saved, fd)
+        os.close(saved)
+
+
+# --------------------------------------------------------------------------------------------------------------
+# The grounding file
+
+
+@dataclass(frozen=True)
+class Grounding:
+    """What a grounding file says (see the module docstring and ``trees/poses/*.yaml``)."""
+
+    path: Path
+    domain: str
+    problems: dict[str, dict[str, Any]]
+    skills: dict[str, dict[str, Any]]
+    frames: dict[str, dict[str, Any]] = field(default_factory=dict)
+    poses: dict[str, dict[str, Any]] = field(default_factory=dict)
+    robot_pose: dict[str, float] = field(default_factory=dict)
+    """Joint values (radians) that replace the robot's home pose at the start, e.g. the idle arm parked."""
+    objects: dict[str, str] = field(default_factory=dict)
+    """Task-file object symbol -> simulator object name, where they differ."""
+    features: dict[str, dict[str, str]] = field(default_factory=dict)
+    """Task-file feature symbol -> ``{object, feature}`` (an attachment feature of a simulator object)."""
+
+    def problem(self, name: str) -> dict[str, Any]:
+        try:
+            return self.problems[name]
+        except KeyError:
+            known = ", ".join(self.problems) or "none"
+            raise ConfigError(f"the grounding file has no problem {name!r}; problems: {known}", self.path) from None
+
+
+_TOP_KEYS = {"domain", "problems", "skills", "frames", "poses", "robot_pose", "objects", "features", "description"}
+
+
+def grounding_paths(domain: str, task_file: str | Path | None = None) -> list[Path]:
+    """Where the grounding file of ``domain`` is looked for, in order."""
+    paths = []
+    if task_file is not None:
+        paths.append(Path(task_file).parent / "poses" / f"{domain}.yaml")
+    paths.append(trees_dir() / "poses" / f"{domain}.yaml")
+    return paths
+
+
+def load_grounding(domain: str, task_file: str | Path | None = None, path: str | Path | None = None) -> Grounding:
+    """The grounding of ``domain``: ``path`` if given, else ``poses/<domain>.yaml`` beside the task file or shipped."""
+    if path is None:
+        candidates = grounding_paths(domain, task_file)
+        found = next((p for p in candidates if p.is_file()), None)
+        if found is None:
+            raise ConfigError(f"no grounding file for domain {domain!r} (looked for "
+                              f"{', '.join(str(p) for p in candidates)}): the simulator cannot run its primitives")
+        path = found
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except yaml.MarkedYAMLError as error:
+        mark = error.problem_mark
+        raise ConfigError(f"not valid YAML: {error.problem}", path, mark.line + 1 if mark else None,
+                          mark.column + 1 if mark else None) from None
+    if not isinstance(data, dict):
+        raise ConfigError("a grounding file is a mapping", path, 1, 1)
+    unknown = set(data) - _TOP_KEYS
+    if unknown:
+        raise ConfigError(f"unknown keys {sorted(unknown)}; expected {sorted(_TOP_KEYS)}", path)
+    for key in ("problems", "skills"):
+        if not isinstance(data.get(key), dict) or not data[key]:
+            raise ConfigError(f"{key!r} must be a non-empty mapping", path)
+    for primitive, spec in data["skills"].items():
+        if not isinstance(spec, dict) or spec.get("skill") not in SKILLS:
+            raise ConfigError(f"skills.{primitive}: give `skill:` one of {', '.join(SKILLS)}", path)
+    return Grounding(path, str(data.get("domain", domain)), dict(data["problems"]), dict(data["skills"]),
+                     dict(data.get("frames") or {}), dict(data.get("poses") or {}),
+                     {str(k): float(v) for k, v in (data.get("robot_pose") or {}).items()},
+                     {str(k): str(v) for k, v in (data.get("objects") or {}).items()},
+                     {str(k): dict(v) for k, v in (data.get("features") or {}).items()})
+
+
+# --------------------------------------------------------------------------------------------------------------
+# The world
+
+
+class PrimitiveSkill:
+    """A skill run for an HTN primitive; on success the primitive's effects update the world's symbolic state."""
+
+    def __init__(self, world: SimWorld, primitive: Any, skill: SimSkill) -> None:
+        self.world = world
+        self.primitive = primitive
+        self.inner = skill
+        self.args: tuple[str, ...] = ()
+        self.effects: tuple[list[Atom], list[Atom]] | None = None
+        self.wall_time = 0.0
+
+    @property
+    def failure(self) -> SkillFailure | None:
+        return self.inner.failure
+
+    def start(self, args: Sequence[str], ctx: Any = None) -> None:
+        self.args = tuple(str(a) for a in args)
+        self.inner.start(self.args, ctx)
+
+    def tick(self) -> str:
+        started = time.perf_counter()
+        status = self.inner.tick()
+        self.wall_time += time.perf_counter() - started
+        if status == SUCCESS and self.effects is None and self.primitive is not None:
+            effects = ground_effects(self.primitive, self.args, self.world.symbolic_state())
+            self.effects = effects or ([], [])
+            if effects is not None:
+                self.world.apply_symbolic(*effects)
+        if status in (SUCCESS, FAILURE):
+            self.world.executed.append(self.record())
+        return status
+
+    def cancel(self) -> None:
+        self.inner.cancel()
+
+    def record(self) -> dict[str, Any]:
+        out = {"action": None if self.primitive is None else self.primitive.name, **self.inner.record(),
+               "args": list(self.args), "wall_ms": round(self.wall_time * 1000.0, 2)}
+        if self.effects is not None:
+            out["effects"] = {"add": [list(a) for a in self.effects[0]], "delete": [list(a) for a in self.effects[1]]}
+        return out
+
+
+class SimWorld:
+    """A task-file problem acted out in pybullet (see the module docstring)."""
+
+    def __init__(
+        self,
+        domain: Any,
+        problem: Any,
+        grounding: Grounding,
+        *,
+        variant: str | None = None,
+        seed: int = 0,
+        gui: bool = False,
+        steps_per_tick: int = 12,
+        joint_speed: float = 1.5,
+        sim: Any = None,
+        realtime: bool | None = None,
+    ) -> None:
+        from bt_meta.world.collision import CollisionChecker
+        from bt_meta.world.fake import initial_state
+        from bt_meta.world.ik import InverseKinematics
+        from bt_meta.world.kinematics import Kinematics
+        from bt_meta.world.scenes import load_scene
+
+        self.domain = domain
+        self.problem = problem
+        self.grounding = grounding
+        self.seed = seed
+        self.steps_per_tick = steps_per_tick
+        self.joint_speed = joint_speed
+        problem_name = getattr(problem, "name", None) or str(problem)
+        setup = grounding.problem(problem_name)
+        missing = sorted(set(domain.primitives) - set(grounding.skills))
+        if missing:
+            raise ConfigError(f"primitives without a skill in the grounding file: {', '.join(missing)}",
+                              grounding.path)
+        scene_name = setup.get("scene")
+        if not scene_name:
+            raise ConfigError(f"problems.{problem_name}: give the `scene:` to build", grounding.path)
+        self.scene = load_scene(scene_name)
+        if variant is None or variant == "nominal":
+            variant = setup.get("variant")
+        if variant is not None and variant != "nominal" and variant not in self.scene.variants:
+            known = ", ".join(["nominal", *self.scene.variants])
+            raise ConfigError(f"scene {self.scene.name!r} has no variant {variant!r}; variants: {known}",
+                              self.scene.path)
+        self.variant = variant or "nominal"
+        self._own_sim = sim is None
+        if sim is None:
+            from bt_meta.world.sim import Simulation
+
+            with quiet_stdout():
+                sim = Simulation(gui=gui, seed=seed)
+        else:
+            sim.clear_objects()
+            for arm in sim.robot.arms:
+                sim.release(arm)
+        self.sim = sim
+        sim.set_joint_positions({**sim.robot.home, **grounding.robot_pose})
+        self.realtime = gui if realtime is None else realtime
+        self.tick_seconds = steps_per_tick * sim.time_step
+        self.scene.build(sim, None if self.variant == "nominal" else self.variant, seed=seed)
+        self._check_objects(problem_name)
+        self.kin = Kinematics(sim.robot)
+        self.collision = CollisionChecker(self.kin)
+        self.ik = InverseKinematics(self.kin, self.collision)
+        self._hand_links = {arm: self._arm_hand_links(arm) for arm in sim.robot.arms}
+        self._geometry: dict[str, list[str]] = {}
+        t = sim.table
+        self.collision.add_box("table", (t.size_x, t.size_y, t.thickness),
+                               pose_to_matrix((t.center_x, t.center_y, t.top_z - t.thickness / 2.0, 0, 0, 0)))
+        self.sync_collision()
+        self._state = initial_state(problem)
+        self.executed: list[dict[str, Any]] = []
+        self.total_ticks = 0
+
+    @classmethod
+    def from_task_file(cls, path: str | Path, problem: str | None = None, *, variant: str | None = None,
+                       seed: int = 0, gui: bool = False, grounding: str | Path | None = None,
+                       **options: Any) -> SimWorld:
+        from bt_meta.htn import load_task_file
+
+        task_file = load_task_file(path)
+        chosen = task_file.problem(problem)
+        return cls(task_file.domain, chosen, load_grounding(task_file.domain.name, path, grounding),
+                   variant=variant, seed=seed, gui=gui, **options)
+
+    def close(self) -> None:
+        if self._own_sim:
+            self.sim.close()
+
+    # -- World protocol -----------------------------------------------------------------------------------------
+
+    def symbolic_state(self) -> State:
+        return self._state
+
+    def apply_symbolic(self, add: Iterable[Atom], delete: Iterable[Atom]) -> None:
+        self._state = self._state.apply(add=add, delete=delete)
+
+    def skill(self, action: str) -> PrimitiveSkill:
+        spec = self.grounding.skills.get(action)
+        if spec is None:
+            raise BtMetaError(f"the simulator has no skill for {action!r}; grounded primitives: "
+                              f"{', '.join(self.grounding.skills)} ({self.grounding.path})")
+        skill = SKILLS[spec["skill"]](self, spec.get("arm", "right"))
+        skill.spec = spec
+        return PrimitiveSkill(self, self.domain.primitives.get(action), skill)
+
+    def observe(self) -> dict[str, Any]:
+        return {
+            "symbolic_state": self._state,
+            "objects": {name: state.as_dict() for name, state in self.sim.object_states().items()},
+            "held": {arm: self.sim.held(arm) for arm in self.sim.robot.arms},
+            "attachments": [list(pair) for pair in self.sim.attachments()],
+            "gripper": {arm: list(self.sim.gripper_pose(arm)) for arm in self.sim.robot.arms},
+        }
+
+    # -- what skills use ----------------------------------------------------------------------------------------
+
+    def end_effector(self, arm: str) -> str:
+        return self.sim.robot.arm(arm).end_effector
+
+    def current_q(self) -> np.ndarray:
+        return self.kin.q_from_dict(self.sim.joint_positions(), self.kin.home)
+
+    def drive_arm(self, arm: str, values: np.ndarray) -> None:
+        joints = self.sim.robot.arm(arm).joints
+        self.sim.set_joint_targets(dict(zip(joints, (float(v) for v in values), strict=True)))
+
+    def advance(self, ticks: int = 1) -> None:
+        """Run the physics for ``ticks`` ticks (the magnetic attach rule is checked at every physics step)."""
+        self.sim.step(self.steps_per_tick * ticks)
+        self.total_ticks += ticks
+        if self.realtime:
+            time.sleep(self.tick_seconds * ticks)
+
+    def held_relative(self, arm: str) -> np.ndarray:
+        """Pose of the held object in the gripper frame."""
+        held = self.sim.held(arm)
+        if held is None:
+            raise BtMetaError(f"the {arm} gripper holds nothing")
+        gripper = self.sim.link_transform(self.end_effector(arm))
+        return np.linalg.inv(gripper) @ self.sim.object_transform(held)
+
+    def grasp(self, name: str, arm: str, reach: float) -> bool:
+        if not self.sim.grasp(name, arm, max_distance=reach):
+            return False
+        self.sync_collision()
+        hand = self._hand_links[arm]
+        for part in self._geometry.get(name, []):
+            self.collision.attach(part, self.end_effector(arm), self.current_q(), allow=hand)
+        return True
+
+    def release(self, arm: str) -> str | None:
+        name = self.sim.release(arm)
+        if name is not None:
+            q = self.current_q()
+            for part in self._geometry.get(name, []):
+                self.collision.detach(part, q=q)
+        return name
+
+    def allow_hand(self, name: str, arm: str, allowed: bool = True) -> None:
+        """Let the hand touch ``name`` in collision checks (approaching it to grasp), or stop letting it."""
+        for part in self._geometry.get(name, []):
+            if allowed:
+                self.collision.allow(part, self._hand_links[arm])
+            else:
+                self.collision.disallow(part)
+
+    def allow_objects(self, name: str, others: Iterable[str]) -> None:
+        """Let object ``name`` touch the ``others`` in collision checks (a part going into a hole)."""
+        parts = [p for other in others for p in self._geometry.get(other, [])]
+        for part in self._geometry.get(name, []):
+            self.collision.allow(part, parts)
+
+    def robot_contacts(self, arm: str) -> list[str]:
+        """What the robot touches in the simulator, except the object it holds: ``table`` or object names."""
+        import pybullet
+
+        sim = self.sim
+        held = {sim.held(a) for a in sim.robot.arms}
+        out: set[str] = set()
+        for contact in pybullet.getContactPoints(bodyA=sim.robot_id, physicsClientId=sim.client):
+            other = contact[2]
+            if other == sim.table_id:
+                out.add("table")
+            else:
+                name = sim.object_name_of(other)
+                if name is not None and name not in held:
+                    out.add(name)
+        return sorted(out)
+
+    def object_lowest(self, name: str) -> float:
+        """Lowest z of an object's geometry (base frame)."""
+        model = self.sim.object_model(name)
+        t = self.sim.object_transform(name)
+        return float((model.points() @ t[:3, :3].T + t[:3, 3])[:, 2].min())
+
+    def object_top(self, name: str) -> float:
+        """Highest z of an object's geometry (base frame)."""
+        model = self.sim.object_model(name)
+        t = self.sim.object_transform(name)
+        points = model.points() @ t[:3, :3].T + t[:3, 3]
+        return float(points[:, 2].max())
+
+    def contact_object(self, name: str) -> str:
+        """The object a collision geometry name belongs to."""
+        return name.split(_PART, 1)[0]
+
+    # -- grounding ----------------------------------------------------------------------------------------------
+
+    def object_name(self, symbol: str) -> str:
+        """The simulator object a task-file symbol stands for; :class:`SkillAbort` (``unknown_entity``) if absent."""
+        name = self.grounding.objects.get(symbol, symbol)
+        if name not in self.sim.object_names():
+            raise SkillAbort(FailureKind.UNKNOWN_ENTITY, f"there is no object {name!r} in the world"
+                             + (f" (task-file symbol {symbol!r})" if name != symbol else ""),
+                             {"object": name, "symbol": symbol, "present": list(self.sim.object_names())})
+        return name
+
+    def feature_of(self, symbol: str) -> tuple[str, str | None]:
+        """(object, feature name) of a task-file feature symbol, or (object, None) for an object's primary one."""
+        spec = self.grounding.features.get(symbol)
+        if spec is None:
+            return self.object_name(symbol), None
+        return self.object_name(str(spec["object"])), spec.get("feature")
+
+    def stack_top(self, name: str) -> float:
+        """Highest point of ``name`` and of whatever rests on it around its centroid (e.g. a joined part)."""
+        sim = self.sim
+        centre = sim.object_transform(name)[:3, 3]
+        low, high = sim.object_model(name).extent()
+        radius = 0.5 * float(min(high[0] - low[0], high[1] - low[1]))
+        top = self.object_top(name)
+        for other in sim.object_names():
+            if other == name or other in {sim.held(a) for a in sim.robot.arms}:
+                continue
+            position = sim.object_transform(other)[:3, 3]
+            if np.linalg.norm(position[:2] - centre[:2]) < radius and position[2] > centre[2]:
+                top = max(top, self.object_top(other))
+        return top
+
+    def pose_spec(self, symbol: str) -> dict[str, Any]:
+        spec = self.grounding.poses.get(symbol)
+        if spec is None:
+            known = ", ".join(self.grounding.poses) or "none"
+            raise SkillAbort(FailureKind.INTERNAL, f"no pose symbol {symbol!r} in {self.grounding.path}; "
+                                                   f"known: {known}", {"symbol": symbol})
+        return spec
+
+    def ground_pose(self, symbol: str, arm: str = "right") -> np.ndarray:
+        """The gripper pose (4x4, base frame) a pose symbol of the task file stands for, now.
+
+        Kinds of entries (``rpy`` in degrees, default pointing down with yaw 180):
+
+        * ``pose: [x, y, z, roll, pitch, yaw]`` -- absolute (an instructor's pose; metres, degrees);
+        * ``above: OBJECT, height: h`` -- top-down over the object's centroid, ``h`` above the top of it and of
+          whatever rests on it (grasp poses: a few millimetres);
+        * ``above_feature: FEATURE, height: h`` -- the held object's lowest point ``h`` above the feature's point,
+          its centroid over it (the gripper itself when nothing is held);
+        * ``anchor: NAME, offset: [dx, dy, dz]`` -- a scene anchor plus an offset.
+        """
+        spec = self.pose_spec(symbol)
+        down = spec.get("rpy", [180.0, 0.0, 180.0])
+        out = np.eye(4)
+        out[:3, :3] = rpy_to_matrix(*(math.radians(float(v)) for v in down))
+        height = float(spec.get("height", 0.0))
+        if "pose" in spec:
+            x, y, z, roll, pitch, yaw = (float(v) for v in spec["pose"])
+            return pose_to_matrix((x, y, z, math.radians(roll), math.radians(pitch), math.radians(yaw)))
+        if "above" in spec:
+            name = self.object_name(str(spec["above"]))
+            centre = self.sim.object_transform(name)[:3, 3]
+            out[:3, 3] = (centre[0], centre[1], self.stack_top(name) + height)
+            return out
+        if "above_feature" in spec:
+            obj, feature = self.feature_of(str(spec["above_feature"]))
+            point, _ = self.sim.feature(obj, feature)
+            held = self.sim.held(arm)
+            if held is None:
+                out[:3, 3] = np.asarray(point) + np.array([0.0, 0.0, height])
+                return out
+            gripper = self.sim.link_transform(self.end_effector(arm)).copy()
+            t = self.sim.object_transform(held)
+            points = self.sim.object_model(held).points() @ t[:3, :3].T + t[:3, 3]
+            lowest = float(points[:, 2].min())
+            gripper[:3, 3] += (point[0] - t[0, 3], point[1] - t[1, 3], point[2] + height - lowest)
+            return gripper
+        if "anchor" in spec:
+            position, _ = self.anchor(str(spec["anchor"]))
+            offset = [float(v) for v in spec.get("offset", (0.0, 0.0, 0.0))]
+            out[:3, 3] = np.asarray(position) + np.asarray(offset)
+            return out
+        raise SkillAbort(FailureKind.INTERNAL,
+                         f"pose {symbol!r} in {self.grounding.path}: give pose, above, above_feature or anchor")
+
+    def anchor(self, name: str) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """A scene anchor's position (z on the table top when the file says ``table``) and rpy."""
+        anchors = getattr(self.scene, "anchors", {}) or {}
+        if name not in anchors:
+            raise SkillAbort(FailureKind.INTERNAL, f"scene {self.scene.name!r} has no anchor {name!r}; "
+                                                   f"anchors: {', '.join(anchors) or 'none'}")
+        (x, y, z), rpy = anchors[name]
+        return (x, y, self.sim.table.top_z if z is None else z), tuple(rpy)
+
+    def ground_cell(self, frame: str, x: str, y: str) -> tuple[float, float, float]:
+        """A point (x, y) of a task-file frame (e.g. letter cells in lb) -> (X, Y, yaw) on the table."""
+        spec = self.grounding.frames.get(frame)
+        if spec is None:
+            raise SkillAbort(FailureKind.INTERNAL, f"no frame {frame!r} in {self.grounding.path}")
+        try:
+            u, v = float(x), float(y)
+        except ValueError:
+            raise SkillAbort(FailureKind.INTERNAL, f"frame {frame!r}: coordinates must be numbers, got {x}, {y}",
+                             {"x": x, "y": y}) from None
+        (ox, oy, _), (_, _, yaw) = self.anchor(str(spec["anchor"]))
+        unit = float(spec.get("unit", 1.0))
+        c, s = math.cos(yaw), math.sin(yaw)
+        return ox + unit * (c * u - s * v), oy + unit * (s * u + c * v), yaw
+
+    # -- internals ----------------------------------------------------------------------------------------------
+
+    def _check_objects(self, problem_name: str) -> None:
+        """Objects the problem names must exist in the nominal scene (a variant may replace them: its point).
+
+        Pose and feature symbols are not objects; other symbols map through the grounding's ``objects``."""
+        if self.variant != "nominal":
+            return
+        objects = getattr(self.problem, "objects", None) or {}
+        names = [o for group in (objects.values() if isinstance(objects, Mapping) else [objects]) for o in group]
+        names = [n for n in names if n not in self.grounding.poses and n not in self.grounding.features]
+        present = set(self.sim.object_names())
+        missing = sorted(n for n in names if self.grounding.objects.get(n, n) not in present)
+        if missing:
+            raise ConfigError(f"problem {problem_name!r} names objects the scene {self.scene.name!r} lacks: "
+                              f"{', '.join(missing)}", self.scene.path)
+
+    def _arm_hand_links(self, arm: str) -> list[str]:
+        """Robot links moved by the arm's last joint (hand, gripper, fingers): a held object may touch them.
+
+        Called before any scene object is added, so every geometry is the robot's."""
+        model = self.kin.model
+        last = model.getJointId(self.sim.robot.arm(arm).joints[-1])
+        links = {model.frames[obj.parentFrame].name for obj in self.collision.geometry.geometryObjects
+                 if last in model.supports[obj.parentJoint]}
+        return sorted(links)
+
+    def sync_collision(self) -> None:
+        """Mirror the simulator's objects into the collision scene (held objects ride with the gripper)."""
+        sim, checker = self.sim, self.collision
+        names = set(sim.object_names())
+        for name in [n for n in self._geometry if n not in names]:
+            for part in self._geometry.pop(name):
+                checker.remove(part)
+        held = {sim.held(arm) for arm in sim.robot.arms}
+        for name in sorted(names):
+            transform = sim.object_transform(name)
+            shapes = _collision_shapes(sim.object_model(name))
+            if name not in self._geometry:
+                parts = []
+                for k, (kind, dims, local) in enumerate(shapes):
+                    part = name if k == 0 else f"{name}{_PART}{k}"
+                    pose = transform @ local
+                    if kind == "box":
+                        checker.add_box(part, dims, pose)
+                    else:
+                        checker.add_cylinder(part, dims[0], dims[1], pose)
+                    parts.append(part)
+                self._geometry[name] = parts
+            elif name not in held:
+                for part, (_, _, local) in zip(self._geometry[name], shapes, strict=True):
+                    checker.move(part, transform @ local)
+
+
+SHRINK = 0.0015
+"""Collision shapes are this much (m) smaller on every side than the simulated ones: blocks placed side by side
+touch exactly, which is not a collision (pybullet, too, lets resting bodies overlap a little)."""
+
+
+def _collision_shapes(model: ObjectModel) -> list[tuple[str, tuple[float, ...], np.ndarray]]:
+    """Boxes and cylinders for the collision checker: the model's parts, or its bounding box when it has many
+    (a hollow tube of 24 boxes checks as its hull: the gripper never goes inside it)."""
+
+    def shrunk(*sizes: float) -> tuple[float, ...]:
+        return tuple(max(1e-3, s - 2.0 * SHRINK) for s in sizes)
+
+    if len(model.parts) > 6:
+        low, high = model.extent()
+        local = np.eye(4)
+        local[:3, 3] = (low + high) / 2.0
+        return [("box", shrunk(*(float(v) for v in high - low)), local)]
+    out: list[tuple[str, tuple[float, ...], np.ndarray]] = []
+    for part in model.parts:
+        local = pose_to_matrix((*part.position, *part.rpy))
+        if isinstance(part, Box):
+            out.append(("box", shrunk(*part.size), local))
+        elif isinstance(part, Cylinder):
+            radius, length = shrunk(2.0 * part.radius, part.length)
+            out.append(("cylinder", (radius / 2.0, length), local))
+    return out
+
+
+@hookimpl
+def bt_meta_make_world(name: str, domain: Any, problem: Any, options: dict[str, Any]) -> SimWorld | None:
+    if name != "sim":
+        return None
+    grounding = load_grounding(domain.name, options.get("task_file"), options.get("grounding"))
+    return SimWorld(domain, problem, grounding, variant=options.get("variant"), seed=int(options.get("seed", 0)),
+                    gui=bool(options.get("gui", False)))
+

@@ -1,0 +1,186 @@
+"""What every simulated skill shares: tick counting, failures with a taxonomy kind, records for traces.
+
+Offers:
+
+* :class:`SimSkill` -- base class of the skills in this package: ``start(args, ctx)`` grounds the arguments and
+  calls :meth:`SimSkill.begin`; ``tick()`` counts, calls :meth:`SimSkill.step` and turns a :class:`SkillAbort`
+  into a FAILURE with its kind (a skill never raises out of ``tick`` for a physical or motion failure)
+* :class:`PhasedSkill` -- a skill made of sub-skills run in order (a small state machine)
+* :class:`SkillAbort` -- raised inside a skill to fail it with a kind, a message and evidence
+* :func:`rounded` -- numbers rounded for records (JSON-able, short)
+
+Why the split between ``start`` and ``begin``: HTN primitives pass symbols (``b0``, ``1.5``, ``attach_pose``); a
+skill used by another skill (Place uses MoveTo and Grasp) passes numbers. ``start`` grounds symbols through the
+world, ``begin`` takes the ground values.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING, Any
+
+from bt_meta.bt.failures import FailureKind
+from bt_meta.errors import BtMetaError
+from bt_meta.world.base import FAILURE, RUNNING, SUCCESS, SkillFailure
+
+if TYPE_CHECKING:
+    from bt_meta.world.sim_world import SimWorld
+
+__all__ = ["PhasedSkill", "SimSkill", "SkillAbort", "rounded"]
+
+
+class SkillAbort(BtMetaError):
+    """Fail the running skill with a taxonomy ``kind``; caught by :meth:`SimSkill.tick`."""
+
+    def __init__(self, kind: str | FailureKind, message: str, evidence: dict[str, Any] | None = None) -> None:
+        super().__init__(message)
+        self.kind = FailureKind(kind).value
+        self.message = message
+        self.evidence = evidence or {}
+
+
+def rounded(values: Iterable[float] | float, digits: int = 4) -> Any:
+    """Round a number or a sequence of numbers for a record."""
+    if isinstance(values, (int, float)):
+        return round(float(values), digits)
+    return [round(float(v), digits) for v in values]
+
+
+class SimSkill:
+    """One execution of a skill on a :class:`~bt_meta.world.sim_world.SimWorld`, advanced tick by tick."""
+
+    name = "skill"
+
+    def __init__(self, world: SimWorld, arm: str = "right") -> None:
+        self.world = world
+        self.arm = arm
+        self.failure: SkillFailure | None = None
+        self.ticks = 0
+        self.outcome: str | None = None
+        self.args: tuple[str, ...] = ()
+        self.info: dict[str, Any] = {}
+        self._started = False
+
+    # -- protocol -----------------------------------------------------------------------------------------------
+
+    def start(self, args: Sequence[str], ctx: Any = None) -> None:
+        """Ground the primitive's symbolic arguments and begin."""
+        self.args = tuple(str(a) for a in args)
+        self._reset()
+        try:
+            self.ground(self.args)
+        except SkillAbort as abort:
+            self._abort(abort)
+
+    def begin_ground(self) -> None:
+        """Mark a skill begun with ground values (by another skill) as started."""
+        self._reset()
+
+    def tick(self) -> str:
+        if self.outcome in (SUCCESS, FAILURE):
+            return self.outcome
+        self.ticks += 1
+        try:
+            status = self.step()
+        except SkillAbort as abort:
+            return self._abort(abort)
+        if status != RUNNING:
+            self.outcome = status
+        return status
+
+    def cancel(self) -> None:
+        if self.outcome is None:
+            self.outcome = "cancelled"
+
+    def record(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"skill": self.name, "args": list(self.args), "ticks": self.ticks,
+                               "outcome": self.outcome}
+        out.update(self.info)
+        if self.failure is not None:
+            out["failure"] = {"kind": self.failure.kind, "message": self.failure.message}
+        return out
+
+    # -- for subclasses -----------------------------------------------------------------------------------------
+
+    def ground(self, args: tuple[str, ...]) -> None:
+        """Turn symbolic arguments into numbers and begin; raise :class:`SkillAbort` for bad ones."""
+        raise NotImplementedError
+
+    def step(self) -> str:
+        """One tick of work: RUNNING, SUCCESS, or raise :class:`SkillAbort`."""
+        raise NotImplementedError
+
+    # -- helpers ------------------------------------------------------------------------------------------------
+
+    def _reset(self) -> None:
+        self.failure = None
+        self.outcome = None
+        self.ticks = 0
+        self.info = {}
+
+    def _abort(self, abort: SkillAbort) -> str:
+        self.failure = SkillFailure(abort.kind, abort.message, dict(abort.evidence))
+        self.outcome = FAILURE
+        return FAILURE
+
+    def run_child(self, child: SimSkill) -> str:
+        """Tick a sub-skill once; its failure becomes this skill's (same kind, its evidence nested)."""
+        status = child.tick()
+        if status == FAILURE:
+            failure = child.failure
+            assert failure is not None
+            evidence = dict(failure.evidence)
+            evidence.setdefault("phase", child.record())
+            raise SkillAbort(failure.kind, failure.message, evidence)
+        return status
+
+
+class PhasedSkill(SimSkill):
+    """A skill made of sub-skills run one after another (Place, Insert): a small state machine.
+
+    :meth:`phases` lists ``(name, make)`` pairs; ``make()`` is called when the phase begins (so targets come from
+    the world as it is then) and returns a begun sub-skill, or ``None`` for a phase that only acts or checks.
+    :meth:`finish` runs after the last phase.
+    """
+
+    def phases(self) -> list[tuple[str, Any]]:
+        raise NotImplementedError
+
+    def finish(self) -> None:
+        """Final checks after the last phase; raise :class:`SkillAbort` to fail."""
+
+    def begin_phases(self) -> None:
+        self._plan = self.phases()
+        self._index = 0
+        self._child: SimSkill | None = None
+        self.info["phases"] = []
+
+    def step(self) -> str:
+        while True:
+            if self._child is None:
+                if self._index >= len(self._plan):
+                    self.finish()
+                    return SUCCESS
+                name, make = self._plan[self._index]
+                self.info["phase"] = name
+                child = make()
+                if child is None:
+                    self.info["phases"].append({"phase": name})
+                    self._index += 1
+                    continue
+                self._child = child
+            try:
+                status = self.run_child(self._child)
+            except SkillAbort as abort:
+                abort.evidence.setdefault("failed_phase", self._plan[self._index][0])
+                self.info["phases"].append({"phase": self._plan[self._index][0], **self._child.record()})
+                raise
+            if status == RUNNING:
+                return RUNNING
+            self.info["phases"].append({"phase": self._plan[self._index][0], **self._child.record()})
+            self._child = None
+            self._index += 1
+            if self._index >= len(self._plan):
+                self.finish()
+                return SUCCESS
+            return RUNNING

@@ -1,0 +1,205 @@
+"""MoveTo(pose): inverse kinematics for a gripper pose, then a joint-space trajectory executed over several ticks.
+
+The first tick solves IK (mink, the current configuration as the first seed, collision-aware against the scene
+mirrored from the simulator) and checks every waypoint of the straight joint-space path for collisions; each
+tick then drives the arm one waypoint further (``world.steps_per_tick`` physics steps) and the skill stays
+RUNNING until the gripper is within tolerance of the target. Failures are classified, never raised:
+
+* ``reachability`` -- IK found no solution (evidence: target, best residual);
+* ``collision`` -- every IK solution, or a waypoint on the way, collides (evidence: the colliding pair);
+* ``physical`` -- the arm did not arrive (blocked), or the held object slipped out of the grasp.
+
+Offers:
+
+* :class:`MoveTo` -- the skill; ``start([symbol])`` grounds a pose symbol through the world, ``begin(pose)``
+  takes a 4x4 gripper pose in the robot base frame
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from bt_meta.bt.failures import FailureKind
+from bt_meta.world.base import RUNNING, SUCCESS
+from bt_meta.world.objects import matrix_to_pose, pose_to_matrix
+from bt_meta.world.skills.base import SimSkill, SkillAbort, rounded
+
+__all__ = ["MoveTo"]
+
+
+class MoveTo(SimSkill):
+    """Move the arm's gripper frame to a pose (robot base frame)."""
+
+    name = "move_to"
+
+    def __init__(self, world: Any, arm: str = "right", *, position_tolerance: float = 0.003,
+                 orientation_tolerance: float = 0.05, settle_ticks: int = 12, require_arrival: bool = True,
+                 check_path: bool = True, check_held: bool = True) -> None:
+        super().__init__(world, arm)
+        self.position_tolerance = position_tolerance
+        self.orientation_tolerance = orientation_tolerance
+        self.settle_ticks = settle_ticks
+        self.require_arrival = require_arrival
+        self.check_path = check_path
+        self.check_held = check_held
+        self.target: np.ndarray | None = None
+        self.label = ""
+        self._waypoints: list[np.ndarray] = []
+        self._next = 0
+        self._settling = 0
+        self._held_rel: np.ndarray | None = None
+        self.verify: list[str] = []
+        """Objects that must hang above the table on arrival (the paper's staging-pose verification)."""
+
+    # -- grounding ----------------------------------------------------------------------------------------------
+
+    def ground(self, args: tuple[str, ...]) -> None:
+        if len(args) == 6:
+            try:
+                pose = pose_to_matrix([float(a) for a in args])
+            except ValueError:
+                raise SkillAbort(FailureKind.INTERNAL, f"move_to: six arguments must be numbers, got {args}") from None
+            self.begin(pose, "(" + ", ".join(args) + ")")
+            return
+        if len(args) != 1:
+            raise SkillAbort(FailureKind.INTERNAL, f"move_to takes a pose symbol (or 6 numbers), got {list(args)}")
+        spec = self.world.pose_spec(args[0])
+        if spec.get("touch") and "above" in spec:
+            # A grasp pose: the fingers may touch the object they are about to close on.
+            self.world.allow_hand(self.world.object_name(str(spec["above"])), self.arm)
+        self.begin(self.world.ground_pose(args[0], self.arm), args[0])
+        self.verify = [self.world.object_name(str(o)) for o in spec.get("verify_lifted", ())]
+
+    def begin(self, pose: np.ndarray, label: str = "") -> MoveTo:
+        self.begin_ground()
+        self.target = np.asarray(pose, dtype=float)
+        self.label = label
+        self._waypoints = []
+        self._next = 0
+        self._settling = 0
+        held = self.world.sim.held(self.arm)
+        self._held_rel = None if held is None or not self.check_held else self.world.held_relative(self.arm)
+        self.info = {"target": rounded(matrix_to_pose(self.target)), "label": label}
+        return self
+
+    # -- ticking ------------------------------------------------------------------------------------------------
+
+    def step(self) -> str:
+        world = self.world
+        if not self._waypoints:
+            self._plan()
+        if self._next < len(self._waypoints):
+            world.drive_arm(self.arm, self._waypoints[self._next])
+            self._next += 1
+            world.advance()
+            return RUNNING if self._next < len(self._waypoints) or not self._arrived() else self._finish()
+        world.advance()
+        if self._arrived():
+            return self._finish()
+        self._settling += 1
+        if self._settling >= self.settle_ticks:
+            if not self.require_arrival:
+                return self._finish()
+            position, rotation = self._error()
+            contacts = world.robot_contacts(self.arm)
+            raise SkillAbort(
+                FailureKind.COLLISION if contacts else FailureKind.PHYSICAL,
+                f"move_to {self.label}: the gripper stopped {position * 1000:.1f} mm / {rotation:.3f} rad short of the "
+                "target" + (f"; the arm touches {', '.join(contacts)}" if contacts else ""),
+                {"target": self.info["target"], "position_error": position, "orientation_error": rotation,
+                 "contacts": contacts, "pair": [f"{self.arm}_arm", contacts[0]] if contacts else None},
+            )
+        return RUNNING
+
+    def _plan(self) -> None:
+        world = self.world
+        assert self.target is not None
+        world.sync_collision()
+        q_now = world.current_q()
+        started = time.perf_counter()
+        result = world.ik.solve(self.arm, pin.SE3(self.target[:3, :3], self.target[:3, 3]), q_now, seed=world.seed)
+        self.info["ik_time_ms"] = round((time.perf_counter() - started) * 1000.0, 3)
+        self.info["ik_attempts"] = result.attempts
+        if not result.success:
+            kind = result.kind or FailureKind.REACHABILITY.value
+            evidence = dict(result.evidence)
+            evidence["label"] = self.label
+            raise SkillAbort(kind, f"move_to {self.label}: {result.message}", evidence)
+        assert result.q is not None
+        indices = world.kin.arm_indices(self.arm)
+        start, goal = q_now[indices], result.q[indices]
+        max_step = world.joint_speed * world.tick_seconds
+        count = max(1, math.ceil(float(np.max(np.abs(goal - start))) / max_step))
+        waypoints = []
+        for k in range(1, count + 1):
+            q = q_now.copy()
+            q[indices] = start + (goal - start) * (k / count)
+            waypoints.append(q)
+        if self.check_path:
+            for k, q in enumerate(waypoints[:-1]):
+                contact = world.collision.check(q, arm=self.arm)
+                if contact is not None:
+                    raise SkillAbort(
+                        FailureKind.COLLISION,
+                        f"move_to {self.label}: the joint-space path collides at {100 * (k + 1) // count}%: {contact}",
+                        {"pair": list(contact.pair), "collision_kind": contact.kind, "penetration": contact.penetration,
+                         "waypoint": k + 1, "waypoints": count, "target": self.info["target"]},
+                    )
+        self._waypoints = [q[indices] for q in waypoints]
+        self.info["waypoints"] = count
+        self.info["q_goal"] = rounded(goal)
+
+    def _error(self) -> tuple[float, float]:
+        assert self.target is not None
+        current = self.world.sim.link_transform(self.world.end_effector(self.arm))
+        position = float(np.linalg.norm(current[:3, 3] - self.target[:3, 3]))
+        rotation = float(np.linalg.norm(pin.log3(self.target[:3, :3].T @ current[:3, :3])))
+        return position, rotation
+
+    def _arrived(self) -> bool:
+        position, rotation = self._error()
+        return position <= self.position_tolerance and rotation <= self.orientation_tolerance
+
+    def _finish(self) -> str:
+        world = self.world
+        position, rotation = self._error()
+        self.info["position_error"] = rounded(position, 5)
+        self.info["orientation_error"] = rounded(rotation, 5)
+        self.info["final_gripper"] = rounded(world.sim.gripper_pose(self.arm))
+        if self._held_rel is not None:
+            held = world.sim.held(self.arm)
+            drift = math.inf if held is None else float(
+                np.linalg.norm(world.held_relative(self.arm)[:3, 3] - self._held_rel[:3, 3]))
+            if drift > 0.01:
+                raise SkillAbort(FailureKind.PHYSICAL, f"move_to {self.label}: the held object was lost on the way",
+                                 {"held": held, "drift": None if math.isinf(drift) else drift})
+        if self.verify:
+            self._verify()
+        return SUCCESS
+
+    def _verify(self, margin: float = 0.01) -> None:
+        """Section 7.3: the subassembly moved to the staging pose must have left the table, every part of it."""
+        sim = self.world.sim
+        heights = {name: float(self.world.object_lowest(name) - sim.table.top_z) for name in self.verify}
+        left = sorted(name for name, h in heights.items() if h < margin)
+        evidence: dict[str, Any] = {
+            "lifted": {name: rounded(h, 4) for name, h in heights.items()},
+            "left_on_table": left,
+            "attachments": [list(p) for p in sim.attachments()],
+            "held": sim.held(self.arm),
+        }
+        roles = [n for n in self.verify if sim.object_model(n).role is not None]
+        if len(roles) >= 2:
+            relation = sim.attachment_relation(roles[0], roles[1])
+            evidence["R_p"] = rounded(relation.distance, 5)
+            evidence["R_n"] = rounded(relation.angle, 4)
+        self.info["verification"] = evidence
+        if left:
+            raise SkillAbort(FailureKind.VERIFICATION,
+                             f"move_to {self.label}: verification failed -- {', '.join(left)} stayed on the table "
+                             "instead of coming along with the subassembly", evidence)

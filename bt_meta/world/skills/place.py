@@ -1,0 +1,164 @@
+"""Place(block, x, y): pick a block up and put it down with its centroid at (x, y) -- the letters primitive.
+
+Built from MoveTo and Grasp as a small state machine (paper, section 6.1: "grasps and then moves the block to
+(x, y)"): approach above the block, descend, grasp, lift, move above the target, descend, release, retreat. The
+grasp is top-down at the block's centroid; the block is turned on the way so its axes line up with the target
+frame's (a 1x2 block lies along the letter's x axis). The symbols x and y are grounded by the world through the
+grounding file's frame (letters: lb = 6.1 cm from the scene's ``letter_origin`` anchor).
+
+After the release the block must rest within ``tolerance`` of the target, else kind ``physical``.
+
+Offers:
+
+* :class:`Place` -- the skill (grounding-file options: ``frame``, ``approach_height``, ``clearance``)
+* :func:`top_down` -- a gripper pose pointing at the table at (x, y, z) with a yaw
+* :func:`symmetry` -- the yaw period of an object's shape (1x1 block: 90 degrees, 1x2: 180 degrees)
+* :func:`nearest_yaw` -- the yaw equivalent to one under a symmetry nearest to a preferred yaw
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from bt_meta.bt.failures import FailureKind
+from bt_meta.world.objects import matrix_to_pose, pose_to_matrix
+from bt_meta.world.skills.base import PhasedSkill, SkillAbort, rounded
+from bt_meta.world.skills.grasp import Grasp
+from bt_meta.world.skills.move_to import MoveTo
+
+__all__ = ["Place", "nearest_yaw", "symmetry", "top_down"]
+
+GRIPPER_YAW = math.pi
+"""Preferred world yaw of a top-down gripper (near Baxter's home orientation)."""
+
+
+def top_down(x: float, y: float, z: float, yaw: float) -> np.ndarray:
+    """A gripper pose pointing straight down (approach axis -z) at (x, y, z), turned by ``yaw``."""
+    return pose_to_matrix((x, y, z, math.pi, 0.0, yaw))
+
+
+def symmetry(model: Any) -> float:
+    shape = getattr(model, "shape", None)
+    if shape == "1x1":
+        return math.pi / 2.0
+    if shape == "1x2":
+        return math.pi
+    return 2.0 * math.pi
+
+
+def nearest_yaw(yaw: float, period: float, preferred: float) -> float:
+    k = round((preferred - yaw) / period)
+    return yaw + k * period
+
+
+def object_yaw(transform: np.ndarray) -> float:
+    return math.atan2(transform[1, 0], transform[0, 0])
+
+
+class Place(PhasedSkill):
+    """Pick ``block`` and put it down at a point of the grounding frame."""
+
+    name = "place"
+    spec: dict[str, Any] = {}
+
+    def __init__(self, world: Any, arm: str = "right", *, approach_height: float = 0.08, clearance: float = 0.002,
+                 tolerance: float = 0.01) -> None:
+        super().__init__(world, arm)
+        self.approach_height = approach_height
+        self.clearance = clearance
+        self.tolerance = tolerance
+        self.block = ""
+        self.goal: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def ground(self, args: tuple[str, ...]) -> None:
+        if len(args) != 3:
+            raise SkillAbort(FailureKind.INTERNAL, f"place takes (block, x, y), got {list(args)}")
+        block, x, y = args
+        frame = str(self.spec.get("frame", "table"))
+        goal = self.world.ground_cell(frame, x, y)
+        self.approach_height = float(self.spec.get("approach_height", self.approach_height))
+        self.begin(self.world.object_name(block), goal)
+
+    def begin(self, block: str, goal: tuple[float, float, float]) -> Place:
+        """Place ``block`` with its centroid at ``goal`` = (X, Y, yaw of the target frame) in the base frame."""
+        self.begin_ground()
+        if block not in self.world.sim.object_names():
+            raise SkillAbort(FailureKind.UNKNOWN_ENTITY, f"place: there is no block {block!r} in the world",
+                             {"object": block, "present": list(self.world.sim.object_names())})
+        self.block = block
+        self.goal = goal
+        self.info.update(block=block, goal=rounded(goal))
+        self.begin_phases()
+        return self
+
+    # -- the phases ---------------------------------------------------------------------------------------------
+
+    def phases(self) -> list[tuple[str, Any]]:
+        return [
+            ("approach", lambda: self._move(self._over_block(self.approach_height), "above " + self.block)),
+            ("descend", self._descend),
+            ("grasp", lambda: Grasp(self.world, self.arm).begin(self.block, release=False)),
+            ("lift", lambda: self._move(self._lifted(), "lift " + self.block)),
+            ("carry", lambda: self._move(self._at_goal(self.approach_height), "above the target")),
+            ("lower", lambda: self._move(self._at_goal(0.0), "down at the target")),
+            ("release", lambda: Grasp(self.world, self.arm).begin(self.block, release=True)),
+            ("retreat", lambda: self._move(self._retreat(), "retreat")),
+        ]
+
+    def _move(self, pose: np.ndarray, label: str) -> MoveTo:
+        return MoveTo(self.world, self.arm).begin(pose, label)
+
+    def _grasp_yaw(self) -> float:
+        transform = self.world.sim.object_transform(self.block)
+        model = self.world.sim.object_model(self.block)
+        return nearest_yaw(object_yaw(transform), symmetry(model), GRIPPER_YAW)
+
+    def _over_block(self, height: float) -> np.ndarray:
+        centre = self.world.sim.object_transform(self.block)[:3, 3]
+        top = self.world.object_top(self.block)
+        return top_down(centre[0], centre[1], top + height, self._grasp_yaw())
+
+    def _descend(self) -> MoveTo:
+        self.world.allow_hand(self.block, self.arm)
+        return self._move(self._over_block(0.004), "grasp " + self.block)
+
+    def _lifted(self) -> np.ndarray:
+        pose = self.world.sim.link_transform(self.world.end_effector(self.arm)).copy()
+        pose[2, 3] += self.approach_height
+        return pose
+
+    def _goal_block(self) -> np.ndarray:
+        """Where the block should end up: centroid at the goal, resting on the table, axes along the frame."""
+        sim = self.world.sim
+        model = sim.object_model(self.block)
+        current = sim.object_transform(self.block)
+        x, y, frame_yaw = self.goal
+        yaw = nearest_yaw(frame_yaw, symmetry(model), object_yaw(current))
+        z = sim.table.top_z + model.lowest_z(0.0, 0.0) + self.clearance
+        return pose_to_matrix((x, y, z, 0.0, 0.0, yaw))
+
+    def _at_goal(self, height: float) -> np.ndarray:
+        gripper = self._goal_block() @ np.linalg.inv(self.world.held_relative(self.arm))
+        gripper[2, 3] += height
+        return gripper
+
+    def _retreat(self) -> np.ndarray:
+        pose = self.world.sim.link_transform(self.world.end_effector(self.arm)).copy()
+        pose[2, 3] += self.approach_height
+        return pose
+
+    def finish(self) -> None:
+        sim = self.world.sim
+        self.world.allow_hand(self.block, self.arm, allowed=False)
+        final = sim.object_transform(self.block)
+        self.info["final_pose"] = rounded(matrix_to_pose(final))
+        error = float(np.linalg.norm(final[:2, 3] - np.asarray(self.goal[:2])))
+        self.info["placement_error"] = rounded(error, 5)
+        if error > self.tolerance:
+            raise SkillAbort(FailureKind.PHYSICAL,
+                             f"place: {self.block} came to rest {error * 100:.1f} cm from its target",
+                             {"object": self.block, "target": rounded(self.goal[:2]),
+                              "final_pose": self.info["final_pose"], "error": error})

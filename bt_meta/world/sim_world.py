@@ -65,8 +65,19 @@ def quiet_stdout() -> Iterator[None]:
             yield
     finally:
         sys.stdout.flush()
+        _flush_c_stdout()
         os.dup2(saved, fd)
         os.close(saved)
+
+
+def _flush_c_stdout() -> None:
+    """Flush the C library's stdout buffer (pybullet's printf output) while fd 1 still points at /dev/null."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError):  # pragma: no cover - no C library to flush
+        pass
 
 
 # --------------------------------------------------------------------------------------------------------------

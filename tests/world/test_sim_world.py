@@ -168,3 +168,20 @@ def test_grounding_errors_are_located(tmp_path):
         SimWorld(task_file.domain, problem, grounding, variant="sideways")
     with pytest.raises(ConfigError, match="no problem 'other'; problems: nominal, attach_only"):
         grounding.problem("other")
+
+
+@slow
+def test_make_world_hook_builds_a_sim_world_only_for_sim():
+    from bt_meta.world.sim_world import bt_meta_make_world
+
+    task_file = load_task_file(trees_dir() / "housing_insertion.yaml")
+    problem = task_file.problem("nominal")
+    assert bt_meta_make_world(name="fake", domain=task_file.domain, problem=problem, options={}) is None
+    with quiet_stdout():
+        world = bt_meta_make_world(name="sim", domain=task_file.domain, problem=problem,
+                                   options={"variant": "housing_upside_down", "seed": 3})
+    try:
+        assert isinstance(world, SimWorld) and world.variant == "housing_upside_down" and world.seed == 3
+        assert world.sim.object_pose("housing")[3] == pytest.approx(math.pi, abs=0.05)
+    finally:
+        world.close()

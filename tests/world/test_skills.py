@@ -78,7 +78,7 @@ def test_move_to_into_the_table_is_a_collision_naming_the_pair(fresh):
     assert skill.tick() == FAILURE
     failure = skill.failure
     assert failure.kind == "collision"
-    assert "table" in failure.evidence["pair"]
+    assert "table" in failure.evidence["pair"] and "table" in failure.evidence["objects"]
     assert any(link.startswith(("r_gripper", "right_")) for link in failure.evidence["pair"])
     assert "collides" in failure.message
 

@@ -129,6 +129,8 @@ class MoveTo(SimSkill):
             kind = result.kind or FailureKind.REACHABILITY.value
             evidence = dict(result.evidence)
             evidence["label"] = self.label
+            if "pair" in evidence:  # geometry names -> object names ("board~2" is a part of "board")
+                evidence["objects"] = [world.contact_object(name) for name in evidence["pair"]]
             raise SkillAbort(kind, f"move_to {self.label}: {result.message}", evidence)
         assert result.q is not None
         indices = world.kin.arm_indices(self.arm)
@@ -147,7 +149,8 @@ class MoveTo(SimSkill):
                     raise SkillAbort(
                         FailureKind.COLLISION,
                         f"move_to {self.label}: the joint-space path collides at {100 * (k + 1) // count}%: {contact}",
-                        {"pair": list(contact.pair), "collision_kind": contact.kind, "penetration": contact.penetration,
+                        {"pair": list(contact.pair), "objects": [world.contact_object(n) for n in contact.pair],
+                         "collision_kind": contact.kind, "penetration": contact.penetration,
                          "waypoint": k + 1, "waypoints": count, "target": self.info["target"]},
                     )
         self._waypoints = [q[indices] for q in waypoints]

@@ -169,6 +169,7 @@ class PrimitiveSkill:
         self.args: tuple[str, ...] = ()
         self.effects: tuple[list[Atom], list[Atom]] | None = None
         self.wall_time = 0.0
+        self._recorded = False
 
     @property
     def failure(self) -> SkillFailure | None:
@@ -187,7 +188,8 @@ class PrimitiveSkill:
             self.effects = effects or ([], [])
             if effects is not None:
                 self.world.apply_symbolic(*effects)
-        if status in (SUCCESS, FAILURE):
+        if status in (SUCCESS, FAILURE) and not self._recorded:
+            self._recorded = True
             self.world.executed.append(self.record())
         return status
 

@@ -1,0 +1,104 @@
+"""One look at the table from above: the image, its blocks and their grid-maps, and crops anywhere on demand.
+
+Offers:
+
+* :class:`TopView` -- an RGB(-D) top view with its projection, the detected :class:`~bt_meta.perception.hsv.Block`
+  list, one grid-map per block, and :meth:`TopView.grid_map_at` for a window anywhere (what the grid-map
+  expectation plugin compares a remembered crop with)
+* :func:`analyse` -- a :class:`TopView` of an image array (synthetic images, recorded frames)
+* :func:`capture` -- a :class:`TopView` from a :class:`bt_meta.world.camera.TopViewCamera` (or any camera with
+  ``capture()`` and the simulator's table)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from bt_meta.memory import GridMap
+from bt_meta.perception.gridmap import DEFAULT_SPEC, GridSpec, block_grid_maps, grid_map_at
+from bt_meta.perception.hsv import (
+    DEFAULT_THRESHOLDS,
+    Block,
+    HSVThresholds,
+    PlaneProjection,
+    detect_blocks,
+    nearest_block,
+)
+
+__all__ = ["TopView", "analyse", "capture"]
+
+
+@dataclass(eq=False)
+class TopView:
+    """A top view and what perception made of it. ``projection`` maps onto the table top; ``names`` (parallel to
+    ``blocks``) are the world objects the blocks were matched to, when known."""
+
+    rgb: np.ndarray
+    projection: PlaneProjection
+    blocks: list[Block]
+    grid_maps: list[GridMap]
+    depth: np.ndarray | None = None
+    spec: GridSpec = DEFAULT_SPEC
+    thresholds: HSVThresholds = DEFAULT_THRESHOLDS
+    names: list[str | None] = field(default_factory=list)
+
+    def grid_map_at(self, centre: Sequence[float], *, z: float | None = None, object_name: str | None = None,
+                    colour: str | None = None, shape: str | None = None) -> GridMap:
+        """The grid-map of the window around table point ``centre`` on the plane at height ``z`` (default: the
+        blocks' top surface when any block was seen, else the table top)."""
+        if z is None:
+            z = float(np.median([b.top_z for b in self.blocks])) if self.blocks else self.projection.plane_z
+        return grid_map_at(self.rgb, self.projection.at_height(z), centre, spec=self.spec,
+                           thresholds=self.thresholds, object_name=object_name, colour=colour, shape=shape)
+
+    def block_near(self, point: Sequence[float], radius: float) -> Block | None:
+        return nearest_block(self.blocks, point, radius)
+
+    def name_of(self, block: Block) -> str | None:
+        return self.names[block.index] if block.index < len(self.names) else None
+
+    def describe(self) -> list[dict[str, Any]]:
+        """The blocks as JSON-able dicts (with ``name`` when matched)."""
+        out = []
+        for block in self.blocks:
+            entry = block.as_dict()
+            entry["name"] = self.name_of(block)
+            out.append(entry)
+        return out
+
+
+def analyse(
+    rgb: np.ndarray,
+    projection: PlaneProjection,
+    *,
+    depth: np.ndarray | None = None,
+    thresholds: HSVThresholds = DEFAULT_THRESHOLDS,
+    spec: GridSpec = DEFAULT_SPEC,
+    namer: Any = None,
+) -> TopView:
+    """Detect the blocks of ``rgb`` and build their grid-maps. ``namer(block) -> str | None`` names blocks
+    (e.g. after the simulator's objects); unnamed maps are called ``b<index>``."""
+    blocks = detect_blocks(rgb, projection, depth=depth, thresholds=thresholds)
+    names = [namer(block) if namer is not None else None for block in blocks]
+    maps = block_grid_maps(rgb, projection, blocks, spec=spec, thresholds=thresholds,
+                           names=[n or f"b{b.index}" for n, b in zip(names, blocks, strict=True)])
+    return TopView(rgb, projection, blocks, maps, depth, spec, thresholds, names)
+
+
+def capture(
+    camera: Any,
+    *,
+    thresholds: HSVThresholds = DEFAULT_THRESHOLDS,
+    spec: GridSpec = DEFAULT_SPEC,
+    use_depth: bool = True,
+    namer: Any = None,
+) -> TopView:
+    """Render one frame of ``camera`` (without segmentation: perception does not peek) and analyse it."""
+    image = camera.capture(depth=use_depth, segmentation=False)
+    projection = PlaneProjection.from_image(image, camera.sim.table.top_z)
+    return analyse(image.rgb, projection, depth=image.depth if use_depth else None, thresholds=thresholds,
+                   spec=spec, namer=namer)

@@ -185,3 +185,23 @@ def test_make_world_hook_builds_a_sim_world_only_for_sim():
         assert world.sim.object_pose("housing")[3] == pytest.approx(math.pi, abs=0.05)
     finally:
         world.close()
+
+
+@slow
+def test_same_seed_same_run():
+    """Two fresh simulators, same seed: the same ticks and bit-identical final poses."""
+    outcomes = []
+    for _ in range(2):
+        with quiet_stdout():
+            world = SimWorld.from_task_file(trees_dir() / "magnetic_attach.yaml", "nominal",
+                                            variant="active_on_side", seed=4)
+        try:
+            clear_blackboard()
+            harness = TreeHarness.from_file(trees_dir() / "magnetic_attach.yaml", "nominal", world=world)
+            status = harness.tick_until("done", max_ticks=500)
+            harness.close()
+            outcomes.append((status, harness.run.tick_count, [r["ticks"] for r in world.executed],
+                             {name: world.sim.object_pose(name) for name in world.sim.object_names()}))
+        finally:
+            world.close()
+    assert outcomes[0] == outcomes[1]

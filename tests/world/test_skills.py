@@ -136,3 +136,19 @@ def test_move_to_symbol_grounding(fresh):
     move = MoveTo(fresh)
     move.start(["joint_above"])
     assert move.record()["target"][:3] == pytest.approx([0.62, -0.10, 0.006])
+
+
+def test_object_lost_on_the_way_is_physical(fresh):
+    sim = fresh.sim
+    x, y = sim.object_pose("active")[:2]
+    top = fresh.object_top("active")
+    assert run(MoveTo(fresh).begin(down(x, y, top + 0.004)))[0] == SUCCESS
+    assert run(Grasp(fresh).begin("active", release=False))[0] == SUCCESS
+    move = MoveTo(fresh).begin(down(x, y + 0.1, top + 0.1), "carry")
+    assert move.tick() == RUNNING
+    fresh.release("right")  # the part slips out behind the skill's back
+    status, _ = run(move)
+    assert status == FAILURE and move.failure.kind == "physical"
+    assert "lost" in move.failure.message and move.failure.evidence["held"] is None
+    sim.move_object("active", sim.resting_pose(sim.object_model("active"), (x, y, 0, 0, 0, 0)))
+    fresh.advance(2)

@@ -255,7 +255,7 @@ class SimWorld:
             from bt_meta.world.sim import Simulation
 
             with quiet_stdout():
-                sim = Simulation(gui=gui, seed=seed)
+                sim = Simulation(gui=gui, seed=seed, visuals="full" if gui else "light")
         else:
             sim.clear_objects()
             for arm in sim.robot.arms:

@@ -182,9 +182,34 @@ def _v2(connection: sqlite3.Connection) -> None:
     )
 
 
+def _v3(connection: sqlite3.Connection) -> None:
+    """Learned method refinements (bt_meta.meta.refinements): a repaired plan saved as a method of its task."""
+    _run(
+        connection,
+        (
+            """CREATE TABLE refinements (
+                 id INTEGER PRIMARY KEY,
+                 created TEXT NOT NULL,
+                 domain TEXT NOT NULL,
+                 task TEXT NOT NULL,
+                 method TEXT NOT NULL UNIQUE,
+                 precondition TEXT NOT NULL,
+                 subtasks TEXT NOT NULL,
+                 poses TEXT NOT NULL,
+                 tolerance TEXT NOT NULL,
+                 problem TEXT,
+                 variant TEXT,
+                 repair TEXT NOT NULL
+               )""",
+            "CREATE INDEX refinements_task ON refinements (domain, task, id)",
+        ),
+    )
+
+
 MIGRATIONS: tuple[Migration, ...] = (
     Migration(1, "episodes, steps, object states, grid-maps, expectations", _v1),
     Migration(2, "steps.task_index (backfilled), views p_a and e_db", _v2),
+    Migration(3, "refinements: learned method refinements", _v3),
 )
 
 SCHEMA_VERSION = MIGRATIONS[-1].version

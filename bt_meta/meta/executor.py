@@ -1,0 +1,344 @@
+"""Runs a plan as a monitored behaviour tree on a world, and repairs it when it fails.
+
+The loop (``docs/meta-reasoning.md``):
+
+1. plan the problem (learned refinements first, when a :class:`~bt_meta.meta.refinements.RefinementStore` is
+   given) and keep the plan as a :class:`~bt_meta.meta.proposals.PlanState`;
+2. compile the steps not yet run into a py_trees tree (a Monitor around every primitive) and tick it through the
+   :class:`~bt_meta.testing.TreeHarness` in one :class:`~bt_meta.bt.context.RunContext` for the whole run;
+3. on FAILURE, or when the tree succeeds but verification fails (the problem's goal facts must hold in the world,
+   plus any ``verifiers``), the :class:`~bt_meta.meta.reasoner.MetaReasoner` diagnoses and ranks proposals; the
+   first that applies becomes the new plan state and execution continues from its cursor (the executed prefix is
+   never run again unless a proposal backtracks into it);
+4. stop on success, or when the reasoner stops (budgets, a recurring motion limit, nothing proposed);
+5. on a success that needed repairs, save the repaired plan as a method refinement.
+
+Offers:
+
+* :class:`MetaExecutor` -- :meth:`~MetaExecutor.run` returns a :class:`RunReport`
+* :class:`RunReport` -- status, attempts, failures, repairs, reported failures, final plan, time, ticks
+* :func:`goal_verifier` -- the default verification: the problem's goal facts hold in the world's symbolic state
+* :func:`run_task_file` -- load a task file, build the fake or a plugin's world, run with repairs
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from py_trees.common import Status
+
+from bt_meta.bt.compiler import compile_plan
+from bt_meta.bt.context import RunContext
+from bt_meta.bt.domain_nodes import domain_registry
+from bt_meta.bt.failures import Failure, FailureKind
+from bt_meta.errors import BtMetaError
+from bt_meta.htn.state import atom_text
+from bt_meta.meta.proposals import PlanState, ProposalError, apply_proposal
+from bt_meta.meta.reasoner import Attempt, Diagnosis, Limits, MetaReasoner
+
+__all__ = ["MetaExecutor", "RunReport", "Verifier", "goal_verifier", "run_task_file"]
+
+log = logging.getLogger("bt_meta.meta")
+
+Verifier = Callable[[Any, RunContext, PlanState], "Failure | None"]
+"""``verifier(world, run, plan_state)`` -> a ``verification`` :class:`Failure`, or ``None`` when verified."""
+
+
+def goal_verifier(world: Any, run: RunContext, plan_state: PlanState) -> Failure | None:
+    """The problem's goal facts must hold in the world's (true) symbolic state after the plan."""
+    goal = list(getattr(run.problem, "goal", None) or [])
+    if not goal:
+        return None
+    truth = world.symbolic_state()
+    missing = [atom for atom in goal if atom not in truth]
+    if not missing:
+        return None
+    steps = plan_state.steps()
+    last = steps[-1] if steps else None
+    return Failure(kind=FailureKind.VERIFICATION,
+                   message="every step succeeded but the goal does not hold: missing "
+                           + ", ".join(atom_text(a) for a in missing),
+                   step=None if last is None else last.step, node_id=None if last is None else last.id,
+                   action=None if last is None else last.task[0],
+                   args=() if last is None else tuple(last.task[1:]),
+                   evidence={"missing": [atom_text(a) for a in missing], "verifier": "goal"})
+
+
+@dataclass
+class RunReport:
+    """The outcome of one repaired run."""
+
+    status: str
+    """``"success"``, ``"failed"`` (not repaired) or ``"no_plan"``."""
+    problem: str | None
+    attempts: list[Attempt] = field(default_factory=list)
+    failures: list[dict[str, Any]] = field(default_factory=list)
+    reported: list[dict[str, Any]] = field(default_factory=list)
+    """Failures the run ended with, not repaired; collision and reachability carry their evidence."""
+    plan: list[list[str]] = field(default_factory=list)
+    initial_plan: list[list[str]] = field(default_factory=list)
+    executed: list[dict[str, Any]] = field(default_factory=list)
+    stop_reason: str = ""
+    seconds: float = 0.0
+    ticks: int = 0
+    segments: int = 0
+    refinements_used: list[str] = field(default_factory=list)
+    refinement_saved: dict[str, Any] | None = None
+    message: str = ""
+
+    @property
+    def repairs(self) -> list[dict[str, Any]]:
+        """The applied proposals, in order."""
+        return [attempt.proposal for attempt in self.attempts]
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "success"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "status": self.status, "problem": self.problem, "stop_reason": self.stop_reason,
+            "message": self.message, "seconds": round(self.seconds, 6), "ticks": self.ticks,
+            "segments": self.segments, "attempts": [a.to_dict() for a in self.attempts], "repairs": self.repairs,
+            "failures": self.failures, "reported": self.reported, "initial_plan": self.initial_plan,
+            "plan": self.plan, "executed": self.executed, "refinements_used": self.refinements_used,
+            "refinement_saved": self.refinement_saved,
+        }
+
+
+class MetaExecutor:
+    """Plans, runs, diagnoses and repairs one problem on one world; see the module docstring.
+
+    ``refinements`` (a :class:`~bt_meta.meta.refinements.RefinementStore`) makes learned refinements of the
+    problem's tasks the first methods tried, and receives the repaired plan of a successful repaired run
+    (``save_refinements=False`` to only use them). ``verifiers`` replace the default goal check.
+    """
+
+    def __init__(
+        self,
+        domain: Any,
+        problem: Any,
+        world: Any,
+        plugins: Any,
+        *,
+        limits: Limits | None = None,
+        reasoner: MetaReasoner | None = None,
+        refinements: Any = None,
+        save_refinements: bool = True,
+        verifiers: Iterable[Verifier] | None = None,
+        task_file: Any = None,
+        variant: str | None = None,
+        plan_seconds: float | None = None,
+    ) -> None:
+        self.base_domain = domain
+        self.problem = problem
+        self.world = world
+        self.plugins = plugins
+        self.limits = limits or (reasoner.limits if reasoner is not None else Limits())
+        self.reasoner = reasoner or MetaReasoner(plugins, self.limits)
+        self.refinements = refinements
+        self.save_refinements = save_refinements
+        self.verifiers = list(verifiers) if verifiers is not None else [goal_verifier]
+        self.task_file = task_file
+        self.variant = variant
+        self.plan_seconds = plan_seconds
+
+    # -- the loop ------------------------------------------------------------------------------------------------
+
+    def run(self) -> RunReport:
+        from bt_meta.htn import plan
+
+        started = time.perf_counter()
+        name = getattr(self.problem, "name", None)
+        report = RunReport(status="failed", problem=name)
+        domain = self.base_domain
+        added: list[str] = []
+        if self.refinements is not None:
+            domain, added = self.refinements.apply(domain, self.problem)
+        run = RunContext(self.world, self.plugins, domain=domain, problem=self.problem, task_file=self.task_file)
+        run.install()  # external predicates (pose tolerance of refinements) read the world through the run
+        start_objects = _objects(self.world)
+        run.emit("run_start", task_file=getattr(self.task_file, "path", None), problem=name,
+                 state=[atom_text(a) for a in sorted(run.state)])
+        external = self.plugins.external_predicate
+        plan_budget = self.plan_seconds if self.plan_seconds is not None else self.limits.max_seconds
+        result = plan(domain, self.problem, external=external, max_seconds=plan_budget)
+        if result.status != "success" or result.tree is None:
+            report.status, report.message = "no_plan", f"{result.status}: {result.message}"
+            report.stop_reason = "no plan for the problem"
+            return self._finish(report, run, started)
+        plan_state = PlanState(result.tree)
+        report.refinements_used = [n.method for n in result.tree.walk() if n.method in added]
+        report.initial_plan = [[a, *args] for a, args in plan_state.full_plan()]
+        registry = domain_registry(domain, self.plugins)
+        tried: set[str] = set()
+        while True:
+            failures, status = self._segment(run, plan_state, registry, domain, report, started)
+            if status is Status.SUCCESS:
+                plan_state = PlanState(plan_state.tree, len(plan_state.steps()), plan_state.committed)
+                failures = [f for f in (v(self.world, run, plan_state) for v in self.verifiers) if f is not None]
+                for failure in failures:
+                    run.record_failure(failure)
+                if not failures:
+                    report.status = "success"
+                    if report.attempts:
+                        report.attempts[-1].outcome = "repaired"
+                    break
+            if report.attempts and report.attempts[-1].outcome == "pending":
+                report.attempts[-1].outcome = "failed_again"
+            if not failures:
+                failures = [Failure(kind=FailureKind.INTERNAL, message="the tree failed without a failure record",
+                                    step=plan_state.cursor)]
+                run.record_failure(failures[0])
+            diagnosis = self.reasoner.diagnose(failures, plan_state, run, report.attempts)
+            decision = self.reasoner.decide(diagnosis, run, plan_state, report.attempts, tried, started)
+            if decision.stop:
+                report.stop_reason = decision.reason
+                report.reported.append(self.reasoner.report_entry(diagnosis))
+                run.emit("repair", outcome="stopped", reason=decision.reason, diagnosis=diagnosis.to_dict(),
+                         dropped=decision.dropped)
+                break
+            applied = self._apply(decision.proposals, diagnosis, plan_state, run, domain, report, tried, started)
+            if applied is None:
+                report.stop_reason = (f"no proposal for {diagnosis.kind.value} at step {diagnosis.step} could be "
+                                      "applied")
+                report.reported.append(self.reasoner.report_entry(diagnosis))
+                run.emit("repair", outcome="stopped", reason=report.stop_reason, diagnosis=diagnosis.to_dict())
+                break
+            plan_state = applied
+        report.plan = [[a, *args] for a, args in plan_state.full_plan()]
+        if report.status == "success" and report.attempts and self.refinements is not None and self.save_refinements:
+            report.refinement_saved = self._save_refinement(domain, report, start_objects)
+        return self._finish(report, run, started)
+
+    def _segment(self, run: RunContext, plan_state: PlanState, registry: Any, domain: Any, report: RunReport,
+                 started: float) -> tuple[list[Failure], Status]:
+        """Tick the steps from the cursor on until the tree finishes; returns the new failures and the status."""
+        from bt_meta.testing import HarnessError, TreeHarness
+
+        report.segments += 1
+        first = len(run.failures)
+        remaining = plan_state.remaining_tree()
+        steps = {n.step: n for n in plan_state.steps()}
+        if not remaining.roots:
+            return [], Status.SUCCESS
+        root = compile_plan(remaining, domain, registry=registry, name=f"plan {report.problem} segment "
+                                                                           f"{report.segments}")
+        harness = TreeHarness(root, run)
+        ticks_left = self.limits.max_ticks - report.ticks
+        try:
+            status = harness.tick_until("done", max_ticks=max(ticks_left, 1))
+        except HarnessError:
+            status = Status.FAILURE
+            run.record_failure(Failure(kind=FailureKind.INTERNAL, step=None,
+                                       message=f"tick budget spent ({self.limits.max_ticks} ticks)",
+                                       evidence={"ticks": report.ticks + len(harness.history)}))
+        report.ticks += len(harness.history)
+        failures = run.failures[first:]
+        failed_step = next((f.step for f in reversed(failures) if f.step is not None), None)
+        last = len(steps) if status is Status.SUCCESS else (failed_step if failed_step is not None else
+                                                            plan_state.cursor)
+        for step in range(plan_state.cursor, min(last + 1, len(steps))):
+            node = steps[step]
+            ok = status is Status.SUCCESS or step < last
+            report.executed.append({"segment": report.segments, "step": step, "action": node.task[0],
+                                    "args": list(node.task[1:]), "node_id": node.id,
+                                    "status": "SUCCESS" if ok else "FAILURE"})
+        return failures, status
+
+    def _apply(self, proposals: list[Any], diagnosis: Diagnosis, plan_state: PlanState, run: RunContext,
+               domain: Any, report: RunReport, tried: set[str], started: float) -> PlanState | None:
+        # Repairs start from what the world is, not from what the failed run believed.
+        symbolic = getattr(self.world, "symbolic_state", None)
+        if symbolic is not None:
+            run.state = symbolic()
+        for proposal in proposals:
+            key = self.reasoner.key(proposal, diagnosis)
+            tried.add(key)
+            attempt_started = time.perf_counter()
+            remaining = max(self.limits.max_seconds - (attempt_started - started), 0.001)
+            try:
+                new_state, change = apply_proposal(
+                    proposal, plan_state, failed_step=diagnosis.step, failed_node=diagnosis.node_id,
+                    domain=domain, problem=self.problem, state=run.state, external=self.plugins.external_predicate,
+                    max_seconds=remaining)
+            except ProposalError as error:
+                log.info("meta: %s proposal of %s not applicable: %s", proposal.action, proposal.plugin, error)
+                run.emit("repair", outcome="not_applicable", proposal=proposal.to_dict(), reason=str(error))
+                continue
+            attempt = Attempt(number=len(report.attempts) + 1, failure=diagnosis.failure.to_dict(),
+                              kind=diagnosis.kind.value, proposal=proposal.to_dict(), change=change,
+                              step=diagnosis.step, seconds=round(time.perf_counter() - attempt_started, 6))
+            attempt.failure.pop("evidence", None)
+            attempt.failure["evidence_keys"] = sorted(diagnosis.failure.evidence)
+            report.attempts.append(attempt)
+            log.info("meta: attempt %d: %s (%s, score %.2f, %s) -> %s", attempt.number, proposal.action,
+                     proposal.plugin, proposal.score, proposal.description, change)
+            run.emit("repair", outcome="applied", attempt=attempt.to_dict())
+            return new_state
+        return None
+
+    def _save_refinement(self, domain: Any, report: RunReport, start_objects: dict[str, Any]) -> dict[str, Any] | None:
+        from bt_meta.meta.refinements import RefinementError
+
+        try:
+            saved = self.refinements.save_repair(self.base_domain, self.problem, report, start_objects,
+                                                 variant=self.variant)
+        except RefinementError as error:
+            log.info("meta: repaired plan not saved as a refinement: %s", error)
+            return {"saved": False, "reason": str(error)}
+        return None if saved is None else saved.to_dict()
+
+    def _finish(self, report: RunReport, run: RunContext, started: float) -> RunReport:
+        report.failures = [f.to_dict() for f in run.failures]
+        report.seconds = time.perf_counter() - started
+        run.emit("run_end", status=report.status, ticks=report.ticks)
+        log.info("meta: run %s %s after %d attempt(s) in %.3f s%s", report.problem, report.status,
+                 len(report.attempts), report.seconds, f" ({report.stop_reason})" if report.stop_reason else "")
+        return report
+
+
+def _objects(world: Any) -> dict[str, Any]:
+    observe = getattr(world, "observe", None)
+    if observe is None:
+        return {}
+    try:
+        objects = observe().get("objects") or {}
+    except Exception as error:  # a world that cannot observe still runs; refinements then carry no poses
+        log.info("meta: the world's objects could not be observed: %s", error)
+        return {}
+    return dict(objects)
+
+
+def run_task_file(
+    path: str | Path,
+    problem: str | None = None,
+    *,
+    plugins: Any = None,
+    world: Any = "fake",
+    faults: Iterable[Any] = (),
+    **options: Any,
+) -> RunReport:
+    """Load ``path``, make the world (``"fake"`` with scripted ``faults``, another plugin's world by name, or a
+    World object) and run ``problem`` with repairs; ``options`` go to :class:`MetaExecutor`."""
+    from bt_meta.htn import load_task_file
+    from bt_meta.plugins import create_plugin_host
+
+    task_file = load_task_file(path)
+    chosen = task_file.problem(problem)
+    if plugins is None:
+        plugins = create_plugin_host(project_file=path)
+    if isinstance(world, str):
+        made = plugins.call("bt_meta_make_world", name=world, domain=task_file.domain, problem=chosen,
+                            options={"faults": list(faults)})
+        if made.errors:
+            raise made.errors[0].error
+        if not made.results:
+            raise BtMetaError(f"no plugin provides a world named {world!r}")
+        world = made.first
+    return MetaExecutor(task_file.domain, chosen, world, plugins, task_file=task_file, **options).run()

@@ -1,0 +1,340 @@
+"""Learned method refinements: a successfully repaired plan kept as a new method of its task (section 7.4).
+
+A refinement is a ground method ``task -> [the repaired primitives]`` whose precondition is sub-symbolic: every
+object of the task and plan that the world reported a pose for must start within a tolerance of the pose it had
+in the repaired run, written as the external predicate ``pose_within(obj, x, y, z, roll, pitch, yaw, pos_tol,
+ang_tol)`` (evaluated by the plugin ``bt_meta_plugins.refinement_predicates``). Refinements live in the episodic
+memory file (table ``refinements``, schema v3); the next run of the same variant plans with them first, so it
+succeeds with zero repair attempts; a run whose objects are elsewhere fails the pose check and plans as before.
+
+Offers:
+
+* :class:`Refinement` -- one stored refinement; :meth:`Refinement.to_method` builds the HTN method
+* :class:`RefinementStore` -- :meth:`~RefinementStore.open` a memory file, :meth:`~RefinementStore.save_repair`,
+  :meth:`~RefinementStore.add`, :meth:`~RefinementStore.list`, :meth:`~RefinementStore.apply` (a domain copy
+  with the refinements first), :meth:`~RefinementStore.export_yaml`
+* :func:`with_refinements` -- a copy of a domain with refinements added as its first methods
+* :func:`domain_with_pose_predicate` -- a copy of a domain that declares ``pose_within``
+* :func:`task_file_yaml` -- a domain (and problems) written back in the task-file format, refinements included;
+  ``bt_meta.htn.load_task_text`` loads it
+* :data:`POSE_PREDICATE`, :data:`POSE_ARITY`, :data:`DEFAULT_TOLERANCE`
+* :class:`RefinementError` -- a repaired run that cannot become a refinement, or a broken stored one
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import sqlite3
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from bt_meta.errors import BtMetaError
+from bt_meta.htn.conditions import DomainContext, template_text
+from bt_meta.htn.state import atom_text
+
+__all__ = [
+    "DEFAULT_TOLERANCE",
+    "POSE_ARITY",
+    "POSE_PREDICATE",
+    "Refinement",
+    "RefinementError",
+    "RefinementStore",
+    "domain_with_pose_predicate",
+    "pose_of",
+    "task_file_yaml",
+    "with_refinements",
+]
+
+POSE_PREDICATE = "pose_within"
+POSE_ARITY = 9
+DEFAULT_TOLERANCE = {"position": 0.02, "angle": 0.1}
+"""Metres and radians: a refinement applies when every object starts this close to its recorded pose."""
+
+
+class RefinementError(BtMetaError):
+    """A repaired run that cannot be saved as a refinement, or a stored refinement that no longer fits its domain."""
+
+
+def _number(value: float) -> str:
+    text = f"{float(value):.6g}"
+    return "0" if text in ("-0", "0") else text
+
+
+def pose_of(state: Any) -> list[float] | None:
+    """The 6-vector pose of an object state: a dict with ``"pose"``, an object with ``.pose``, or a sequence."""
+    pose = state.get("pose") if isinstance(state, dict) else getattr(state, "pose", state)
+    try:
+        values = [float(v) for v in pose]
+    except (TypeError, ValueError):
+        return None
+    return values if len(values) == 6 and all(math.isfinite(v) for v in values) else None
+
+
+@dataclass
+class Refinement:
+    """One learned refinement; ``subtasks`` are ground primitive calls in the task-file syntax."""
+
+    domain: str
+    task: str
+    method: str
+    precondition: str
+    subtasks: list[str]
+    poses: dict[str, list[float]] = field(default_factory=dict)
+    tolerance: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_TOLERANCE))
+    problem: str | None = None
+    variant: str | None = None
+    repair: dict[str, Any] = field(default_factory=dict)
+    id: int | None = None
+    created: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def to_method(self, domain: Any) -> Any:
+        """The HTN method (checked against ``domain``, which must declare ``pose_within`` when poses are used)."""
+        from bt_meta.htn import method_from_text
+
+        try:
+            return method_from_text(domain, name=self.method, task=self.task, precondition=self.precondition,
+                                    subtasks=self.subtasks)
+        except BtMetaError as error:
+            raise RefinementError(f"refinement {self.method} does not fit domain {self.domain}: {error}") from None
+
+
+def pose_precondition(poses: dict[str, list[float]], tolerance: dict[str, float]) -> str:
+    if not poses:
+        return "true"
+    position, angle = _number(tolerance["position"]), _number(tolerance["angle"])
+    return " and ".join(f"{POSE_PREDICATE}({name}, {', '.join(_number(v) for v in pose)}, {position}, {angle})"
+                        for name, pose in sorted(poses.items()))
+
+
+def domain_with_pose_predicate(domain: Any) -> Any:
+    """A shallow copy of ``domain`` that declares the external predicate ``pose_within`` (the original is kept)."""
+    if POSE_PREDICATE in domain.external:
+        return dataclasses.replace(domain, methods=list(domain.methods), methods_by_task={})
+    if POSE_PREDICATE in domain.context.arities:
+        raise RefinementError(f"domain {domain.name} already uses {POSE_PREDICATE!r} for something else")
+    context = DomainContext(arities={**domain.context.arities, POSE_PREDICATE: POSE_ARITY},
+                            derived=set(domain.context.derived),
+                            external={*domain.context.external, POSE_PREDICATE}, axioms=domain.context.axioms)
+    external = {**domain.external, POSE_PREDICATE: ["object"] * POSE_ARITY}
+    return dataclasses.replace(domain, external=external, context=context, methods=list(domain.methods),
+                               methods_by_task={})
+
+
+def with_refinements(domain: Any, refinements: Iterable[Refinement]) -> tuple[Any, list[str]]:
+    """A copy of ``domain`` whose first methods are ``refinements`` (in the order given); returns the copy and the
+    names of the methods added (refinements already in the domain are skipped)."""
+    refinements = list(refinements)
+    copy = domain_with_pose_predicate(domain) if refinements else domain
+    added: list[str] = []
+    for refinement in reversed(refinements):  # add_method(first=True) puts each in front: keep the given order
+        if any(m.name == refinement.method for m in copy.methods):
+            continue
+        copy.add_method(refinement.to_method(copy), first=True)
+        added.append(refinement.method)
+    return copy, list(reversed(added))
+
+
+class RefinementStore:
+    """The refinements of one memory file. Use :meth:`open`; close it (or use ``with``)."""
+
+    def __init__(self, connection: sqlite3.Connection, path: Path, readonly: bool,
+                 tolerance: dict[str, float] | None = None) -> None:
+        self._connection = connection
+        self.path = path
+        self.readonly = readonly
+        self.tolerance = dict(tolerance or DEFAULT_TOLERANCE)
+
+    @classmethod
+    def open(cls, path: str | Path, *, readonly: bool = False,
+             tolerance: dict[str, float] | None = None) -> RefinementStore:
+        """Open the memory file at ``path`` (created and migrated unless ``readonly``; errors name the path)."""
+        from bt_meta.memory import EpisodicMemory, MemoryStoreError
+
+        memory = EpisodicMemory.open(path, readonly=readonly)  # checks, creates and migrates the file
+        resolved = memory.path
+        memory.close()
+        try:
+            if readonly:
+                connection = sqlite3.connect(f"{resolved.as_uri()}?mode=ro", uri=True, isolation_level=None,
+                                             timeout=10)
+            else:
+                connection = sqlite3.connect(str(resolved), isolation_level=None, timeout=10)
+        except sqlite3.Error as error:
+            raise MemoryStoreError(resolved, f"cannot open: {error}") from None
+        return cls(connection, resolved, readonly, tolerance)
+
+    def close(self) -> None:
+        self._connection.close()
+
+    def __enter__(self) -> RefinementStore:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def _query(self, sql: str, params: Sequence[Any] = ()) -> list[tuple[Any, ...]]:
+        from bt_meta.memory import MemoryStoreError
+
+        try:
+            return self._connection.execute(sql, params).fetchall()
+        except sqlite3.Error as error:
+            raise MemoryStoreError(self.path, f"refinement query failed: {error}") from None
+
+    # -- writing -------------------------------------------------------------------------------------------------
+
+    def add(self, refinement: Refinement) -> Refinement:
+        """Store ``refinement`` (its ``id`` and ``created`` are filled in); a method name taken is an error."""
+        from bt_meta.memory import MemoryStoreError
+
+        if self.readonly:
+            raise MemoryStoreError(self.path, "opened read-only; cannot save a refinement")
+        refinement.created = refinement.created or datetime.now(timezone.utc).isoformat(timespec="seconds")
+        try:
+            cursor = self._connection.execute(
+                "INSERT INTO refinements (created, domain, task, method, precondition, subtasks, poses, tolerance,"
+                " problem, variant, repair) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (refinement.created, refinement.domain, refinement.task, refinement.method, refinement.precondition,
+                 json.dumps(refinement.subtasks), json.dumps(refinement.poses), json.dumps(refinement.tolerance),
+                 refinement.problem, refinement.variant, json.dumps(refinement.repair, default=str)))
+        except sqlite3.IntegrityError:
+            raise RefinementError(f"a refinement named {refinement.method} is already stored in {self.path}") from None
+        except sqlite3.Error as error:
+            raise MemoryStoreError(self.path, f"cannot save the refinement: {error}") from None
+        refinement.id = int(cursor.lastrowid or 0)
+        return refinement
+
+    def save_repair(self, domain: Any, problem: Any, report: Any, start_objects: dict[str, Any],
+                    variant: str | None = None) -> Refinement:
+        """Turn a successful repaired run (``report``, a :class:`~bt_meta.meta.executor.RunReport`) into a
+        refinement of the problem's task and store it; the objects' starting poses become its precondition."""
+        tasks = list(getattr(problem, "tasks", None) or [])
+        if len(tasks) != 1:
+            raise RefinementError(f"the problem has {len(tasks)} root tasks; a refinement refines exactly one")
+        task = tuple(tasks[0])
+        if task[0] not in domain.tasks:
+            raise RefinementError(f"the root task {task[0]} is a primitive: there is no method to refine")
+        if report.plan == report.initial_plan:
+            raise RefinementError("the repairs did not change the plan (retries only): nothing new to keep")
+        subtasks = [atom_text(tuple(step)) for step in report.plan]
+        mentioned = {str(a) for a in task[1:]} | {str(a) for step in report.plan for a in step[1:]}
+        poses = {name: pose for name in sorted(mentioned)
+                 if name in start_objects and (pose := pose_of(start_objects[name])) is not None}
+        digest = hashlib.sha1(json.dumps([subtasks, poses], sort_keys=True).encode()).hexdigest()[:8]
+        method = f"refined_{task[0]}_{digest}"
+        existing = [r for r in self.list(domain=domain.name) if r.method == method]
+        if existing:
+            return existing[0]
+        refinement = Refinement(
+            domain=domain.name, task=atom_text(task), method=method,
+            precondition=pose_precondition(poses, self.tolerance), subtasks=subtasks, poses=poses,
+            tolerance=dict(self.tolerance), problem=getattr(problem, "name", None), variant=variant,
+            repair={"attempts": len(report.attempts), "kinds": [a.kind for a in report.attempts],
+                    "proposals": [{"action": a.proposal.get("action"), "plugin": a.proposal.get("plugin"),
+                                   "change": a.change} for a in report.attempts]})
+        refinement.to_method(domain_with_pose_predicate(domain))  # it must load before it is stored
+        return self.add(refinement)
+
+    # -- reading -------------------------------------------------------------------------------------------------
+
+    def list(self, *, domain: str | None = None, task: str | None = None) -> list[Refinement]:
+        """Stored refinements, newest first (the order they are tried in)."""
+        where, params = [], []
+        if domain is not None:
+            where.append("domain = ?")
+            params.append(domain)
+        if task is not None:
+            where.append("task = ?")
+            params.append(task)
+        sql = ("SELECT id, created, domain, task, method, precondition, subtasks, poses, tolerance, problem, variant,"
+               " repair FROM refinements" + (" WHERE " + " AND ".join(where) if where else "") + " ORDER BY id DESC")
+        refinements = []
+        for row in self._query(sql, params):
+            refinements.append(Refinement(
+                id=row[0], created=row[1], domain=row[2], task=row[3], method=row[4], precondition=row[5],
+                subtasks=json.loads(row[6]), poses=json.loads(row[7]), tolerance=json.loads(row[8]),
+                problem=row[9], variant=row[10], repair=json.loads(row[11])))
+        return refinements
+
+    def apply(self, domain: Any, problem: Any = None) -> tuple[Any, list[str]]:
+        """A copy of ``domain`` with this memory's refinements of it as its first methods (newest first), and the
+        names added; refinements of tasks the domain no longer has are skipped."""
+        fitting = [r for r in self.list(domain=domain.name) if r.task.split("(")[0] in domain.tasks]
+        if not fitting:
+            return domain, []
+        return with_refinements(domain, fitting)
+
+    def export_yaml(self, domain: Any, problems: Iterable[Any] = ()) -> str:
+        """The task file of ``domain`` with this memory's refinements of it first, plus ``problems``."""
+        refined, _ = self.apply(domain)
+        return task_file_yaml(refined, problems)
+
+
+# -- the task-file writer ---------------------------------------------------------------------------------------
+
+
+def _parameter_list(names: Sequence[str], types: Sequence[str | None]) -> list[str]:
+    return [f"?{name} - {kind}" if kind else f"?{name}" for name, kind in zip(names, types, strict=True)]
+
+
+def task_file_yaml(domain: Any, problems: Iterable[Any] = (), header: str | None = None) -> str:
+    """``domain`` (and ``problems``) in the task-file format; ``load_task_text`` reads it back to the same model."""
+    data: dict[str, Any] = {}
+    body: dict[str, Any] = {"name": domain.name}
+    if domain.types:
+        body["types"] = dict(domain.types) if any(domain.types.values()) else list(domain.types)
+    if domain.predicates:
+        body["predicates"] = {name: list(types) for name, types in domain.predicates.items()}
+    if domain.external:
+        body["external"] = {name: list(types) for name, types in domain.external.items()}
+    if domain.axioms:
+        body["axioms"] = [{"head": template_text(a.head_pred, a.head_args), "when": a.source} for a in domain.axioms]
+    primitives: dict[str, Any] = {}
+    for name, primitive in domain.primitives.items():
+        entry: dict[str, Any] = {"parameters": _parameter_list(primitive.parameters, primitive.types)}
+        if not primitive.precondition.trivial:
+            entry["precondition"] = primitive.precondition.source
+        entry["add"] = [template_text(t[0], t[1:]) for t in primitive.add]
+        entry["delete"] = [template_text(t[0], t[1:]) for t in primitive.delete]
+        if primitive.cost != 1:
+            entry["cost"] = primitive.cost
+        if primitive.expectations:
+            entry["expectations"] = primitive.expectations
+        primitives[name] = entry
+    body["primitives"] = primitives
+    if domain.tasks:
+        body["tasks"] = {name: _parameter_list(task.parameters, task.types) for name, task in domain.tasks.items()}
+    methods = []
+    for method in domain.methods:
+        entry = {"name": method.name, "task": method.task_text()}
+        if not method.precondition.trivial:
+            entry["precondition"] = method.precondition.source
+        entry["subtasks" if method.ordered else "unordered"] = method.subtask_texts()
+        methods.append(entry)
+    if methods:
+        body["methods"] = methods
+    data["domain"] = body
+    written = {}
+    for problem in problems:
+        entry = {}
+        if problem.objects:
+            entry["objects"] = {kind: list(names) for kind, names in problem.objects.items()}
+        entry["init"] = [atom_text(a) for a in problem.init]
+        entry["tasks"] = [atom_text(a) for a in problem.tasks]
+        if problem.goal:
+            entry["goal"] = [atom_text(a) for a in problem.goal]
+        written[problem.name] = entry
+    if written:
+        data["problems"] = written
+    text = yaml.safe_dump(data, sort_keys=False, default_flow_style=False, width=1_000_000, allow_unicode=True)
+    return (header or f"# {domain.name} with learned refinements (written by bt-meta)\n") + text

@@ -1,0 +1,216 @@
+"""The repair loop on the fake world: retry, replan from a node, budgets, motion limits, contained plugins."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import pytest
+
+from bt_meta.bt.failures import FailureKind, RepairProposal
+from bt_meta.errors import BtMetaError
+from bt_meta.meta import Limits, MetaExecutor, run_task_file
+from bt_meta.plugins import hookimpl
+from bt_meta.world.fake import FakeWorld, Fault
+
+from .conftest import ScriptedWorld, make_host
+
+
+def _actions(report):
+    return [attempt.proposal["action"] for attempt in report.attempts]
+
+
+def test_a_scripted_skill_failure_is_repaired_by_retry(blocks):
+    problem = blocks.problem("two")
+    world = FakeWorld(blocks.domain, problem, faults=["put(b0, 0, 0)#1=fail:physical"])
+    report = MetaExecutor(blocks.domain, problem, world, make_host()).run()
+    assert report.ok, report.stop_reason
+    assert _actions(report) == ["retry"]
+    attempt = report.attempts[0]
+    assert (attempt.kind, attempt.step, attempt.outcome) == ("physical", 1, "repaired")
+    assert attempt.proposal["plugin"] == "retry_repair"
+    # the executed prefix (pick b0) is not run again: the retry resumes at the failed put
+    assert [(e["step"], e["status"]) for e in report.executed] == [
+        (0, "SUCCESS"), (1, "FAILURE"), (1, "SUCCESS"), (2, "SUCCESS"), (3, "SUCCESS")]
+    assert [s.record()["action"] for s in world.executed] == ["pick", "put", "put", "pick", "put"]
+    assert report.plan == report.initial_plan
+    assert report.failures[0]["kind"] == "physical"
+    assert report.segments == 2 and report.seconds > 0 and report.ticks > 0
+
+
+def test_a_silent_failure_is_caught_by_the_monitor_classified_and_retried(blocks):
+    problem = blocks.problem("two")
+    world = FakeWorld(blocks.domain, problem, faults=["pick(b1)#1=silent"])
+    report = MetaExecutor(blocks.domain, problem, world, make_host()).run()
+    assert report.ok
+    assert [(a.kind, a.proposal["action"]) for a in report.attempts] == [("physical", "retry")]
+    failure = report.failures[0]
+    assert failure["evidence"]["classified_by"] == "classification_rules"
+    assert failure["evidence"]["mismatches"][0]["evidence"]["missing"] == ["held(b1)"]
+
+
+class StealAfterFirstPut:
+    """Someone takes block b1 off the table while the robot puts b0 down."""
+
+    @hookimpl
+    def bt_meta_trace_event(self, event: dict[str, Any]) -> None:
+        if event["type"] == "step_end" and event["action"] == "put" and event["status"] == "SUCCESS":
+            from bt_meta.bt.context import current_run
+
+            current_run().world.apply_symbolic(add=[], delete=[("on_table", "b1")])
+
+
+def test_a_precondition_failure_is_repaired_by_replanning_from_its_node(blocks):
+    problem = blocks.problem("two")
+    world = FakeWorld(blocks.domain, problem)
+    report = MetaExecutor(blocks.domain, problem, world, make_host(("thief", StealAfterFirstPut()))).run()
+    assert report.ok, report.stop_reason
+    assert [(a.kind, a.proposal["action"]) for a in report.attempts] == [("precondition", "replan")]
+    assert report.attempts[0].proposal["changes"]["node_id"] == report.failures[0]["node_id"]
+    assert "replanned from" in report.attempts[0].change
+    assert report.initial_plan[2:] == [["pick", "b1"], ["put", "b1", "1", "0"]]
+    assert report.plan == [["pick", "b0"], ["put", "b0", "0", "0"], ["pick", "b2"], ["put", "b2", "1", "0"]]
+    assert ("at", "b2", "1", "0") in world.symbolic_state()
+    # the belief still had b1 on the table: the world refused pick(b1); it is not retried
+    assert [(s.record()["action"], s.record()["args"][0], s.record()["outcome"]) for s in world.executed] == [
+        ("pick", "b0", "SUCCESS"), ("put", "b0", "SUCCESS"), ("pick", "b1", "FAILURE"), ("pick", "b2", "SUCCESS"),
+        ("put", "b2", "SUCCESS")]
+
+
+def test_attempts_are_bounded(blocks):
+    problem = blocks.problem("two")
+    world = FakeWorld(blocks.domain, problem, faults=["pick=fail:physical"])
+    report = MetaExecutor(blocks.domain, problem, world, make_host(), limits=Limits(max_attempts=1)).run()
+    assert report.status == "failed"
+    assert len(report.attempts) == 1 and report.attempts[0].outcome == "failed_again"
+    assert "attempt budget spent (1 repair attempt(s))" in report.stop_reason
+    assert report.reported[0]["kind"] == "physical"
+
+
+def test_time_is_bounded(blocks):
+    problem = blocks.problem("two")
+    world = FakeWorld(blocks.domain, problem, faults=["pick=fail:physical"])
+    report = MetaExecutor(blocks.domain, problem, world, make_host(), limits=Limits(max_seconds=1e-9),
+                          plan_seconds=5).run()
+    assert report.status == "failed" and report.attempts == []
+    assert report.stop_reason.startswith("time budget spent")
+
+
+def test_bad_limits_are_refused():
+    with pytest.raises(BtMetaError, match="bad repair limits"):
+        Limits(max_attempts=-1)
+
+
+class StubbornRetry:
+    """A careless plugin: retries everything, collisions included."""
+
+    @hookimpl
+    def bt_meta_propose_repairs(self, failure: Any, context: Any) -> list[RepairProposal]:
+        return [RepairProposal("retry", 0.9, "try again", changes={"n": 1})]
+
+
+class OtherCell:
+    """Proposes moving the put to another cell -- which collides too."""
+
+    @hookimpl
+    def bt_meta_propose_repairs(self, failure: Any, context: Any) -> list[RepairProposal]:
+        if failure.action != "put":
+            return []
+        return [RepairProposal("rewrite_args", 0.8, "put it next door",
+                               changes={"args": [failure.args[0], "1", "1"]})]
+
+
+@pytest.mark.parametrize(("kind", "evidence", "shown"), [
+    ("collision", {"colliding_pair": ["right_gripper", "b1"], "distance": -0.004}, "colliding_pair"),
+    ("reachability", {"unreachable_target": [0.9, -0.8, 0.2, 0, 3.14, 0], "ik": "failed"}, "unreachable_target"),
+])
+def test_motion_limits_are_reported_once_with_evidence_and_never_retried(blocks, kind, evidence, shown):
+    problem = blocks.problem("two")
+    world = ScriptedWorld(blocks.domain, problem, scripted={"put": (kind, f"scripted {kind}", evidence)})
+    report = MetaExecutor(blocks.domain, problem, world, make_host(("stubborn", StubbornRetry()))).run()
+    assert report.status == "failed"
+    assert report.attempts == []
+    assert world.scripted_starts == 1
+    assert [f["kind"] for f in report.failures] == [kind]
+    assert len(report.reported) == 1
+    assert report.reported[0]["kind"] == kind and report.reported[0]["evidence"][shown] == evidence[shown]
+    assert "reported with its evidence" in report.stop_reason
+
+
+def test_a_motion_limit_that_recurs_after_a_repair_stops_the_loop(blocks):
+    problem = blocks.problem("two")
+    evidence = {"colliding_pair": ["right_gripper", "b1"]}
+    world = ScriptedWorld(blocks.domain, problem, scripted={"put": ("collision", "gripper hits b1", evidence)})
+    report = MetaExecutor(blocks.domain, problem, world, make_host(("other_cell", OtherCell()))).run()
+    assert report.status == "failed"
+    assert _actions(report) == ["rewrite_args"]
+    assert world.scripted_starts == 2
+    assert "collision again at step 1 after a repair" in report.stop_reason
+    assert report.reported == [{"kind": "collision", "step": 1, "node_id": report.failures[-1]["node_id"],
+                                "action": "put", "args": ["b0", "1", "1"], "message": "gripper hits b1",
+                                "evidence": {"colliding_pair": ["right_gripper", "b1"]}}]
+
+
+class Broken:
+    @hookimpl
+    def bt_meta_propose_repairs(self, failure: Any, context: Any) -> list[RepairProposal]:
+        raise ValueError("no idea")
+
+
+def test_a_plugin_raising_in_propose_repairs_is_contained_as_internal(blocks):
+    problem = blocks.problem("two")
+    world = FakeWorld(blocks.domain, problem, faults=["pick#1=fail:physical"])
+    report = MetaExecutor(blocks.domain, problem, world, make_host(("broken", Broken()))).run()
+    assert report.ok
+    assert _actions(report) == ["retry"]
+    internal = [f for f in report.failures if f["kind"] == "internal"]
+    assert len(internal) == 1
+    assert internal[0]["plugin"] == "broken"
+    assert "raised in bt_meta_propose_repairs: ValueError: no idea" in internal[0]["message"]
+
+
+def test_a_failed_verification_triggers_a_repair(blocks):
+    problem = blocks.problem("one")
+    # The put "succeeds" but b0 stays in the hand: without perception the monitor believes the effects, only the
+    # verification (the goal in the world) sees it.
+    fault = Fault("put", mode="partial", args=("b0", "0", "0"), occurrence=1,
+                  drop=(("at", "b0", "0", "0"), ("held", "b0")))
+    world = FakeWorld(blocks.domain, problem, faults=[fault])
+    report = MetaExecutor(blocks.domain, problem, world, make_host(perception=False)).run()
+    assert report.failures[0]["kind"] == "verification"
+    assert report.failures[0]["evidence"]["missing"] == ["at(b0, 0, 0)"]
+    assert report.ok, report.stop_reason
+    assert [(a.kind, a.proposal["action"], a.step) for a in report.attempts] == [
+        ("verification", "replan", 1)]
+    assert "replanned from n0" in report.attempts[0].change  # put_at(0, 0), re-decomposed by put_held
+    # the repaired plan replaces the failed put; what ran shows both
+    assert report.plan == [["pick", "b0"], ["put", "b0", "0", "0"]]
+    assert [(e["action"], e["status"]) for e in report.executed] == [
+        ("pick", "SUCCESS"), ("put", "SUCCESS"), ("put", "SUCCESS")]
+    assert ("at", "b0", "0", "0") in world.symbolic_state()
+
+
+def test_no_proposal_means_stop_with_the_failure_reported(blocks):
+    problem = blocks.problem("two")
+    world = FakeWorld(blocks.domain, problem, faults=["pick#1=fail:physical"])
+    report = MetaExecutor(blocks.domain, problem, world, make_host(retry=False)).run()
+    assert report.status == "failed" and report.attempts == []
+    assert report.stop_reason == "no repair proposed for physical at step 0"
+
+
+def test_no_plan_is_reported(blocks):
+    problem = dataclasses.replace(blocks.problem("two"), goal=[("at", "b0", "1", "1")])
+    world = FakeWorld(blocks.domain, problem)
+    report = MetaExecutor(blocks.domain, problem, world, make_host()).run()
+    assert report.status == "no_plan" and report.stop_reason == "no plan for the problem"
+    assert report.message.startswith("no_plan: ") and world.executed == []
+
+
+def test_run_task_file_with_the_fake_world(tmp_path):
+    from .conftest import BLOCKS
+
+    path = tmp_path / "blocks.yaml"
+    path.write_text(BLOCKS, encoding="utf-8")
+    report = run_task_file(path, "two", plugins=make_host(), faults=["pick#2=fail:physical"])
+    assert report.ok and _actions(report) == ["retry"]
+    assert report.to_dict()["attempts"][0]["kind"] == FailureKind.PHYSICAL.value

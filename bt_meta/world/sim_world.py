@@ -243,7 +243,7 @@ class SimWorld:
         if not scene_name:
             raise ConfigError(f"problems.{problem_name}: give the `scene:` to build", grounding.path)
         self.scene = load_scene(scene_name)
-        if variant is None or variant == "nominal":
+        if variant is None:
             variant = setup.get("variant")
         if variant is not None and variant != "nominal" and variant not in self.scene.variants:
             known = ", ".join(["nominal", *self.scene.variants])
@@ -261,11 +261,15 @@ class SimWorld:
             for arm in sim.robot.arms:
                 sim.release(arm)
         self.sim = sim
-        sim.set_joint_positions({**sim.robot.home, **grounding.robot_pose})
         self.realtime = gui if realtime is None else realtime
         self.tick_seconds = steps_per_tick * sim.time_step
-        self.scene.build(sim, None if self.variant == "nominal" else self.variant, seed=seed)
-        self._check_objects(problem_name)
+        try:
+            sim.set_joint_positions({**sim.robot.home, **grounding.robot_pose})
+            self.scene.build(sim, None if self.variant == "nominal" else self.variant, seed=seed)
+            self._check_objects(problem_name)
+        except BaseException:
+            self.close()
+            raise
         self.kin = Kinematics(sim.robot)
         self.collision = CollisionChecker(self.kin)
         self.ik = InverseKinematics(self.kin, self.collision)
@@ -526,14 +530,20 @@ class SimWorld:
     # -- internals ----------------------------------------------------------------------------------------------
 
     def _check_objects(self, problem_name: str) -> None:
-        """Objects the problem names must exist in the nominal scene (a variant may replace them: its point).
-
-        Pose and feature symbols are not objects; other symbols map through the grounding's ``objects``."""
+        """The problem's symbols must mean something here: objects of type ``pose`` need a pose grounding, of
+        type ``feature`` a feature grounding (or name an object), every other object must be in the nominal scene
+        (a variant may replace objects: that is its point)."""
+        objects = getattr(self.problem, "objects", None) or {}
+        groups = objects.items() if isinstance(objects, Mapping) else [("object", objects)]
+        poses = [o for kind, group in groups if kind == "pose" for o in group]
+        where = self.grounding.path
+        unposed = [p for p in poses if p not in self.grounding.poses]
+        if unposed:
+            raise ConfigError(f"problem {problem_name!r}: pose symbols without a grounding under `poses:`: "
+                              f"{', '.join(unposed)}", where)
         if self.variant != "nominal":
             return
-        objects = getattr(self.problem, "objects", None) or {}
-        names = [o for group in (objects.values() if isinstance(objects, Mapping) else [objects]) for o in group]
-        names = [n for n in names if n not in self.grounding.poses and n not in self.grounding.features]
+        names = [o for kind, group in groups if kind != "pose" for o in group if o not in self.grounding.features]
         present = set(self.sim.object_names())
         missing = sorted(n for n in names if self.grounding.objects.get(n, n) not in present)
         if missing:

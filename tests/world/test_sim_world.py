@@ -205,3 +205,21 @@ def test_same_seed_same_run():
         finally:
             world.close()
     assert outcomes[0] == outcomes[1]
+
+
+@slow
+def test_problem_objects_missing_from_the_scene_are_a_config_error(sim, tmp_path):
+    task_file = load_task_file(trees_dir() / "magnetic_attach.yaml")
+    wrong = tmp_path / "wrong.yaml"
+    wrong.write_text("problems: {nominal: {scene: housing_insertion}}\n"
+                     "objects: {active_part: active, reference_part: reference}\n"
+                     "skills: {MoveTo: {skill: move_to}, Grasp: {skill: grasp}}\n"
+                     "poses: {home: {pose: [0.6, -0.2, 0.1, 180, 0, 180]}}\n")
+    with pytest.raises(ConfigError, match="pose symbols without a grounding under `poses:`: active_above, "):
+        SimWorld(task_file.domain, task_file.problem("nominal"), load_grounding("x", path=wrong), sim=sim)
+    one = "{pose: [0.6, -0.2, 0.1, 180, 0, 180]}"
+    poses = "".join(f"  {p}: {one}\n" for p in task_file.problem("nominal").objects["pose"])
+    wrong.write_text(wrong.read_text().replace(f"poses: {{home: {one}}}\n", "poses:\n" + poses))
+    with pytest.raises(ConfigError, match="problem 'nominal' names objects the scene 'housing_insertion' lacks: "
+                                          "active_part, reference_part"):
+        SimWorld(task_file.domain, task_file.problem("nominal"), load_grounding("x", path=wrong), sim=sim)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 
-import cv2
 import numpy as np
 import pytest
 
@@ -18,36 +17,18 @@ from bt_meta.perception.hsv import (
     colour_masks,
     detect_blocks,
 )
+from bt_meta.perception.synthetic import BLOCK_RGB, blank, draw_block, top_view_projection
 from bt_meta.world.objects import LB
 
-TABLE_RGB = (222, 214, 198)  # the simulator's beige table
-RGB = {"red": (217, 20, 20), "blue": (20, 51, 217), "green": (25, 166, 51)}
 MPP = 0.0025
 
 
 def view() -> PlaneProjection:
-    return PlaneProjection.top_down(320, 240, (0.70, -0.20), MPP)
-
-
-def draw_block(image: np.ndarray, projection: PlaneProjection, x: float, y: float, yaw: float,
-               shape: str, colour: str) -> None:
-    """Fill the block's footprint (a rotated rectangle in table coordinates) with sub-pixel corners."""
-    length = (2 if shape == "1x2" else 1) * LB
-    axis = np.array([math.cos(yaw), math.sin(yaw)])
-    normal = np.array([-axis[1], axis[0]])
-    corners = [np.array([x, y]) + sx * axis * length / 2 + sy * normal * LB / 2
-               for sx, sy in ((1, 1), (1, -1), (-1, -1), (-1, 1))]
-    us, vs = projection.table_to_pixel(np.array([c[0] for c in corners]), np.array([c[1] for c in corners]))
-    shift = 8
-    # Pixel (u, v) continuous -> OpenCV's integer-indexed coordinates: subtract the half pixel.
-    points = np.round(np.stack([us - 0.5, vs - 0.5], axis=1) * (1 << shift)).astype(np.int32)
-    cv2.fillPoly(image, [points], RGB[colour], lineType=cv2.LINE_AA, shift=shift)
+    return top_view_projection()
 
 
 def canvas() -> np.ndarray:
-    image = np.empty((240, 320, 3), np.uint8)
-    image[:] = TABLE_RGB
-    return image
+    return blank(top_view_projection())
 
 
 def angle_error(a: float, b: float, period: float) -> float:
@@ -100,7 +81,7 @@ def test_other_colours_and_specks_are_ignored():
     projection = view()
     image = canvas()
     draw_block(image, projection, 0.70, -0.20, 0.0, "1x1", "green")
-    image[10:13, 10:13] = RGB["red"]  # 9 pixels: a speck, not a block
+    image[10:13, 10:13] = BLOCK_RGB["red"]  # 9 pixels: a speck, not a block
     assert detect_blocks(image, projection) == []
 
 

@@ -1,0 +1,117 @@
+"""Camera perception: blocks and grid-maps from a top view of the table (paper, section 6.3).
+
+After every successful primitive, when the world has a top camera, one frame is rendered and analysed: HSV blobs
+become blocks (colour, shape 1x1/1x2, centroid, orientation in table coordinates) and each block gets its 3 lb x
+3 lb grid-map. The world's camera is ``world.top_camera`` when it has one; a world built on the pybullet
+simulator (``world.sim``) gets a :class:`~bt_meta.world.camera.TopViewCamera` of its own, made once. Blocks are
+named after the simulator's objects they lie on (the nearest object within half a block), so remembered and
+observed grid-maps of the same block can be paired; the geometry itself comes from the image only.
+
+Settings (:func:`configure`): HSV thresholds (a mapping, see :meth:`HSVThresholds.from_mapping`), the grid spec,
+whether to use the depth image, the camera's centre and height.
+
+Offers:
+
+* :class:`CameraPerception` -- the plugin as an object (register your own instance for other settings)
+* :func:`bt_meta_observe` -- ``{"blocks": [...], "gridmaps": [GridMap, ...], "image": TopView}``
+* :func:`configure` -- replace the settings of the module-level plugin
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+from collections.abc import Mapping
+from typing import Any
+
+from bt_meta.perception.gridmap import DEFAULT_SPEC, GridSpec
+from bt_meta.perception.hsv import DEFAULT_THRESHOLDS, HSVThresholds
+from bt_meta.perception.topview import TopView, capture
+from bt_meta.plugins import hookimpl
+from bt_meta.world.objects import LB
+
+
+class CameraPerception:
+    """Top-view perception with fixed settings; one camera per simulator, made on first use."""
+
+    def __init__(
+        self,
+        *,
+        thresholds: HSVThresholds | Mapping[str, Any] = DEFAULT_THRESHOLDS,
+        spec: GridSpec = DEFAULT_SPEC,
+        use_depth: bool = True,
+        camera_centre: tuple[float, float] | None = None,
+        camera_height: float = 1.0,
+        name_radius: float = 0.5 * LB,
+    ) -> None:
+        if isinstance(thresholds, Mapping):
+            thresholds = HSVThresholds.from_mapping(thresholds)
+        self.thresholds = thresholds
+        self.spec = spec
+        self.use_depth = use_depth
+        self.camera_centre = camera_centre
+        self.camera_height = camera_height
+        self.name_radius = name_radius
+        self._cameras: weakref.WeakKeyDictionary[Any, Any] = weakref.WeakKeyDictionary()
+
+    def camera_for(self, world: Any) -> Any:
+        """The world's top camera, or one made for its simulator, or ``None``."""
+        camera = getattr(world, "top_camera", None)
+        if camera is not None:
+            return camera
+        sim = getattr(world, "sim", None)
+        if sim is None or not hasattr(sim, "table"):
+            return None
+        camera = self._cameras.get(sim)
+        if camera is None:
+            from bt_meta.world.camera import TopViewCamera
+
+            options: dict[str, Any] = {"height": self.camera_height}
+            if self.camera_centre is not None:
+                options["centre"] = self.camera_centre
+            camera = self._cameras[sim] = TopViewCamera(sim, **options)
+        return camera
+
+    def look(self, world: Any) -> TopView | None:
+        """One analysed top view of ``world`` (``None`` without a camera)."""
+        camera = self.camera_for(world)
+        if camera is None:
+            return None
+        sim = getattr(camera, "sim", None)
+        namer = None
+        if sim is not None and hasattr(sim, "object_states"):
+            # Pair blocks with the simulator's objects by position only (for names; geometry is the image's).
+            centres = {name: s.pose[:2] for name, s in sim.object_states().items() if s.shape is not None}
+            radius = self.name_radius
+
+            def namer(block: Any) -> str | None:
+                best, best_d = None, radius
+                for name, (x, y) in centres.items():
+                    d = math.hypot(x - block.centroid[0], y - block.centroid[1])
+                    if d <= best_d:
+                        best, best_d = name, d
+                return best
+
+        return capture(camera, thresholds=self.thresholds, spec=self.spec, use_depth=self.use_depth, namer=namer)
+
+    @hookimpl
+    def bt_meta_observe(self, world: Any, context: Any) -> dict[str, Any] | None:
+        view = self.look(world)
+        if view is None:
+            return None
+        return {"blocks": view.describe(), "gridmaps": list(view.grid_maps), "image": view}
+
+
+_plugin = CameraPerception()
+
+
+def configure(**settings: Any) -> CameraPerception:
+    """Replace the module-level plugin's settings (keyword arguments of :class:`CameraPerception`)."""
+    global _plugin
+    _plugin = CameraPerception(**settings)
+    return _plugin
+
+
+@hookimpl
+def bt_meta_observe(world: Any, context: Any) -> dict[str, Any] | None:
+    return _plugin.bt_meta_observe(world, context)

@@ -1,0 +1,180 @@
+"""Grid-map expectations (paper, section 6): after a step, the blocks it moved should look as they did in memory.
+
+For a monitored step the episodic memory gives the states after the same step in the last N successful traces
+(:mod:`bt_meta.perception.recall`). Their grid-maps of the objects the step names (e.g. ``place(b5, 1.5, 1)``:
+b5's map) -- or every map of the state when none is named after an argument -- are the expectation. The
+observation is the top view of camera perception (``observations["image"]``): for each remembered map the block
+seen nearest its centroid (within ``recentre_radius``, default a quarter block) is cropped centred on its own
+centroid, as the paper crops blobs; when no single block is there (nothing, or blocks touching each other merged
+into one blob) the remembered window itself is cropped. A trace matches when every one of its maps
+differs from the observation by at most ``max_cells`` cells; the step matches when any of the N traces does
+(nearest neighbour). A mismatch suggests ``unknown_entity`` when a block is seen there with another shape than
+the one remembered (the 1x2 replaced by a 1x1), else ``unexpected_configuration``.
+
+An expectation made at the last primitive of a task is also that task's expectation (bubbled up, section 6.2):
+``data["task_end"]`` and ``data["parent_task"]`` say so.
+
+Offers:
+
+* :class:`GridMapExpectations` -- the plugin as an object (memory, N, tolerance in cells, colour, rotations)
+* :func:`bt_meta_expectations`, :func:`bt_meta_compare` -- the module-level plugin (see :func:`configure`)
+* :data:`KIND` -- ``"gridmap"``
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from bt_meta.bt.expectations import Comparison, Expectation
+from bt_meta.bt.failures import FailureKind
+from bt_meta.perception.gridmap import grid_difference, render
+from bt_meta.perception.recall import memory_for, remember
+from bt_meta.plugins import hookimpl
+from bt_meta.world.objects import LB
+
+KIND = "gridmap"
+
+
+class GridMapExpectations:
+    """Per-step grid-map expectations from the last ``n`` successful traces.
+
+    ``max_cells``: cells that may differ; ``compare_colour``: a cell of another colour differs too (off by
+    default: the paper's occupancy is colour presence); ``rotations``: the best quarter turn counts (off: the
+    same step should put the block the same way); ``memory``: an :class:`~bt_meta.memory.EpisodicMemory`
+    (default: the run's, else the ``--memory`` file).
+    """
+
+    def __init__(self, memory: Any = None, *, n: int = 5, max_cells: int = 2, compare_colour: bool = False,
+                 rotations: bool = False, recentre_radius: float = 0.25 * LB) -> None:
+        if n < 1 or max_cells < 0 or recentre_radius < 0:
+            raise ValueError("n must be >= 1, max_cells and recentre_radius >= 0")
+        self.memory = memory
+        self.n = n
+        self.max_cells = max_cells
+        self.compare_colour = compare_colour
+        self.rotations = rotations
+        self.recentre_radius = recentre_radius
+
+    @hookimpl
+    def bt_meta_expectations(self, context: Any) -> list[Expectation] | None:
+        memory = memory_for(context, self.memory)
+        if memory is None:
+            return None
+        remembered = remember(memory, context, self.n)
+        if remembered is None:
+            return None
+        names = {str(a) for a in context.args}
+        traces = []
+        for record in remembered.records:
+            maps = record.step.state.grid_maps
+            chosen = [m for m in maps if m.object_name in names] or list(maps)
+            if chosen:
+                traces.append({"episode": record.episode_id, "maps": chosen})
+        if not traces:
+            return None
+        call = f"{context.action}({', '.join(str(a) for a in context.args)})"
+        return [Expectation(
+            kind=KIND,
+            description=f"grid-maps after {call} as in {len(traces)} remembered trace(s)",
+            data={
+                "traces": traces,
+                "max_cells": self.max_cells,
+                "compare_colour": self.compare_colour,
+                "rotations": self.rotations,
+                "recentre_radius": self.recentre_radius,
+                "parent_task": remembered.parent_task,
+                "task_end": remembered.task_end,
+                "matched_by": remembered.key,
+            },
+            failure_kind=FailureKind.UNEXPECTED_CONFIGURATION,
+        )]
+
+    @hookimpl
+    def bt_meta_compare(self, expectation: Expectation, observations: dict[str, Any], context: Any
+                        ) -> Comparison | None:
+        return compare(expectation, observations)
+
+
+def _distance(expected: Any, observed: Any, colour: bool, rotations: bool) -> int:
+    cells = grid_difference(expected, observed, rotations=rotations)
+    if colour and not rotations:
+        a, b = np.asarray(expected.occupancy), np.asarray(observed.occupancy)
+        cells += int(np.count_nonzero((a != 0) & (b != 0) & (a != b)))
+    return cells
+
+
+def compare(expectation: Expectation, observations: dict[str, Any]) -> Comparison | None:
+    """Compare a ``"gridmap"`` expectation with the top view in ``observations["image"]`` (``None`` without)."""
+    if expectation.kind != KIND:
+        return None
+    view = observations.get("image")
+    if view is None or not hasattr(view, "grid_map_at"):
+        return None
+    data = expectation.data
+    best: dict[str, Any] | None = None
+    for trace in data["traces"]:
+        details = []
+        for expected in trace["maps"]:
+            block = view.block_near(expected.centroid, data["recentre_radius"])
+            if block is not None and block.shape == "unknown":
+                block = None  # blocks merged into one blob: its centroid is nobody's
+            if block is not None:
+                observed = view.grid_map_at(block.centroid, z=block.top_z, colour=block.colour, shape=block.shape)
+            else:
+                observed = view.grid_map_at(expected.centroid)
+            cells = _distance(expected, observed, data["compare_colour"], data["rotations"])
+            details.append({
+                "object": expected.object_name,
+                "cells": cells,
+                "expected": {"colour": expected.colour, "shape": expected.shape,
+                             "centroid": list(expected.centroid), "grid": render(expected)},
+                "observed": {"colour": observed.colour, "shape": observed.shape,
+                             "centroid": list(observed.centroid), "grid": render(observed),
+                             "block_seen": block is not None},
+            })
+        worst = max(d["cells"] for d in details)
+        if best is None or worst < best["cells"]:
+            best = {"episode": trace["episode"], "cells": worst, "maps": details}
+    assert best is not None
+    evidence = {"nearest_episode": best["episode"], "cells": best["cells"], "max_cells": data["max_cells"],
+                "maps": best["maps"], "parent_task": data["parent_task"], "task_end": data["task_end"]}
+    if best["cells"] <= data["max_cells"]:
+        return Comparison(matched=True, evidence=evidence)
+    off = [d for d in best["maps"] if d["cells"] > data["max_cells"]]
+    other_shape = any(d["observed"]["block_seen"] and d["observed"]["shape"] != d["expected"]["shape"] for d in off)
+    kind = FailureKind.UNKNOWN_ENTITY if other_shape else FailureKind.UNEXPECTED_CONFIGURATION
+    shown = "; ".join(
+        f"{d['object']}: {d['cells']} cells differ (expected {d['expected']['colour']} {d['expected']['shape']}, "
+        f"seen {d['observed']['colour'] or 'nothing'} {d['observed']['shape'] or ''})".rstrip()
+        for d in off
+    )
+    evidence["suggested_kind"] = kind.value
+    return Comparison(
+        matched=False,
+        message=f"{expectation.description}: {shown}",
+        evidence=evidence,
+        expectation=replace(expectation, failure_kind=kind),
+    )
+
+
+_plugin = GridMapExpectations()
+
+
+def configure(**settings: Any) -> GridMapExpectations:
+    """Replace the module-level plugin's settings (keyword arguments of :class:`GridMapExpectations`)."""
+    global _plugin
+    _plugin = GridMapExpectations(**settings)
+    return _plugin
+
+
+@hookimpl
+def bt_meta_expectations(context: Any) -> list[Expectation] | None:
+    return _plugin.bt_meta_expectations(context)
+
+
+@hookimpl
+def bt_meta_compare(expectation: Expectation, observations: dict[str, Any], context: Any) -> Comparison | None:
+    return compare(expectation, observations)

@@ -1,0 +1,294 @@
+"""Grid-map and keypoint expectation plugins against a temporary episodic memory of recorded states.
+
+A substituted block (A's 1x2 bar replaced by a 1x1) raises a grid-map mismatch at the bar's step; a misaligned
+attach raises a keypoint mismatch; nominal observations raise none. The plugin modules are registered explicitly
+with the plugin manager, as the ``bt_meta`` entry points will register them.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from types import SimpleNamespace
+
+import bt_meta_plugins.gridmap_expectations as gridmap_plugin
+import bt_meta_plugins.keypoint_expectations as keypoint_plugin
+import numpy as np
+import pytest
+
+from bt_meta.bt.context import RunContext
+from bt_meta.bt.expectations import StepContext
+from bt_meta.htn import State as HtnState
+from bt_meta.memory import Episode, EpisodicMemory, ObjectState, State, Step, Trace
+from bt_meta.perception.synthetic import blank, draw_block, top_view_projection
+from bt_meta.perception.topview import analyse
+from bt_meta.plugins import PluginHost
+from bt_meta.world.objects import LB
+
+# -- letter A, drawn step by step ----------------------------------------------------------------------------------
+
+ORIGIN = (0.55, 0.10)  # the letter's cell (0, 0); letter x = robot -y, letter y = robot +x
+PLAN = [  # (block, x, y, shape, parent task, parent node)
+    ("b0", 0, 0, "1x1", "draw_leg", "n2"),
+    ("b1", 0, 1, "1x1", "draw_leg", "n2"),
+    ("b2", 3, 0, "1x1", "draw_leg", "n5"),
+    ("b3", 3, 1, "1x1", "draw_leg", "n5"),
+    ("b5", 1.5, 1, "1x2", "draw_A_bar", "n8"),
+    ("b4", 1.5, 2, "1x1", "draw_apex", "n10"),
+]
+
+
+def cell(x: float, y: float) -> tuple[float, float]:
+    return ORIGIN[0] + y * LB, ORIGIN[1] - x * LB
+
+
+def letter_view(steps: int, *, bar_shape: str = "1x2", jitter: float = 0.0, seed: int = 0):
+    """The top view after the first ``steps`` placements (the bar drawn with ``bar_shape``)."""
+    rng = np.random.default_rng(seed)
+    projection = top_view_projection()
+    image = blank(top_view_projection())
+    for name, x, y, shape, _, _ in PLAN[:steps]:
+        if name == "b5":
+            shape = bar_shape
+        bx, by = cell(x, y)
+        bx, by = bx + rng.uniform(-jitter, jitter), by + rng.uniform(-jitter, jitter)
+        draw_block(image, projection, bx, by, -math.pi / 2, shape, "blue")
+    names = {}
+    for name, x, y, *_ in PLAN[:steps]:
+        names[cell(x, y)] = name
+
+    def namer(block):
+        best = min(names, key=lambda c: math.hypot(c[0] - block.centroid[0], c[1] - block.centroid[1]))
+        return names[best] if math.hypot(best[0] - block.centroid[0], best[1] - block.centroid[1]) < LB / 2 else None
+
+    return analyse(image, projection, namer=namer)
+
+
+def letter_trace(seed: int) -> Trace:
+    steps = []
+    for i, (name, x, y, shape, parent, node) in enumerate(PLAN):
+        top = letter_view(i + 1, jitter=0.002, seed=seed)
+        # As the paper's instructor does: the placed block's map, centred where it was put (section 6.3).
+        maps = (top.grid_map_at(cell(x, y), object_name=name, colour="blue", shape=shape),)
+        steps.append(Step(i, "place", (name, str(x), str(y)), node_id=f"n{20 + i}", parent_task=parent,
+                          parent_node=node, state=State(facts=(("at", name, str(x), str(y)),), grid_maps=maps)))
+    episode = Episode("draw_A", "letters.yaml", "A", started=1000.0 + seed, outcome="success", finished=1001.0 + seed)
+    return Trace(episode, tuple(steps))
+
+
+def make_context(run: RunContext, step: int, action: str, args: tuple[str, ...]) -> StepContext:
+    return StepContext(action=action, args=args, step=step, node_id=f"n{20 + step}", run=run)
+
+
+@pytest.fixture(scope="module")
+def letters_memory(tmp_path_factory):
+    path = tmp_path_factory.mktemp("memory") / "memory.sqlite"
+    with EpisodicMemory.open(path) as memory:
+        for seed in range(3):
+            memory.write(letter_trace(seed))
+    memory = EpisodicMemory.open(path, readonly=True)
+    yield memory
+    memory.close()
+
+
+def letters_run(memory: EpisodicMemory | None) -> RunContext:
+    run = RunContext(None, None, problem=SimpleNamespace(name="A", tasks=[("draw_A",)]), state=HtnState())
+    if memory is not None:
+        run.memory = memory  # the run's memory, as `bt-meta run --memory` will hand it over
+    return run
+
+
+def host_with(module, name: str) -> PluginHost:
+    host = PluginHost()
+    host.register(module, name, source="test")
+    return host
+
+
+def check(host: PluginHost, context: StepContext, observations: dict):
+    result = host.call("bt_meta_expectations", context=context)
+    assert not result.errors, result.errors[0].traceback if result.errors else ""
+    expectations = [e for value in result.values for e in value]
+    verdicts = []
+    for expectation in expectations:
+        verdict = host.call("bt_meta_compare", expectation=expectation, observations=observations, context=context)
+        assert not verdict.errors
+        verdicts.append(verdict.first)
+    return expectations, verdicts
+
+
+def test_gridmap_nominal_steps_match(letters_memory):
+    host = host_with(gridmap_plugin, "gridmap_expectations")
+    run = letters_run(letters_memory)
+    for i, (name, x, y, *_) in enumerate(PLAN):
+        context = make_context(run, i, "place", (name, str(x), str(y)))
+        expectations, verdicts = check(host, context, {"image": letter_view(i + 1, jitter=0.002, seed=7)})
+        assert len(expectations) == 1 and expectations[0].kind == "gridmap"
+        assert len(expectations[0].data["traces"]) == 3
+        assert verdicts[0].matched, verdicts[0].evidence
+
+
+def test_gridmap_substituted_bar_is_an_unknown_entity_at_the_bar_step(letters_memory):
+    host = host_with(gridmap_plugin, "gridmap_expectations")
+    run = letters_run(letters_memory)
+    # the legs are as remembered
+    context = make_context(run, 3, "place", ("b3", "3", "1"))
+    _, verdicts = check(host, context, {"image": letter_view(4, bar_shape="1x1")})
+    assert verdicts[0].matched
+    # the bar step: a 1x1 stands where the 1x2 should be
+    context = make_context(run, 4, "place", ("b5", "1.5", "1"))
+    expectations, verdicts = check(host, context, {"image": letter_view(5, bar_shape="1x1")})
+    comparison = verdicts[0]
+    assert not comparison.matched
+    assert comparison.expectation.failure_kind.value == "unknown_entity"
+    assert comparison.evidence["cells"] == 4
+    assert "b5: 4 cells differ (expected blue 1x2, seen blue 1x1)" in comparison.message
+    # the 3 lb window shows the bar and, as context, the legs below it
+    assert comparison.evidence["maps"][0]["expected"]["grid"] == "......\n......\nbbbbbb\nbbbbbb\nb....b\nb....b"
+    assert comparison.evidence["maps"][0]["observed"]["grid"] == "......\n......\nb.bb.b\nb.bb.b\nb....b\nb....b"
+    # the bar is the last (only) primitive of draw_A_bar: its expectation is the task's (bubbled up)
+    assert expectations[0].data["parent_task"] == "draw_A_bar" and expectations[0].data["task_end"] is True
+
+
+def test_gridmap_bubbling_flags_only_the_last_primitive_of_a_task(letters_memory):
+    plugin = gridmap_plugin.GridMapExpectations(letters_memory)
+    run = letters_run(None)
+    first = plugin.bt_meta_expectations(make_context(run, 0, "place", ("b0", "0", "0")))
+    second = plugin.bt_meta_expectations(make_context(run, 1, "place", ("b1", "0", "1")))
+    assert first[0].data["task_end"] is False and second[0].data["task_end"] is True
+    assert second[0].data["parent_task"] == "draw_leg"
+
+
+def test_gridmap_falls_back_to_action_and_arguments_when_the_plan_changed(letters_memory):
+    plugin = gridmap_plugin.GridMapExpectations(letters_memory, n=2)
+    run = letters_run(None)
+    expectations = plugin.bt_meta_expectations(make_context(run, 9, "place", ("b5", "1.5", "1")))
+    assert expectations[0].data["matched_by"] == "action" and len(expectations[0].data["traces"]) == 2
+    assert plugin.bt_meta_expectations(make_context(run, 4, "place", ("b9", "7", "7"))) is None
+
+
+def test_no_memory_no_expectations(tmp_path, monkeypatch):
+    monkeypatch.setenv("BT_META_MEMORY", str(tmp_path / "absent.sqlite"))
+    run = letters_run(None)
+    context = make_context(run, 4, "place", ("b5", "1.5", "1"))
+    assert gridmap_plugin.GridMapExpectations().bt_meta_expectations(context) is None
+    assert keypoint_plugin.KeypointExpectations().bt_meta_expectations(context) is None
+
+
+def test_memory_from_environment(letters_memory, monkeypatch):
+    monkeypatch.setenv("BT_META_MEMORY", str(letters_memory.path))
+    plugin = gridmap_plugin.GridMapExpectations()
+    expectations = plugin.bt_meta_expectations(make_context(letters_run(None), 4, "place", ("b5", "1.5", "1")))
+    assert expectations and expectations[0].data["matched_by"] == "plan step"
+
+
+def test_compare_needs_a_top_view_and_its_own_kind(letters_memory):
+    plugin = gridmap_plugin.GridMapExpectations(letters_memory)
+    expectation = plugin.bt_meta_expectations(make_context(letters_run(None), 4, "place", ("b5", "1.5", "1")))[0]
+    assert gridmap_plugin.compare(expectation, {}) is None
+    assert keypoint_plugin.compare(expectation, {"objects": {}}) is None
+    with pytest.raises(ValueError, match="check must be one of"):
+        keypoint_plugin.KeypointExpectations(check="sometimes")
+    with pytest.raises(ValueError, match="n must be >= 1"):
+        gridmap_plugin.GridMapExpectations(n=0)
+
+
+# -- magnetic attach -----------------------------------------------------------------------------------------------
+
+REFERENCE_AP = (0.62, -0.10, -0.16)
+
+
+def attach_states(rng: np.random.Generator, *, misaligned: bool = False) -> dict[str, ObjectState]:
+    """Object states after the attach motion: the active magnet on the reference's (within a few mm), or the
+    active part lying on its side (its magnet facing -y, 2 cm off)."""
+    noise = rng.uniform(-0.002, 0.002, 3)
+    reference = ObjectState("reference_part", (0.62, -0.10, -0.18, 0, 0, 0), REFERENCE_AP, (0, 0, 1))
+    if misaligned:
+        active = ObjectState("active_part", (0.62, -0.08, -0.14, math.pi / 2, 0, 0),
+                             tuple(np.add(REFERENCE_AP, (0.0, 0.0, 0.02)) + noise), (0, 0, -1))
+    else:
+        active = ObjectState("active_part", (0.62, -0.10, -0.13, 0, 0, 0),
+                             tuple(np.add(REFERENCE_AP, noise)), (0, 0, -1))
+    return {"active_part": active, "reference_part": reference}
+
+
+ATTACH_PLAN = [("MoveTo", ("joint_above",), "AttachOnto", "n7"), ("MoveTo", ("joint",), "AttachOnto", "n7"),
+               ("Grasp", (), "AttachOnto", "n7"), ("MoveTo", ("joint_above",), "AttachOnto", "n7")]
+
+
+@pytest.fixture(scope="module")
+def attach_memory(tmp_path_factory):
+    path = tmp_path_factory.mktemp("attach") / "memory.sqlite"
+    rng = np.random.default_rng(3)
+    with EpisodicMemory.open(path) as memory:
+        for j in range(4):
+            steps = []
+            for i, (action, args, parent, node) in enumerate(ATTACH_PLAN):
+                objects = tuple(attach_states(rng).values())
+                steps.append(Step(i, action, args, parent_task=parent, parent_node=node,
+                                  state=State(objects=objects)))
+            memory.write(Trace(Episode("MagneticAttach", "magnetic_attach.yaml", "attach_only",
+                                       started=time.time() + j, outcome="success"), tuple(steps)))
+    memory = EpisodicMemory.open(path, readonly=True)
+    yield memory
+    memory.close()
+
+
+def attach_run(memory: EpisodicMemory) -> RunContext:
+    problem = SimpleNamespace(name="attach_only", tasks=[("MagneticAttach", "active_part", "reference_part")])
+    run = RunContext(None, None, problem=problem, state=HtnState())
+    run.memory = memory
+    return run
+
+
+def observed(states: dict[str, ObjectState]) -> dict[str, dict]:
+    """As ground-truth perception gives them: dicts with the normal in the base frame."""
+    return {name: {"name": name, "pose": list(s.pose), "ap": list(s.ap), "an": list(s.an_base)}
+            for name, s in states.items()}
+
+
+def test_keypoint_nominal_attach_matches_and_misaligned_attach_does_not(attach_memory):
+    host = host_with(keypoint_plugin, "keypoint_expectations")
+    run = attach_run(attach_memory)
+    rng = np.random.default_rng(11)
+    context = make_context(run, 3, "MoveTo", ("joint_above",))
+    expectations, verdicts = check(host, context, {"objects": observed(attach_states(rng))})
+    assert [e.kind for e in expectations] == ["keypoint"]
+    data = expectations[0].data
+    assert {data["active"], data["reference"]} == {"active_part", "reference_part"}
+    assert data["expected"]["n"] == 4 and data["expected"]["r_n"] == pytest.approx(math.pi)
+    assert data["task_end"] is True and data["parent_task"] == "AttachOnto"
+    assert verdicts[0].matched
+    _, verdicts = check(host, context, {"objects": observed(attach_states(rng, misaligned=True))})
+    comparison = verdicts[0]
+    assert not comparison.matched
+    assert comparison.evidence["failed"] == ["r_p", "r_n"]
+    assert "R_n 90.0 deg, expected 180.0 deg" in comparison.message
+
+
+def test_keypoint_thresholds_and_check_setting(attach_memory):
+    run = attach_run(attach_memory)
+    rng = np.random.default_rng(5)
+    misaligned = observed(attach_states(rng, misaligned=True))
+    # R_n only, with a tolerance wider than the misalignment: no mismatch
+    loose = keypoint_plugin.KeypointExpectations(position_tolerance=None, angle_tolerance=math.radians(100))
+    expectation = loose.bt_meta_expectations(make_context(run, 3, "MoveTo", ("joint_above",)))[0]
+    assert keypoint_plugin.compare(expectation, {"objects": misaligned}).matched
+    # check="task_end": only the last primitive of AttachOnto carries an expectation
+    at_end = keypoint_plugin.KeypointExpectations(check="task_end")
+    assert at_end.bt_meta_expectations(make_context(run, 1, "MoveTo", ("joint",))) is None
+    assert at_end.bt_meta_expectations(make_context(run, 3, "MoveTo", ("joint_above",)))
+    # explicit pairs naming an object nobody observes: a mismatch that says so
+    named = keypoint_plugin.KeypointExpectations(pairs=[("active_part", "reference_part")])
+    expectation = named.bt_meta_expectations(make_context(run, 3, "MoveTo", ("joint_above",)))[0]
+    missing = keypoint_plugin.compare(expectation, {"objects": {"reference_part": misaligned["reference_part"]}})
+    assert not missing.matched and "active_part not observed" in missing.message
+
+
+def test_configure_replaces_the_module_plugin(attach_memory):
+    try:
+        keypoint_plugin.configure(memory=attach_memory, angle_tolerance=None, position_tolerance=0.5)
+        context = make_context(attach_run(attach_memory), 3, "MoveTo", ("joint_above",))
+        expectation = keypoint_plugin.bt_meta_expectations(context)[0]
+        assert expectation.data["position_tolerance"] == 0.5 and expectation.data["angle_tolerance"] is None
+    finally:
+        keypoint_plugin.configure()

@@ -110,6 +110,7 @@ class PluginHost:
         self.manager.add_hookspecs(hookspecs)
         self.sources: dict[str, str] = {}
         self._impls: dict[str, tuple[Any, ...]] = {}
+        self._firstresult: dict[str, bool] = {}
 
     # -- registration -------------------------------------------------------------------------------------------
 
@@ -200,8 +201,15 @@ class PluginHost:
         return result
 
     def _is_firstresult(self, hook: str) -> bool:
-        caller = getattr(self.manager.hook, hook)
-        return bool(caller.spec and caller.spec.opts.get("firstresult"))
+        first = self._firstresult.get(hook)
+        if first is None:
+            caller = getattr(self.manager.hook, hook)
+            first = self._firstresult[hook] = bool(caller.spec and caller.spec.opts.get("firstresult"))
+        return first
+
+    def implemented_hooks(self) -> frozenset[str]:
+        """The hooks at least one plugin implements (a run takes this snapshot when it starts)."""
+        return frozenset(hook for hook in HOOK_NAMES if self.implementations(hook))
 
     def external_predicate(self, name: str, args: tuple[str, ...], state: Any) -> bool:
         """The planner's ``external`` callable: ask the plugins; no answer or a raising plugin is a PluginError."""

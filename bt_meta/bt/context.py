@@ -70,7 +70,9 @@ class RunContext:
         self.failure_records: list[dict[str, Any]] = []
         self.tick_count = 0
         self.steps_started = 0
-        self._trace = bool(plugins and plugins.implements("bt_meta_trace_event"))
+        # Which hooks anyone implements, fixed for the run: monitors skip the others without asking.
+        self.hooks: frozenset[str] = frozenset() if plugins is None else plugins.implemented_hooks()
+        self._trace = "bt_meta_trace_event" in self.hooks
         self._external = None if plugins is None else plugins.external_predicate
 
     # -- blackboard ---------------------------------------------------------------------------------------------
@@ -167,7 +169,7 @@ class RunContext:
         index = len(self.failure_records)
         self._store(failure, notify=True)
         plugins = self.plugins
-        if plugins is not None and plugins.implements("bt_meta_on_failure"):
+        if plugins is not None and "bt_meta_on_failure" in self.hooks:
             result = plugins.call("bt_meta_on_failure", failure=failure, context=context)
             if result.results:
                 failure.evidence.setdefault("meta", {}).update({name: value for name, value in result.results})

@@ -154,10 +154,13 @@ class Monitor(py_trees.decorators.Decorator):
 
     def stop(self, new_status: Status) -> None:
         # Lean version of Decorator.stop (no debug formatting on the tick path).
-        if new_status is Status.INVALID:
-            self.decorated.stop(new_status)
-        elif self.decorated.status is _RUNNING:
-            self.decorated.stop(Status.INVALID)
+        child = self.decorated
+        if new_status is Status.INVALID or child.status is _RUNNING:
+            if self._inline:
+                child.terminate(Status.INVALID)
+                child.status = Status.INVALID
+            else:
+                child.stop(Status.INVALID)
         self.status = new_status
 
     # -- before -------------------------------------------------------------------------------------------------
@@ -210,17 +213,17 @@ class Monitor(py_trees.decorators.Decorator):
     # -- after --------------------------------------------------------------------------------------------------
 
     def _after_success(self, run: RunContext) -> Status:
-        plugins = run.plugins
-        observations: dict[str, Any] = {}
-        context = None
-        if plugins is not None and (plugins.implements("bt_meta_observe")
-                                    or plugins.implements("bt_meta_expectations")):
+        hooks = run.hooks
+        observe = "bt_meta_observe" in hooks
+        expect = "bt_meta_expectations" in hooks
+        if observe or expect:
             context = self._step_context(run)
             internal = None
-            if plugins.implements("bt_meta_observe"):
+            observations: dict[str, Any] = {}
+            if observe:
                 observations, internal = self._observe(run, context)
             mismatches: list[Comparison] = []
-            if internal is None and plugins.implements("bt_meta_expectations"):
+            if internal is None and expect:
                 mismatches, internal = self._compare(run, context, observations)
             self._update_belief(run, observations)
             if internal is not None:
@@ -302,8 +305,7 @@ class Monitor(py_trees.decorators.Decorator):
         else:
             failure = reported
             failure.node_name = failure.node_name or self.decorated.name
-        plugins = run.plugins
-        if plugins is not None and plugins.implements("bt_meta_observe"):
+        if "bt_meta_observe" in run.hooks:
             observations, internal = self._observe(run, context)
             self._update_belief(run, observations)
             if internal is not None:
@@ -343,7 +345,7 @@ class Monitor(py_trees.decorators.Decorator):
     def _classify(self, run: RunContext, failure: Failure, mismatches: list[Comparison],
                   context: StepContext) -> None:
         plugins = run.plugins
-        if plugins is None or not plugins.implements("bt_meta_classify_failure"):
+        if plugins is None or "bt_meta_classify_failure" not in run.hooks:
             return
         result = plugins.call("bt_meta_classify_failure", failure=failure, mismatches=mismatches, context=context)
         self._contain(run, result, context)

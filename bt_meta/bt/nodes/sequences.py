@@ -4,7 +4,8 @@ Offers:
 
 * :class:`Sequence` -- resumes at the RUNNING child; on FAILURE resets every child and restarts at 0 next time
 * :class:`SequenceWithMemory` -- resumes at the RUNNING child and, after a FAILURE, at the child that failed
-  (BT.CPP keeps the index even when halted)
+  (BT.CPP keeps the index even when halted); inside a tree with a wake-up signal it ends the tick with RUNNING
+  after each child that finished synchronously (BT.CPP 4.8 does, see :mod:`bt_meta.bt.nodes.loops`)
 * :class:`ReactiveSequence` -- re-ticks every child from 0 on every tick; a RUNNING child halts all the others
 
 py_trees' ``Sequence(memory=True)`` resumes at the RUNNING child but restarts at 0 after a failure, like BT.CPP's
@@ -59,6 +60,7 @@ class SequenceWithMemory(ControlNode):
     def execute(self) -> TickGenerator:
         self.status = Status.RUNNING
         while self.current_child_idx < len(self.children):
+            previous = self.children[self.current_child_idx].status
             child_status = yield from self.tick_child(self.current_child_idx)
             if child_status == Status.RUNNING:
                 return Status.RUNNING
@@ -66,6 +68,10 @@ class SequenceWithMemory(ControlNode):
                 self.reset_children(self.current_child_idx)
                 return Status.FAILURE
             self.current_child_idx += 1
+            # BT.CPP 4.8 yields after a child that finished synchronously, whether or not it is async.
+            if self.requires_wake_up() and previous == Status.INVALID and self.current_child_idx < len(self.children):
+                self.emit_wake_up()
+                return Status.RUNNING
         self.reset_children()
         self.current_child_idx = 0
         return Status.SUCCESS

@@ -19,9 +19,19 @@ from bt_meta.bt.nodes.base import DecoratorNode, TickGenerator
 class SubTree(DecoratorNode):
     """BT.CPP ``SubTree``; ``tree_id`` is the ``<BehaviorTree ID>`` it instantiates."""
 
-    def __init__(self, name: str, child: py_trees.behaviour.Behaviour, tree_id: str) -> None:
+    def __init__(
+        self, name: str, child: py_trees.behaviour.Behaviour, tree_id: str, init: dict[str, str] | None = None
+    ) -> None:
         super().__init__(name, child)
         self.tree_id = tree_id
+        # Literal remappings (``<SubTree ID="X" speed="3"/>``) written into the private scope before the first
+        # tick unless already there (BT.CPP writes them when the tree is created).
+        self.init_values = dict(init or {})
+
+    def initialise(self) -> None:
+        for key, value in self.init_values.items():
+            if not py_trees.blackboard.Blackboard.exists(key):
+                py_trees.blackboard.Blackboard.set(key, value)
 
     def execute(self) -> TickGenerator:
         self.status = Status.RUNNING

@@ -33,8 +33,7 @@ def tick_exactly_once(root: py_trees.behaviour.Behaviour) -> Status:
 
 def tick_once(root: py_trees.behaviour.Behaviour) -> Status:
     signal: WakeUpSignal | None = getattr(root, "bt_wake_up", None)
-    if signal is not None:
-        signal.consume()
+    # Like BT.CPP, a signal left pending by an earlier tick is not cleared first: it causes one re-tick.
     root.tick_once()
     while root.status == Status.RUNNING and signal is not None and signal.consume():
         root.tick_once()

@@ -50,6 +50,8 @@ class SimSkill:
     """One execution of a skill on a :class:`~bt_meta.world.sim_world.SimWorld`, advanced tick by tick."""
 
     name = "skill"
+    spec: dict[str, Any] = {}
+    """The grounding file's entry for the primitive this skill runs (options such as ``frame`` or ``mode``)."""
 
     def __init__(self, world: SimWorld, arm: str = "right") -> None:
         self.world = world

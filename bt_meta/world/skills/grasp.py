@@ -42,8 +42,6 @@ class Grasp(SimSkill):
         self.release: bool | None = None
         self._done = False
 
-    spec: dict[str, Any] = {}
-
     def ground(self, args: tuple[str, ...]) -> None:
         if len(args) > 1:
             raise SkillAbort(FailureKind.INTERNAL, f"grasp takes at most one object, got {list(args)}")

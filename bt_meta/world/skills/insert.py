@@ -37,8 +37,6 @@ class Insert(PhasedSkill):
     """Put ``part``'s insertable end into ``target``'s hole feature."""
 
     name = "insert"
-    spec: dict[str, Any] = {}
-
     def __init__(self, world: Any, arm: str = "right", *, approach_height: float = 0.10, tolerance: float = 0.005,
                  angle_tolerance: float = math.radians(15.0)) -> None:
         super().__init__(world, arm)

@@ -62,8 +62,6 @@ class Place(PhasedSkill):
     """Pick ``block`` and put it down at a point of the grounding frame."""
 
     name = "place"
-    spec: dict[str, Any] = {}
-
     def __init__(self, world: Any, arm: str = "right", *, approach_height: float = 0.08, clearance: float = 0.002,
                  tolerance: float = 0.01) -> None:
         super().__init__(world, arm)

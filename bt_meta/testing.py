@@ -22,6 +22,7 @@ A monitored action reports its Monitor's status (what the tree sees); pass ``raw
 from __future__ import annotations
 
 import re
+import shutil
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
@@ -71,6 +72,7 @@ class TreeHarness:
         self.history: list[dict[str, Any]] = []
         self._last: dict[str, Status] = {}
         self._by_name: dict[str, list[py_trees.behaviour.Behaviour]] = {}
+        self._temporary: Path | None = None
         for behaviour in root.iterate():
             self._by_name.setdefault(behaviour.name, []).append(behaviour)
         run.install()
@@ -124,7 +126,13 @@ class TreeHarness:
         folder = Path(tempfile.mkdtemp(prefix="bt_meta_harness_"))
         path = folder / f"tree{suffix}"
         path.write_text(text, encoding="utf-8")
-        return cls.from_file(path, problem, **kwargs)
+        try:
+            harness = cls.from_file(path, problem, **kwargs)
+        except BaseException:
+            shutil.rmtree(folder, ignore_errors=True)
+            raise
+        harness._temporary = folder
+        return harness
 
     # -- ticking ------------------------------------------------------------------------------------------------
 
@@ -223,7 +231,11 @@ class TreeHarness:
         return self.run.world
 
     def close(self) -> None:
+        """Clear bt-meta's blackboard keys and remove the temporary file of :meth:`from_text`."""
         clear_blackboard()
+        if self._temporary is not None:
+            shutil.rmtree(self._temporary, ignore_errors=True)
+            self._temporary = None
 
 
 # -- pytest fixtures ------------------------------------------------------------------------------------------------
@@ -243,15 +255,21 @@ if pytest is not None:
         clear_blackboard()
 
     @pytest.fixture
-    def bt_harness(bt_blackboard: Any) -> Callable[..., TreeHarness]:
-        """Factory: ``bt_harness(path_or_text, problem=None, **options)`` -> :class:`TreeHarness`."""
+    def bt_harness(bt_blackboard: Any) -> Iterator[Callable[..., TreeHarness]]:
+        """Factory: ``bt_harness(path_or_text, problem=None, **options)`` -> :class:`TreeHarness` (closed after)."""
+        made: list[TreeHarness] = []
 
         def make(source: str | Path, problem: str | None = None, **options: Any) -> TreeHarness:
             if isinstance(source, Path) or ("\n" not in str(source) and Path(str(source)).is_file()):
-                return TreeHarness.from_file(source, problem, **options)
-            return TreeHarness.from_text(str(source), problem, **options)
+                harness = TreeHarness.from_file(source, problem, **options)
+            else:
+                harness = TreeHarness.from_text(str(source), problem, **options)
+            made.append(harness)
+            return harness
 
-        return make
+        yield make
+        for harness in made:
+            harness.close()
 
     @pytest.fixture
     def bt_plugins() -> Callable[..., Any]:

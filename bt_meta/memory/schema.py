@@ -191,6 +191,7 @@ def _v3(connection: sqlite3.Connection) -> None:
                  id INTEGER PRIMARY KEY,
                  created TEXT NOT NULL,
                  domain TEXT NOT NULL,
+                 domain_path TEXT,
                  task TEXT NOT NULL,
                  method TEXT NOT NULL UNIQUE,
                  precondition TEXT NOT NULL,

@@ -23,6 +23,7 @@ Offers:
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from collections.abc import Callable, Iterable
@@ -180,7 +181,7 @@ class MetaExecutor:
         while True:
             failures, status = self._segment(run, plan_state, registry, domain, report, started)
             if status is Status.SUCCESS:
-                plan_state = PlanState(plan_state.tree, len(plan_state.steps()), plan_state.committed)
+                plan_state = dataclasses.replace(plan_state, cursor=len(plan_state.steps()))
                 failures = [f for f in (v(self.world, run, plan_state) for v in self.verifiers) if f is not None]
                 for failure in failures:
                     run.record_failure(failure)

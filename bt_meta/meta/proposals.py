@@ -43,7 +43,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -93,6 +93,9 @@ class PlanState:
     tree: DecompositionTree
     cursor: int = 0
     committed: list[Step] = field(default_factory=list)
+    unguarded: frozenset[str] = frozenset()
+    """Compound nodes whose method precondition is not checked again: a repair changed steps below them, knowingly
+    departing from the method's bindings (e.g. another arm than the method's precondition chose)."""
 
     def steps(self) -> list[DecompositionNode]:
         return self.tree.primitives()
@@ -116,7 +119,7 @@ class PlanState:
         """The steps from the cursor on, with their ancestors; an ancestor part of which already ran loses its
         method, so the compiled tree does not check its precondition again (it was checked when it started)."""
         keep: set[str] = set()
-        touched: set[str] = set()
+        touched: set[str] = set(self.unguarded)
         for node in self.steps():
             ancestors = [a.id for a in self.tree.ancestors(node.id)]
             if node.step is not None and node.step < self.cursor:
@@ -214,28 +217,29 @@ def apply_proposal(
     changes = proposal.changes or {}
     steps = plan_state.steps()
     if kind == RETRY:
-        return PlanState(plan_state.tree, failed_step, list(plan_state.committed)), f"retry step {failed_step}"
+        return dataclasses.replace(plan_state, cursor=failed_step), f"retry step {failed_step}"
     if kind == REWRITE_ARGS:
         step = _int(changes, "step", failed_step)
         if step < failed_step:
             raise ProposalError(f"rewrite_args of step {step} before the failed step {failed_step}: use backtrack")
         tree = copy_tree(plan_state.tree)
         _rewrite(tree, domain, step, changes.get("args", ()))
-        return PlanState(tree, failed_step, list(plan_state.committed)), f"step {step} now {_call(tree, step)}"
+        return _changed(plan_state, tree, failed_step, [step]), f"step {step} now {_call(tree, step)}"
     if kind == BACKTRACK:
         to_step = _int(changes, "to_step")
         if not 0 <= to_step <= failed_step:
             raise ProposalError(f"backtrack to step {to_step}: must be between 0 and the failed step {failed_step}")
         tree = copy_tree(plan_state.tree)
-        rewritten = []
+        rewritten, changed_steps = [], []
         for key, args in dict(changes.get("args") or {}).items():
             step = _int({"step": key}, "step")
             if step < to_step:
                 raise ProposalError(f"backtrack to step {to_step} cannot change the earlier step {step}")
             _rewrite(tree, domain, step, args)
+            changed_steps.append(step)
             rewritten.append(f"step {step} now {_call(tree, step)}")
         account = f"backtrack to step {to_step}" + (f"; {'; '.join(rewritten)}" if rewritten else "")
-        return PlanState(tree, to_step, list(plan_state.committed)), account
+        return _changed(plan_state, tree, to_step, changed_steps), account
     if kind == SUBSTITUTE:
         mapping = {str(k): str(v) for k, v in dict(changes.get("mapping") or {}).items()}
         if not mapping:
@@ -244,23 +248,24 @@ def apply_proposal(
         if not 0 <= from_step <= failed_step:
             raise ProposalError(f"substitute from step {from_step}: must be between 0 and the failed step")
         tree = copy_tree(plan_state.tree)
-        changed = 0
+        changed_steps = []
         for node in tree.primitives():
             if node.step is None or node.step < from_step:
                 continue
             new_task = (node.task[0], *(mapping.get(a, a) for a in node.task[1:]))
             if new_task != node.task:
-                changed += 1
+                changed_steps.append(node.step)
                 _rewrite(tree, domain, node.step, new_task[1:])
         for node in tree.walk():  # compound nodes entirely after from_step: keep their labels truthful
             if node.kind == "compound" and all(p.step is not None and p.step >= from_step
                                                for p in tree.primitives(node.id)):
                 node.task = (node.task[0], *(mapping.get(a, a) for a in node.task[1:]))
                 node.bindings = {k: mapping.get(v, v) for k, v in node.bindings.items()}
-        if not changed:
+        if not changed_steps:
             raise ProposalError(f"substitute {mapping}: no step from {from_step} on uses these objects")
         pairs = ", ".join(f"{k} -> {v}" for k, v in mapping.items())
-        return PlanState(tree, from_step, list(plan_state.committed)), f"substitute {pairs} in {changed} step(s)"
+        account = f"substitute {pairs} in {len(changed_steps)} step(s)"
+        return _changed(plan_state, tree, from_step, changed_steps), account
     if kind == SPLICE:
         start = _int(changes, "start", failed_step)
         end = _int(changes, "end", start + 1)
@@ -295,7 +300,8 @@ def apply_proposal(
         siblings[position:position] = new_ids
         _renumber(tree)
         calls = ", ".join(_call(tree, s) for s in range(start, start + len(actions)))
-        return PlanState(tree, start, list(plan_state.committed)), f"steps {start}..{end - 1} replaced by {calls}"
+        account = f"steps {start}..{end - 1} replaced by {calls}"
+        return _changed(plan_state, tree, start, range(start, start + len(actions))), account
     if kind == REPLAN:
         from bt_meta.htn import replan
 
@@ -308,7 +314,9 @@ def apply_proposal(
         if result.status != "success" or result.tree is None:
             raise ProposalError(f"replan from {node_id}: {result.status}: {result.message}")
         kept = int(result.stats.get("kept_steps", 0))
-        return PlanState(result.tree, kept, list(plan_state.committed)), result.message
+        kept_ids = set(result.tree.nodes)
+        return PlanState(result.tree, kept, list(plan_state.committed),
+                         frozenset(i for i in plan_state.unguarded if i in kept_ids)), result.message
     if kind == REPLAN_SCRATCH:
         from bt_meta.htn import plan
 
@@ -324,6 +332,16 @@ def apply_proposal(
                    f"{time.perf_counter() - started:.3f} s")
         return PlanState(result.tree, 0, [*plan_state.committed, *done]), account
     raise ProposalError(f"unknown proposal kind {kind!r}; expected one of: {', '.join(PROPOSAL_KINDS)}")
+
+
+def _changed(plan_state: PlanState, tree: DecompositionTree, cursor: int, steps: Iterable[int]) -> PlanState:
+    """The next plan state after steps ``steps`` of ``tree`` changed: their ancestors lose their guards."""
+    wanted = set(steps)
+    unguarded = set(plan_state.unguarded)
+    for node in tree.primitives():
+        if node.step in wanted:
+            unguarded.update(a.id for a in tree.ancestors(node.id))
+    return PlanState(tree, cursor, list(plan_state.committed), frozenset(unguarded))
 
 
 def _call(tree: DecompositionTree, step: int) -> str:

@@ -92,6 +92,8 @@ class Refinement:
     problem: str | None = None
     variant: str | None = None
     repair: dict[str, Any] = field(default_factory=dict)
+    domain_path: str | None = None
+    """The task file the domain was loaded from (absolute), so ``bt-meta refinements export`` can find it."""
     id: int | None = None
     created: str = ""
 
@@ -156,12 +158,13 @@ class RefinementStore:
         self.tolerance = dict(tolerance or DEFAULT_TOLERANCE)
 
     @classmethod
-    def open(cls, path: str | Path, *, readonly: bool = False,
+    def open(cls, path: str | Path, *, readonly: bool = False, create: bool = True,
              tolerance: dict[str, float] | None = None) -> RefinementStore:
-        """Open the memory file at ``path`` (created and migrated unless ``readonly``; errors name the path)."""
+        """Open the memory file at ``path`` (created unless ``create=False`` or ``readonly``, migrated unless
+        ``readonly``); errors are :class:`~bt_meta.memory.MemoryStoreError` naming the path."""
         from bt_meta.memory import EpisodicMemory, MemoryStoreError
 
-        memory = EpisodicMemory.open(path, readonly=readonly)  # checks, creates and migrates the file
+        memory = EpisodicMemory.open(path, readonly=readonly, create=create)  # checks, creates, migrates
         resolved = memory.path
         memory.close()
         try:
@@ -202,9 +205,10 @@ class RefinementStore:
         refinement.created = refinement.created or datetime.now(timezone.utc).isoformat(timespec="seconds")
         try:
             cursor = self._connection.execute(
-                "INSERT INTO refinements (created, domain, task, method, precondition, subtasks, poses, tolerance,"
-                " problem, variant, repair) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                (refinement.created, refinement.domain, refinement.task, refinement.method, refinement.precondition,
+                "INSERT INTO refinements (created, domain, domain_path, task, method, precondition, subtasks, poses,"
+                " tolerance, problem, variant, repair) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (refinement.created, refinement.domain, refinement.domain_path, refinement.task, refinement.method,
+                 refinement.precondition,
                  json.dumps(refinement.subtasks), json.dumps(refinement.poses), json.dumps(refinement.tolerance),
                  refinement.problem, refinement.variant, json.dumps(refinement.repair, default=str)))
         except sqlite3.IntegrityError:
@@ -235,8 +239,10 @@ class RefinementStore:
         existing = [r for r in self.list(domain=domain.name) if r.method == method]
         if existing:
             return existing[0]
+        source = getattr(domain, "path", None)
+        domain_path = str(Path(source).resolve()) if source and not source.startswith("<") else None
         refinement = Refinement(
-            domain=domain.name, task=atom_text(task), method=method,
+            domain=domain.name, domain_path=domain_path, task=atom_text(task), method=method,
             precondition=pose_precondition(poses, self.tolerance), subtasks=subtasks, poses=poses,
             tolerance=dict(self.tolerance), problem=getattr(problem, "name", None), variant=variant,
             repair={"attempts": len(report.attempts), "kinds": [a.kind for a in report.attempts],
@@ -257,13 +263,14 @@ class RefinementStore:
             where.append("task = ?")
             params.append(task)
         sql = ("SELECT id, created, domain, task, method, precondition, subtasks, poses, tolerance, problem, variant,"
-               " repair FROM refinements" + (" WHERE " + " AND ".join(where) if where else "") + " ORDER BY id DESC")
+               " repair, domain_path FROM refinements" + (" WHERE " + " AND ".join(where) if where else "")
+               + " ORDER BY id DESC")
         refinements = []
         for row in self._query(sql, params):
             refinements.append(Refinement(
                 id=row[0], created=row[1], domain=row[2], task=row[3], method=row[4], precondition=row[5],
                 subtasks=json.loads(row[6]), poses=json.loads(row[7]), tolerance=json.loads(row[8]),
-                problem=row[9], variant=row[10], repair=json.loads(row[11])))
+                problem=row[9], variant=row[10], repair=json.loads(row[11]), domain_path=row[12]))
         return refinements
 
     def apply(self, domain: Any, problem: Any = None) -> tuple[Any, list[str]]:

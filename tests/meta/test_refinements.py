@@ -1,0 +1,184 @@
+"""Learned refinements: saved after a repaired run, exported as a task file that loads, used first next time."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+from bt_meta_plugins.refinement_predicates import pose_within
+
+from bt_meta.bt.failures import RepairProposal
+from bt_meta.cli import main
+from bt_meta.htn import load_task_file, load_task_text, plan
+from bt_meta.meta import MetaExecutor, RefinementError, RefinementStore, task_file_yaml
+from bt_meta.meta.refinements import Refinement, domain_with_pose_predicate
+from bt_meta.plugins import hookimpl
+from bt_meta.resources import trees_dir
+
+from .conftest import NOMINAL_POSE, VARIANT_POSE, PosedWorld, make_host
+
+
+class GraspFromTheOtherSide:
+    """A stand-in for pose backtracking: after a misaligned attachment, go back to the MoveTo and use g_alt."""
+
+    @hookimpl
+    def bt_meta_propose_repairs(self, failure: Any, context: Any) -> list[RepairProposal] | None:
+        if failure.action != "Attach" or failure.kind.value != "unexpected_configuration":
+            return None
+        plan = failure.evidence["plan"]
+        move = max(s["step"] for s in plan if s["action"] == "MoveTo" and s["step"] < failure.step)
+        return [RepairProposal("backtrack", 0.9, "grasp pose that fits the part's pose",
+                               changes={"to_step": move, "args": {str(move): ["g_alt"]}},
+                               evidence={"R_p": failure.evidence.get("R_p")})]
+
+
+def _run(attach, pose, store, **options):
+    problem = attach.problem("attach")
+    world = PosedWorld(attach.domain, problem, pose)
+    host = make_host(("backtrack_stand_in", GraspFromTheOtherSide()))
+    return MetaExecutor(attach.domain, problem, world, host, refinements=store, variant="upside down",
+                        **options).run(), world
+
+
+def test_a_repaired_variant_is_saved_and_the_next_run_needs_no_repair(attach, tmp_path):
+    with RefinementStore.open(tmp_path / "memory.sqlite") as store:
+        first, _ = _run(attach, VARIANT_POSE, store)
+        assert first.ok, first.stop_reason
+        assert [(a.kind, a.proposal["action"], a.change) for a in first.attempts] == [
+            ("unexpected_configuration", "backtrack", "backtrack to step 0; step 0 now MoveTo(g_alt)")]
+        saved = first.refinement_saved
+        assert saved is not None and saved["id"] == 1
+        assert saved["task"] == "MagneticAttach(active, reference)"
+        assert saved["subtasks"] == ["MoveTo(g_alt)", "Grasp(active)", "Attach(active, reference)"]
+        assert saved["poses"]["active"] == VARIANT_POSE
+        assert saved["precondition"].startswith("pose_within(active, 0.6, -0.2, 0.8, 3.14159, 0, 0, 0.02, 0.1)")
+        assert saved["repair"]["kinds"] == ["unexpected_configuration"]
+
+        second, world = _run(attach, VARIANT_POSE, store)
+        assert second.ok and second.attempts == [] and second.failures == []
+        assert [(s.record()["action"], s.record()["args"]) for s in world.executed] == [
+            ("MoveTo", ["g_alt"]), ("Grasp", ["active"]), ("Attach", ["active", "reference"])]
+        assert second.refinements_used == [saved["method"]]
+        assert second.initial_plan == [["MoveTo", "g_alt"], ["Grasp", "active"], ["Attach", "active", "reference"]]
+        assert second.refinement_saved is None
+        assert len(store.list()) == 1
+
+        # the nominal pose fails the refinement's pose check: the nominal method is planned, and works
+        nominal, _ = _run(attach, NOMINAL_POSE, store)
+        assert nominal.ok and nominal.attempts == [] and nominal.refinements_used == []
+        assert nominal.initial_plan[0] == ["MoveTo", "g_nominal"]
+
+
+def test_without_a_store_every_run_repairs_again(attach):
+    first, _ = _run(attach, VARIANT_POSE, None)
+    second, _ = _run(attach, VARIANT_POSE, None)
+    assert len(first.attempts) == len(second.attempts) == 1
+
+
+def test_retries_alone_are_not_saved(blocks, tmp_path):
+    from bt_meta.world.fake import FakeWorld
+
+    problem = blocks.problem("two")
+    with RefinementStore.open(tmp_path / "m.sqlite") as store:
+        world = FakeWorld(blocks.domain, problem, faults=["pick#1=fail:physical"])
+        report = MetaExecutor(blocks.domain, problem, world, make_host(), refinements=store).run()
+        assert report.ok and len(report.attempts) == 1
+        assert report.refinement_saved == {"saved": False, "reason": "the repairs did not change the plan (retries "
+                                                                     "only): nothing new to keep"}
+        assert store.list() == []
+
+
+def test_the_export_is_a_task_file_that_loads_and_plans_with_the_refinement_first(attach, tmp_path):
+    with RefinementStore.open(tmp_path / "memory.sqlite") as store:
+        _run(attach, VARIANT_POSE, store)
+        text = store.export_yaml(attach.domain, attach.problems.values())
+    loaded = load_task_text(text, "<exported>")
+    domain = loaded.domain
+    assert domain.methods[0].name.startswith("refined_MagneticAttach_")
+    assert domain.methods[1].name == "nominal"
+    assert "pose_within" in domain.external
+    seen: list[tuple[str, tuple[str, ...]]] = []
+
+    def external(name, args, state):
+        seen.append((name, args))
+        return pose_within(VARIANT_POSE, args) if args[0] == "active" else True
+
+    result = plan(domain, loaded.problem("attach"), external=external)
+    assert [(a.name, a.args) for a in result.plan] == [("MoveTo", ("g_alt",)), ("Grasp", ("active",)),
+                                                       ("Attach", ("active", "reference"))]
+    assert seen and seen[0][0] == "pose_within"
+    result = plan(domain, loaded.problem("attach"), external=lambda name, args, state: False)
+    assert result.plan[0].args == ("g_nominal",)
+
+
+@pytest.mark.parametrize("name", ["letters.yaml", "magnetic_attach.yaml", "housing_insertion.yaml"])
+def test_the_task_file_writer_round_trips_the_shipped_task_files(name):
+    original = load_task_file(trees_dir() / name)
+    again = load_task_text(task_file_yaml(original.domain, original.problems.values()), f"<{name}>")
+    assert list(again.domain.primitives) == list(original.domain.primitives)
+    assert [m.name for m in again.domain.methods] == [m.name for m in original.domain.methods]
+    for problem_name, problem in original.problems.items():
+        copy = again.problem(problem_name)
+        assert (copy.state, copy.tasks, copy.goal) == (problem.state, problem.tasks, problem.goal)
+        try:
+            expected = plan(original.domain, problem, max_seconds=5)
+        except Exception as error:  # external predicates without a plugin: both must fail the same way
+            with pytest.raises(type(error)):
+                plan(again.domain, copy, max_seconds=5)
+            continue
+        got = plan(again.domain, copy, max_seconds=5)
+        assert [(a.name, a.args) for a in got.plan] == [(a.name, a.args) for a in expected.plan]
+
+
+def test_a_refinement_that_does_not_fit_its_domain_is_a_clear_error(attach):
+    broken = Refinement(domain="attach", task="MagneticAttach(active, reference)", method="refined_x",
+                        precondition="true", subtasks=["Fly(active)"])
+    with pytest.raises(RefinementError, match=r"refinement refined_x does not fit domain attach: .*Fly"):
+        broken.to_method(domain_with_pose_predicate(attach.domain))
+
+
+def test_a_method_name_is_stored_once(attach, tmp_path):
+    refinement = Refinement(domain="attach", task="MagneticAttach(active, reference)", method="refined_y",
+                            precondition="true", subtasks=["MoveTo(g_alt)"])
+    with RefinementStore.open(tmp_path / "m.sqlite") as store:
+        store.add(refinement)
+        with pytest.raises(RefinementError, match="a refinement named refined_y is already stored"):
+            store.add(Refinement(**{**refinement.to_dict(), "id": None}))
+
+
+def test_cli_lists_and_exports_refinements(attach, tmp_path, capsys):
+    memory = tmp_path / "memory.sqlite"
+    with RefinementStore.open(memory) as store:
+        first, _ = _run(attach, VARIANT_POSE, store)
+    task_path = tmp_path / "attach.yaml"
+    from .conftest import ATTACH
+
+    task_path.write_text(ATTACH, encoding="utf-8")
+    assert main(["refinements", "ls", "--memory", str(memory)]) == 0
+    out = capsys.readouterr().out
+    assert first.refinement_saved["method"] in out and "MagneticAttach(active, reference)" in out
+    assert main(["refinements", "ls", "--json", "--memory", str(memory)]) == 0
+    import json
+
+    listed = json.loads(capsys.readouterr().out)
+    assert listed[0]["subtasks"][0] == "MoveTo(g_alt)"
+    out_file = tmp_path / "refined.yaml"
+    assert main(["refinements", "export", str(task_path), "--memory", str(memory), "-o", str(out_file)]) == 0
+    loaded = load_task_file(out_file)
+    assert loaded.domain.methods[0].name == first.refinement_saved["method"]
+    assert set(loaded.problems) == {"attach"}
+
+
+def test_cli_errors(tmp_path, capsys):
+    missing = tmp_path / "none.sqlite"
+    assert main(["refinements", "ls", "--memory", str(missing)]) == 1  # like `bt-meta memory ls`
+    assert "no episodic memory here" in capsys.readouterr().err
+    assert not missing.exists()
+    task = tmp_path / "t.yaml"
+    task.write_text("domain: [oops", encoding="utf-8")
+    with RefinementStore.open(tmp_path / "m.sqlite"):
+        pass
+    assert main(["refinements", "export", str(task), "--memory", str(tmp_path / "m.sqlite")]) == 2
+    assert "t.yaml:1:" in capsys.readouterr().err
+    assert main(["refinements", "export", "--memory", str(tmp_path / "m.sqlite")]) == 2
+    assert "no refinements to export in" in capsys.readouterr().err

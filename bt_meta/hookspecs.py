@@ -84,11 +84,14 @@ def bt_meta_external_predicate(name: str, args: tuple[str, ...], state: Any) -> 
 def bt_meta_trace_event(event: dict[str, Any]) -> None:
     """Receive one trace event of a run (episodic memory, loggers, progress displays implement this).
 
-    ``event["type"]`` is one of ``"run_start"`` (with ``task_file``, ``problem``, ``state``), ``"tick"``
+    ``event["type"]`` is one of ``"run_start"`` (with ``task_file``, ``problem``, ``state``; emitted by whoever
+    drives the run: ``bt-meta tick``, the harness's ``from_file``, the repair executor), ``"tick"``
     (``tick``, ``status``), ``"step_start"`` / ``"step_end"`` (the step's ``action``, ``args``, ``node_id``,
-    ``step``; ``step_end`` adds ``status``, ``state`` (sorted atoms) and ``observations``), ``"failure"``
-    (``failure``: a :meth:`Failure.to_dict` record) and ``"run_end"`` (``status``, ``ticks``). Every event has
-    ``tick``. Return nothing; an exception is recorded as an ``internal`` failure and the run goes on.
+    ``step``; ``step_end`` adds ``status``, ``state`` (sorted atom texts) and ``failure``), ``"uncompared"``
+    (an expectation no plugin compared), ``"failure"`` (``failure``: a :meth:`Failure.to_dict` record) and
+    ``"run_end"`` (``status``, ``ticks``). Other drivers add their own types (the executor's ``"repair"``);
+    ignore types you do not know. Every event has ``tick``. Return nothing; an exception is recorded as an
+    ``internal`` failure and the run goes on.
     """
 
 

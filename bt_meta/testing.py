@@ -115,7 +115,9 @@ class TreeHarness:
             world = made.first
         run = RunContext(world, plugins, domain=compiled.domain, problem=compiled.problem,
                          task_file=compiled.task_file)
-        return cls(compiled.root, run, compiled)
+        harness = cls(compiled.root, run, compiled)
+        run.start()
+        return harness
 
     @classmethod
     def from_text(cls, text: str, problem: str | None = None, *, suffix: str | None = None,

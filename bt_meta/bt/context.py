@@ -116,6 +116,20 @@ class RunContext:
             # A broken trace plugin must not recurse into tracing its own failure.
             self._store(self._internal(error, None), notify=False)
 
+    def start(self) -> None:
+        """Install the run and emit ``run_start`` (whoever drives a whole run calls this once)."""
+        self.install()
+        if self._trace:
+            problem = getattr(self.problem, "name", None)
+            self.emit("run_start", task_file=getattr(self.task_file, "path", None), problem=problem,
+                      state=[" ".join(atom) for atom in sorted(self._state)])
+
+    def finish(self, status: Any) -> None:
+        """Emit ``run_end`` with the root's final status."""
+        if self._trace:
+            self.emit("run_end", status=getattr(status, "value", status), ticks=self.tick_count,
+                      failures=len(self.failures))
+
     def contain(self, result: HookResult, context: StepContext | None) -> Failure | None:
         """Record every error of a safe hook call as an ``internal`` failure; return the first (or ``None``)."""
         first = None

@@ -80,6 +80,7 @@ def run(args: argparse.Namespace) -> int:
                 print(f"          failure {failure.summary()}")
         if status is not Status.RUNNING and not args.keep_ticking:
             break
+    harness.run.finish(status)
     final_state = sorted(" ".join(a) for a in harness.state)
     if args.json:
         print_json({

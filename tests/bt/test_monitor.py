@@ -221,7 +221,10 @@ def test_custom_expectation_kind_and_trace_events(harness):
     [failure] = h.failures
     assert failure.action == "put" and failure.message == "colour changed"
     types = [e["type"] for e in events]
-    assert types[:2] == ["step_start", "step_end"] and "failure" in types and types[-1] == "tick"
+    assert types[:3] == ["run_start", "step_start", "step_end"] and "failure" in types and types[-1] == "tick"
+    assert events[0]["problem"] == "two" and "on_table b0" in events[0]["state"]
+    h.run.finish(h.root.status)
+    assert events[-1] == {"type": "run_end", "tick": 1, "status": "FAILURE", "ticks": 1, "failures": 1}
     end = next(e for e in events if e["type"] == "step_end")
     assert end["action"] == "pick" and end["status"] == "SUCCESS" and "held(b0)" in end["state"]
 

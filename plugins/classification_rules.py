@@ -60,11 +60,15 @@ def _observed_objects(context: Any) -> set[str] | None:
     return set(objects) if objects else None
 
 
-def _known_objects(context: Any) -> set[str]:
+def _known_objects(context: Any, observed: set[str]) -> tuple[set[str], set[str]]:
+    """The problem's objects, and those of them the world should report: the objects of every type of which the
+    world reports at least one (cells, poses and other symbols are never observed)."""
     run = getattr(context, "run", None)
     problem = getattr(run, "problem", None)
     objects = getattr(problem, "objects", None) or {}
-    return {name for names in objects.values() for name in names}
+    known = {name for names in objects.values() for name in names}
+    observable = {name for names in objects.values() if observed.intersection(names) for name in names}
+    return known, observable
 
 
 def classify(failure: Any, mismatches: list[Any], context: Any) -> FailureKind | None:
@@ -87,9 +91,9 @@ def classify(failure: Any, mismatches: list[Any], context: Any) -> FailureKind |
     atoms = _atoms(mismatches)
     observed = _observed_objects(context) if atoms else None
     if observed is not None:
-        known = _known_objects(context)
+        known, observable = _known_objects(context, observed)
         unknown = observed - known if known else set()
-        missing = {arg for _, args in atoms for arg in args if arg in known and arg not in observed}
+        missing = {arg for _, args in atoms for arg in args if arg in observable and arg not in observed}
         if missing and unknown:
             failure.evidence["missing_entities"] = sorted(missing)
             failure.evidence["unknown_entities"] = sorted(unknown)

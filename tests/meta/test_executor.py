@@ -50,14 +50,37 @@ def test_a_silent_failure_is_caught_by_the_monitor_classified_and_retried(blocks
 
 
 class StealAfterFirstPut:
-    """Someone takes block b1 off the table while the robot puts b0 down."""
+    """Someone takes block b1 off the table while the robot puts b0 down (and, if ``seen``, the robot sees it)."""
+
+    def __init__(self, seen: bool = False) -> None:
+        self.seen = seen
 
     @hookimpl
     def bt_meta_trace_event(self, event: dict[str, Any]) -> None:
         if event["type"] == "step_end" and event["action"] == "put" and event["status"] == "SUCCESS":
             from bt_meta.bt.context import current_run
 
-            current_run().world.apply_symbolic(add=[], delete=[("on_table", "b1")])
+            run = current_run()
+            run.world.apply_symbolic(add=[], delete=[("on_table", "b1")])
+            if self.seen:
+                run.state = run.world.symbolic_state()
+
+
+def test_a_method_guard_catches_a_precondition_the_robot_saw_change_and_its_node_is_replanned(blocks):
+    problem = blocks.problem("two")
+    world = FakeWorld(blocks.domain, problem)
+    report = MetaExecutor(blocks.domain, problem, world, make_host(("thief", StealAfterFirstPut(True)))).run()
+    assert report.ok, report.stop_reason
+    failure = report.failures[0]
+    # the guard of put_at(1, 0)'s method fails before its pick starts; the reasoner localises it to step 2
+    assert (failure["kind"], failure["node_id"], failure["step"]) == ("precondition", "n4", None)
+    assert failure["evidence"]["bindings"]["b"] == "b1"
+    assert failure["evidence"]["localisation"] == {"step": 2, "node_id": "n4", "ancestors": [
+        {"id": "n0", "task": ["draw"], "method": "draw_two"}]}
+    assert report.attempts[0].proposal["changes"] == {"node_id": "n4"}
+    assert [(a.proposal["action"], a.outcome) for a in report.attempts] == [("replan", "repaired")]
+    assert report.plan[2:] == [["pick", "b2"], ["put", "b2", "1", "0"]]
+    assert [s.record()["args"][0] for s in world.executed] == ["b0", "b0", "b2", "b2"]  # pick(b1) never started
 
 
 def test_a_precondition_failure_is_repaired_by_replanning_from_its_node(blocks):

@@ -2,7 +2,7 @@
 
 Plugins come from three places, loaded in this order (pluggy calls later-registered plugins first):
 
-1. built-ins of the framework itself (the fake world);
+1. built-ins of the framework itself (the fake world; the simulator world, imported only when asked for);
 2. the ``bt_meta`` entry-point group -- the shipped strategies (``bt_meta_plugins.*``) and any installed
    package's plugins;
 3. plugin folders: every ``*.py`` file (not ``_*.py``) in each ``--plugins DIR``, and the project's own folder.
@@ -50,6 +50,21 @@ __all__ = [
 
 ENTRY_POINT_GROUP = "bt_meta"
 BUILTIN_PLUGINS: tuple[tuple[str, str], ...] = (("fake_world", "bt_meta.world.fake"),)
+LAZY_WORLDS: dict[str, str] = {"sim": "bt_meta.world.sim_world"}
+
+
+class _LazyWorlds:
+    """Built-in plugin for worlds whose modules are heavy to import (the pybullet simulator): imported on demand."""
+
+    @hookimpl(trylast=True)
+    def bt_meta_make_world(self, name: str, domain: Any, problem: Any, options: dict[str, Any]) -> Any:
+        module_name = LAZY_WORLDS.get(name)
+        if module_name is None:
+            return None
+        import importlib
+
+        module = importlib.import_module(module_name)
+        return module.bt_meta_make_world(name=name, domain=domain, problem=problem, options=options)
 HOOK_NAMES: tuple[str, ...] = tuple(name for name in dir(hookspecs) if name.startswith("bt_meta_"))
 
 
@@ -228,6 +243,9 @@ class PluginHost:
         for name, module_name in BUILTIN_PLUGINS:
             if not self.manager.has_plugin(name):
                 self.register(importlib.import_module(module_name), name, source=f"builtin {module_name}")
+        if not self.manager.has_plugin("lazy_worlds"):
+            worlds = ", ".join(f"{world} ({module})" for world, module in LAZY_WORLDS.items())
+            self.register(_LazyWorlds(), "lazy_worlds", source=f"builtin: {worlds}, imported on first use")
 
     def load_entry_points(self, group: str = ENTRY_POINT_GROUP) -> int:
         """Load every entry point of ``group``; an entry point that fails to import is a :class:`PluginLoadError`."""

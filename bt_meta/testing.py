@@ -90,13 +90,17 @@ class TreeHarness:
         world: str | Any = "fake",
         faults: Iterable[Any] = (),
         ticks_per_skill: int | dict[str, int] = 1,
+        world_options: dict[str, Any] | None = None,
         plugins: Any = None,
         plugin_dirs: Iterable[str | Path] = (),
         entry_points: bool = True,
         extra_plugins: Iterable[tuple[str, Any]] = (),
     ) -> TreeHarness:
         """Load a task file or tree XML, build the world (``"fake"``, another name a plugin provides, a World
-        object, or ``None``) and a plugin host (given, or built-ins + entry points + folders + ``extra_plugins``)."""
+        object, or ``None``) and a plugin host (given, or built-ins + entry points + folders + ``extra_plugins``).
+
+        A named world gets ``options`` with ``faults``, ``ticks_per_skill``, ``task_file`` and ``world_options``.
+        """
         from bt_meta.bt.loading import load_runnable
         from bt_meta.plugins import create_plugin_host
 
@@ -105,7 +109,8 @@ class TreeHarness:
                                          plugins=extra_plugins)
         compiled = load_runnable(path, problem=problem, task_file=task_file, policy=policy, plugins=plugins)
         if isinstance(world, str):
-            options = {"faults": list(faults), "ticks_per_skill": ticks_per_skill}
+            options = {"faults": list(faults), "ticks_per_skill": ticks_per_skill,
+                       "task_file": getattr(compiled.task_file, "path", None), **(world_options or {})}
             made = plugins.call("bt_meta_make_world", name=world, domain=compiled.domain,
                                 problem=compiled.problem, options=options)
             if made.errors:

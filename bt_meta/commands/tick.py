@@ -3,7 +3,8 @@
 Offers:
 
 * :func:`register` -- adds ``tick FILE [--problem P] [--task-file T] [--policy] [--world fake] [--ticks N]
-  [--ticks-per-skill K] [--fault SPEC ...] [--keep-ticking] [--plugins DIR] [--json]``
+  [--ticks-per-skill K] [--fault SPEC ...] [--seed N] [--world-option K=V ...] [--keep-ticking] [--plugins DIR]
+  [--json]``
 
 FILE is a YAML task file (planned, then compiled) or a tree XML (its primitives come from ``--task-file``, by default
 the ``.yaml`` next to it). Ticking stops when the root finishes unless ``--keep-ticking``. Each tick prints the root
@@ -34,6 +35,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--ticks-per-skill", type=int, default=1, help="fake world: ticks each skill takes (1)")
     parser.add_argument("--fault", action="append", default=[], metavar="SPEC",
                         help="fake world fault ACTION[(ARGS)][#N]=fail[:KIND]|silent|raise (repeatable)")
+    parser.add_argument("--seed", type=int, default=0, help="seed for worlds that draw random numbers (0)")
+    parser.add_argument("--world-option", action="append", default=[], metavar="KEY=VALUE",
+                        help="extra option for the world plugin, e.g. variant=rotated (repeatable)")
     parser.add_argument("--keep-ticking", action="store_true", help="keep ticking after the root finished")
     parser.add_argument("--json", action="store_true", help="print one JSON object with every tick")
     add_plugin_arguments(parser)
@@ -56,10 +60,16 @@ def run(args: argparse.Namespace) -> int:
     if args.ticks_per_skill < 1:
         raise UserInputError("--ticks-per-skill must be at least 1")
     faults = [Fault.parse(spec) for spec in args.fault]
+    world_options: dict[str, Any] = {"seed": args.seed}
+    for item in args.world_option:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise UserInputError(f"bad --world-option {item!r}: expected KEY=VALUE")
+        world_options[key.strip()] = value.strip()
     plugins = plugin_host_from_args(args, args.file)
     harness = TreeHarness.from_file(args.file, args.problem, task_file=args.task_file, policy=args.policy,
                                     world=args.world, faults=faults, ticks_per_skill=args.ticks_per_skill,
-                                    plugins=plugins)
+                                    world_options=world_options, plugins=plugins)
     shown = {b.name for b in harness.root.iterate() if _shown(b.name, b)}
     ticks: list[dict[str, Any]] = []
     status = Status.INVALID

@@ -135,4 +135,26 @@ def test_plugins_fixture(bt_plugins):
             return None
 
     host = bt_plugins(("mine", Mine()), entry_points=False)
-    assert host.plugin_names() == ["fake_world", "mine"]
+    assert host.plugin_names() == ["fake_world", "lazy_worlds", "mine"]
+
+
+def test_world_plugins_get_the_task_file_and_options(tmp_path, bt_blackboard):
+    from bt_meta.world.fake import FakeWorld
+
+    seen = {}
+
+    class Probe:
+        @hookimpl
+        def bt_meta_make_world(self, name, domain, problem, options):
+            if name != "probe":
+                return None
+            seen.update(options)
+            return FakeWorld(domain, problem)
+
+    (tmp_path / "lamp.yaml").write_text(TASKS)
+    h = TreeHarness.from_file(tmp_path / "lamp.yaml", world="probe", world_options={"seed": 7, "variant": "x"},
+                              extra_plugins=[("probe", Probe())])
+    assert h.tick() is Status.SUCCESS
+    assert seen["task_file"].endswith("lamp.yaml") and seen["seed"] == 7 and seen["variant"] == "x"
+    assert seen["faults"] == [] and seen["ticks_per_skill"] == 1
+    h.close()

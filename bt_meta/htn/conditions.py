@@ -585,21 +585,137 @@ def match_clause(steps: Sequence[Step], state: State, env: dict[str, str], exter
     return _match_many(steps, state, env, external, axioms, derived_source)
 
 
+_DONE: Iterator[Any] = iter(())  # a test literal that passed: nothing more to try at its level
+
+
 def _match_many(steps: Sequence[Step], state: State, env: dict[str, str], external: ExternalFn | None,
                 axioms: Any, derived_source: Callable[[str], Any] | None) -> Iterator[dict[str, str]]:
-    """Iterative backtracking over the literals of a clause (no recursion)."""
+    """Iterative backtracking over the literals of a clause (no recursion).
+
+    One binding dict is updated in place: a level binds its free variables from each candidate fact and
+    unbinds them when it is exhausted; only complete matches are copied. Tests (``not``, ``==``, ``!=``,
+    ground atoms, external atoms) are evaluated once when their level opens.
+    """
+    env = dict(env)
     count = len(steps)
-    iters: list[Iterator[dict[str, str]]] = [iter(())] * count
-    iters[0] = iter(_step_results(steps[0], state, env, external, axioms, derived_source))
-    depth = 0
     last = count - 1
-    while depth >= 0:
-        result = next(iters[depth], None)
-        if result is None:
-            depth -= 1
+    iters: list[Any] = [None] * count
+    frees: list[Any] = [None] * count
+    fixeds: list[Any] = [None] * count
+    lengths = [0] * count
+    streamed = [False] * count
+    level = 0
+    while level >= 0:
+        it = iters[level]
+        if it is None:  # open the level
+            step = steps[level]
+            kind = step[0]
+            if kind in (POS, DPOS):
+                pred = step[1]
+                vals: list[Any] = [pred]
+                free: list[tuple[int, str, int]] | None = None
+                for arg in step[2]:
+                    if arg.__class__ is Var:
+                        name = arg.name
+                        value = env.get(name)
+                        if value is None:
+                            if free is None:
+                                free = []
+                            same = 0
+                            for position, other, _ in free:
+                                if other == name:
+                                    same = position
+                                    break
+                            free.append((len(vals), name, same))
+                            vals.append(None)
+                            continue
+                        vals.append(value)
+                    else:
+                        vals.append(arg)
+                if free is None:
+                    atom = tuple(vals)
+                    if kind == POS:
+                        ok = atom in state
+                    elif derived_source is not None:
+                        ok = atom in derived_source(pred)
+                    else:
+                        ok = axioms.holds(state, atom)
+                    if not ok:
+                        level -= 1
+                        continue
+                    iters[level] = _DONE
+                else:
+                    frees[level] = free
+                    if kind == DPOS and derived_source is None:
+                        iters[level] = iter(axioms.query(state, pred, step[2], env))
+                        streamed[level] = True
+                    else:
+                        source = state if kind == POS else derived_source(pred)  # type: ignore[misc]
+                        length = len(vals)
+                        for position in range(1, length):
+                            value = vals[position]
+                            if value is not None:
+                                pool: Iterable[Atom] = source.with_arg(pred, position, value)
+                                fixeds[level] = [(i, v) for i, v in enumerate(vals) if i > position and v is not None]
+                                break
+                        else:
+                            pool = source.atoms_of(pred)
+                            fixeds[level] = ()
+                        iters[level] = iter(pool)
+                        lengths[level] = length
+                        streamed[level] = False
+                    continue  # consume the first candidate below
+            else:
+                if not _step_results(step, state, env, external, axioms, derived_source):
+                    level -= 1
+                    continue
+                iters[level] = _DONE
+            # a passed test
+            if level == last:
+                iters[level] = None
+                yield dict(env)
+                level -= 1
+            else:
+                level += 1
             continue
-        if depth == last:
-            yield result
+        if it is _DONE:  # back at a passed test: nothing else to try here
+            iters[level] = None
+            level -= 1
             continue
-        depth += 1
-        iters[depth] = iter(_step_results(steps[depth], state, result, external, axioms, derived_source))
+        free = frees[level]
+        if streamed[level]:
+            for _, name, _ in free:  # the stream extends the live env: drop the previous candidate's values
+                env.pop(name, None)
+            found = next(it, None)
+            if found is not None:
+                for _, name, _ in free:
+                    env[name] = found[name]
+        else:
+            length = lengths[level]
+            fixed = fixeds[level]
+            while True:
+                found = next(it, None)
+                if found is None:
+                    break
+                if len(found) != length:
+                    continue
+                for i, v in fixed:
+                    if found[i] != v:
+                        break
+                else:
+                    for position, name, same in free:
+                        if same and found[position] != found[same]:
+                            break
+                        env[name] = found[position]
+                    else:
+                        break
+        if found is None:  # level exhausted: unbind its variables and go back
+            for _, name, _ in free:
+                env.pop(name, None)
+            iters[level] = None
+            level -= 1
+            continue
+        if level == last:
+            yield dict(env)
+        else:
+            level += 1

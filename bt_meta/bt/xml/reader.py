@@ -212,11 +212,14 @@ class _Resolver:
             ports[attr] = value
         return ports
 
-    def resolve_ports(self, ports: dict[str, str], scope: _Scope) -> dict[str, str]:
+    def resolve_ports(self, node_type: NodeType, ports: dict[str, str], scope: _Scope) -> dict[str, str]:
         resolved = {}
         for port, value in ports.items():
             key = blackboard_key(value)
-            if key is None:
+            if key is None and node_type.builtin and node_type.id == "SetBlackboard" and port == "output_key":
+                # BT.CPP's SetBlackboard names its entry with a plain string, in the current (subtree) scope.
+                resolved[port] = "{" + scope.resolve(value.strip()) + "}"
+            elif key is None:
                 resolved[port] = value
             else:
                 resolved[port] = "{" + scope.resolve(port if key == "=" else key) + "}"
@@ -257,7 +260,7 @@ class _Resolver:
             node_type,
             element.attrib.get("name", node_type.id),
             ports,
-            self.resolve_ports(completed, scope),
+            self.resolve_ports(node_type, completed, scope),
             element.line,
             element.column,
             children,

@@ -33,7 +33,7 @@ from py_trees.common import Status
 
 from bt_meta.bt.context import FAILURES_KEY, RUN_KEY, STATE_KEY, WORLD_KEY, RunContext
 from bt_meta.bt.failures import Failure
-from bt_meta.errors import BtMetaError
+from bt_meta.errors import BtMetaError, PluginError
 
 __all__ = ["HarnessError", "TreeHarness", "bt_blackboard", "bt_harness", "bt_plugins"]
 
@@ -114,7 +114,10 @@ class TreeHarness:
             made = plugins.call("bt_meta_make_world", name=world, domain=compiled.domain,
                                 problem=compiled.problem, options=options)
             if made.errors:
-                raise made.errors[0].error
+                error = made.errors[0]
+                if isinstance(error.error, BtMetaError):
+                    raise error.error
+                raise PluginError(f"{error.message}\n{error.traceback}") from error.error
             if not made.results:
                 raise HarnessError(f"no plugin provides a world named {world!r}")
             world = made.first

@@ -117,7 +117,7 @@ class TreeHarness:
                 error = made.errors[0]
                 if isinstance(error.error, BtMetaError):
                     raise error.error
-                raise PluginError(f"{error.message}\n{error.traceback}") from error.error
+                raise PluginError(error.message) from error.error
             if not made.results:
                 raise HarnessError(f"no plugin provides a world named {world!r}")
             world = made.first

@@ -13,7 +13,10 @@ whether to use the depth image, the camera's centre and height.
 Offers:
 
 * :class:`CameraPerception` -- the plugin as an object (register your own instance for other settings)
-* :func:`bt_meta_observe` -- ``{"blocks": [...], "gridmaps": [GridMap, ...], "image": TopView}``
+* :func:`bt_meta_observe` -- ``{"blocks": [...], "gridmaps": [GridMap, ...], "image": TopView,
+  "object_gridmaps": {name: GridMap}}``: detected blocks (with ``name`` when matched), one grid-map per detected
+  block, the analysed view (crops anywhere on demand), and -- in the simulator -- one grid-map per block object
+  centred where it truly is (the instructor's annotation when recording a demonstration)
 * :func:`configure` -- replace the settings of the module-level plugin
 """
 
@@ -94,12 +97,28 @@ class CameraPerception:
 
         return capture(camera, thresholds=self.thresholds, spec=self.spec, use_depth=self.use_depth, namer=namer)
 
+    def object_grid_maps(self, world: Any, view: TopView) -> dict[str, Any]:
+        """One grid-map per simulator block, centred where the block truly is: the instructor's annotation of
+        section 6.3 ("the block which was placed as well as its location"), for recording demonstrations."""
+        sim = getattr(world, "sim", None)
+        if sim is None or not hasattr(sim, "object_states"):
+            return {}
+        maps = {}
+        for name, state in sim.object_states().items():
+            if state.shape is None:
+                continue
+            block = view.block_near(state.pose[:2], self.name_radius)
+            maps[name] = view.grid_map_at(state.pose[:2], z=None if block is None else block.top_z,
+                                          object_name=name, colour=state.colour, shape=state.shape)
+        return maps
+
     @hookimpl
     def bt_meta_observe(self, world: Any, context: Any) -> dict[str, Any] | None:
         view = self.look(world)
         if view is None:
             return None
-        return {"blocks": view.describe(), "gridmaps": list(view.grid_maps), "image": view}
+        return {"blocks": view.describe(), "gridmaps": list(view.grid_maps), "image": view,
+                "object_gridmaps": self.object_grid_maps(world, view)}
 
 
 _plugin = CameraPerception()

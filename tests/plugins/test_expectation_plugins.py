@@ -292,3 +292,141 @@ def test_configure_replaces_the_module_plugin(attach_memory):
         assert expectation.data["position_tolerance"] == 0.5 and expectation.data["angle_tolerance"] is None
     finally:
         keypoint_plugin.configure()
+
+
+# -- end to end in the simulator: record nominal A, then run with the bar substituted --------------------------------
+
+
+def _tick(harness, limit: int = 4000):
+    from py_trees.common import Status
+
+    status, ticks = Status.RUNNING, 0
+    while status is Status.RUNNING and ticks < limit:
+        status = harness.run.tick(harness.root)
+        ticks += 1
+    return status
+
+
+@pytest.mark.slow
+def test_recorded_nominal_a_then_substituted_bar_raises_gridmap_mismatch_at_the_bar_step(tmp_path, monkeypatch):
+    import bt_meta_plugins.camera_perception as camera_plugin
+
+    from bt_meta.plugins import create_plugin_host, hookimpl
+    from bt_meta.resources import trees_dir
+    from bt_meta.testing import TreeHarness
+    from bt_meta.world.sim_world import SimWorld, quiet_stdout
+
+    path = trees_dir() / "letters.yaml"
+    camera = camera_plugin.CameraPerception()
+    recorded: dict[int, tuple[StepContext, object]] = {}
+
+    class Recorder:
+        """Records, after each place, the placed block's grid-map at its true position (the instructor's key)."""
+
+        @hookimpl
+        def bt_meta_observe(self, world, context):
+            maps = camera.object_grid_maps(world, camera.look(world))
+            recorded[context.step] = (context, maps[world.object_name(context.args[0])])
+
+    with quiet_stdout():
+        world = SimWorld.from_task_file(path, "A", seed=0)
+    try:
+        harness = TreeHarness.from_file(path, "A", world=world, plugins=create_plugin_host(
+            entry_points=False, plugins=[("recorder", Recorder())]))
+        assert _tick(harness).value == "SUCCESS"
+        tree = harness.compiled.plan_result.tree
+    finally:
+        world.close()
+    steps = []
+    for i in sorted(recorded):
+        context, grid = recorded[i]
+        parent = tree.nodes[tree.nodes[context.node_id].parent]
+        steps.append(Step(i, context.action, context.args, node_id=context.node_id, parent_task=parent.task[0],
+                          parent_node=parent.id, state=State(grid_maps=(grid,))))
+    memory_path = tmp_path / "memory.sqlite"
+    with EpisodicMemory.open(memory_path) as memory:
+        memory.write(Trace(Episode("draw_A", str(path), "A", started=time.time(), outcome="success"), tuple(steps)))
+    monkeypatch.setenv("BT_META_MEMORY", str(memory_path))
+
+    def run_variant(variant: str):
+        plugins = create_plugin_host(entry_points=False, plugins=[
+            ("camera_perception", camera_plugin), ("gridmap_expectations", gridmap_plugin)])
+        with quiet_stdout():
+            world = SimWorld.from_task_file(path, "A", variant=variant, seed=0)
+        try:
+            harness = TreeHarness.from_file(path, "A", world=world, plugins=plugins)
+            return _tick(harness).value, harness.run.failures
+        finally:
+            world.close()
+
+    status, failures = run_variant("A_two_1x1_same_colour")
+    assert status == "FAILURE"
+    assert len(failures) == 1
+    failure = failures[0]
+    assert (failure.step, failure.action, tuple(failure.args)) == (4, "place", ("b5", "1.5", "1"))
+    assert failure.kind.value == "unknown_entity"
+    assert "expected blue 1x2, seen red 1x1" in failure.message
+    status, failures = run_variant("nominal")
+    assert status == "SUCCESS" and failures == []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("check_at", "step"), [("all", 0), ("task_end", 3)])
+def test_recorded_nominal_attach_then_part_on_its_side_raises_keypoint_mismatch(tmp_path, check_at, step):
+    import bt_meta_plugins.ground_truth_perception as truth_plugin
+
+    from bt_meta.plugins import create_plugin_host, hookimpl
+    from bt_meta.resources import trees_dir
+    from bt_meta.testing import TreeHarness
+    from bt_meta.world.sim_world import SimWorld, quiet_stdout
+
+    path = trees_dir() / "magnetic_attach.yaml"
+    recorded: dict[int, tuple[StepContext, tuple[ObjectState, ...]]] = {}
+
+    class Recorder:
+        @hookimpl
+        def bt_meta_observe(self, world, context):
+            recorded[context.step] = (context, tuple(
+                ObjectState(s.name, s.pose, s.ap, s.an_object) for s in world.sim.object_states().values()))
+
+    with quiet_stdout():
+        world = SimWorld.from_task_file(path, "attach_only", seed=0)
+    try:
+        harness = TreeHarness.from_file(path, "attach_only", world=world, plugins=create_plugin_host(
+            entry_points=False, plugins=[("recorder", Recorder())]))
+        assert _tick(harness).value == "SUCCESS"
+        tree = harness.compiled.plan_result.tree
+    finally:
+        world.close()
+    steps = []
+    for i in sorted(recorded):
+        context, objects = recorded[i]
+        parent = tree.nodes[tree.nodes[context.node_id].parent]
+        steps.append(Step(i, context.action, context.args, node_id=context.node_id, parent_task=parent.task[0],
+                          parent_node=parent.id, state=State(objects=objects)))
+    memory = EpisodicMemory.open(tmp_path / "memory.sqlite")
+    memory.write(Trace(Episode("MagneticAttach", str(path), "attach_only", started=time.time(), outcome="success"),
+                       tuple(steps)))
+
+    def run_variant(variant: str):
+        plugin = keypoint_plugin.KeypointExpectations(memory, check=check_at)
+        plugins = create_plugin_host(entry_points=False, plugins=[
+            ("ground_truth_perception", truth_plugin), ("keypoint_expectations", plugin)])
+        with quiet_stdout():
+            world = SimWorld.from_task_file(path, "attach_only", variant=variant, seed=0)
+        try:
+            harness = TreeHarness.from_file(path, "attach_only", world=world, plugins=plugins)
+            return _tick(harness).value, harness.run.failures
+        finally:
+            world.close()
+
+    try:
+        status, failures = run_variant("active_on_side")
+        assert status == "FAILURE" and len(failures) == 1
+        failure = failures[0]
+        assert failure.step == step and failure.kind.value == "unexpected_configuration"
+        assert "R_n 90.0 deg, expected 180.0 deg" in failure.message
+        status, failures = run_variant("nominal")
+        assert status == "SUCCESS" and failures == []
+    finally:
+        memory.close()

@@ -104,9 +104,9 @@ class Monitor(py_trees.decorators.Decorator):
             self.failure = None
             self.context = None
             run = self.run = current_run()
+            self._step_effects = self.effects
             if run is not None and run._trace:
                 run.emit("step_start", **self._step_context(run).describe())
-            self._step_effects = self.effects
             if self._check and run is not None and not self._precondition_holds(run):
                 self._finish(_FAILURE)
                 yield self
@@ -317,6 +317,9 @@ class Monitor(py_trees.decorators.Decorator):
 
     def _step_context(self, run: RunContext | None) -> StepContext:
         if self.context is not None:
+            if self._step_effects is not None:
+                # Effects bound by the precondition check are known only after the context was first made.
+                self.context.effects = self._step_effects
             return self.context
         if self.action is not None:
             context = self.action.context

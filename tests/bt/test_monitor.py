@@ -282,3 +282,38 @@ def test_external_predicates_in_preconditions_come_from_plugins(bt_harness):
     failure = h.failures[-1]
     assert failure.kind is FailureKind.INTERNAL and failure.plugin == "reach"
     assert "IK server down" in failure.message
+
+
+CUPS = """
+domain:
+  name: cups
+  predicates:
+    on: [cup, place]
+    free: [place]
+  primitives:
+    move:
+      parameters: [?c, ?to]
+      precondition: on(?c, ?from) and free(?to)
+      add: [on(?c, ?to), free(?from)]
+      delete: [on(?c, ?from), free(?to)]
+problems:
+  one:
+    init: [on(c1, shelf), free(table)]
+    tasks: [move(c1, table)]
+"""
+
+
+@pytest.mark.parametrize("tracing", [False, True])
+def test_effects_bound_by_the_precondition_are_expected(bt_harness, tracing):
+    class Tracer:
+        @hookimpl
+        def bt_meta_trace_event(self, event):
+            pass
+
+    extra = [("tracer", Tracer())] if tracing else []
+    h = bt_harness(CUPS, "one", faults=["move=silent"], extra_plugins=extra)
+    assert h.tick() is Status.FAILURE
+    [failure] = h.failures
+    evidence = failure.evidence["mismatches"][0]["evidence"]
+    assert evidence["missing"] == ["on(c1, table)", "free(shelf)"]
+    assert evidence["not_deleted"] == ["on(c1, shelf)", "free(table)"]

@@ -172,7 +172,7 @@ class PluginHost:
         return sorted(caller.name for caller in self.manager.get_hookcallers(plugin) or [])
 
     def describe(self) -> list[dict[str, Any]]:
-        """Every loaded plugin with its source and hooks, in the order hooks call them (first called first)."""
+        """Every loaded plugin with its source and hooks, in registration order (pluggy calls later ones first)."""
         names = self.plugin_names()
         return [{"name": name, "source": self.sources.get(name, ""), "hooks": self.hooks_of(name)} for name in names]
 

@@ -217,3 +217,26 @@ def test_compiled_letters_load_and_tick_in_behaviortree_cpp(policy, bt_blackboar
         btcpp = [name for name in btcpp if " guard " not in name]
         ours = [name for name in ours if " guard " not in name]
     assert ours == btcpp and len([n for n in ours if "place" in n]) == 6
+
+
+@pytest.mark.parametrize(("primitive", "message"), [
+    ("Sequence:\n      parameters: [?x]", "primitive 'Sequence' has the ID of a built-in node"),
+    ("label:\n      parameters: [?name]", r"parameter \?name cannot be a BehaviorTree.CPP port name"),
+])
+def test_domains_that_cannot_become_node_types_are_refused(primitive, message):
+    from bt_meta.bt.domain_nodes import domain_registry
+    from bt_meta.bt.registry import RegistryError
+
+    text = f"""
+domain:
+  name: clash
+  predicates:
+    p: [thing]
+  primitives:
+    {primitive}
+      precondition: p(?{'x' if 'Sequence' in primitive else 'name'})
+      add: []
+      delete: []
+"""
+    with pytest.raises(RegistryError, match=message):
+        domain_registry(load_task_text(text, "<clash>").domain)

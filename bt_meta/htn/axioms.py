@@ -16,7 +16,7 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from bt_meta.htn.conditions import DNEG, DPOS, Condition, Step, Term, Var, candidates, ground, match_clause
+from bt_meta.htn.conditions import DNEG, DPOS, Clause, Condition, Step, Term, Var, candidates, ground, match_clause
 from bt_meta.htn.state import Atom, State
 
 MAX_DEPTH = 200  # nested top-down proofs before falling back to the bottom-up extension
@@ -184,7 +184,7 @@ class AxiomSet:
             for clause in axiom.condition.clauses:
                 for j, step in enumerate(clause):
                     if step[0] == DPOS and step[1] in component:
-                        rest = [s for k, s in enumerate(clause) if k != j]
+                        rest = Clause(s for k, s in enumerate(clause) if k != j)
                         self._recursive.setdefault(step[1], []).append((axiom, j, step, rest))
 
     def extension(self, state: State, pred: str) -> DerivedIndex:

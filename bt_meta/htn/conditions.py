@@ -444,7 +444,7 @@ def compile_condition(source: str, expr: Expr, context: DomainContext, bound: It
                 _require_bound(_vars_of((node.left, node.right)), have, node, f"'{node.op}'")
                 is_eq = (node.op == "==") != negated
                 steps.append((EQ if is_eq else NEQ, node.left, node.right, node))
-        clauses.append(steps)
+        clauses.append(Clause(steps))
         bound_everywhere = have if bound_everywhere is None else bound_everywhere & have
     return Condition(source, expr, clauses, context, frozenset(bound_everywhere or initially))
 
@@ -588,102 +588,118 @@ def match_clause(steps: Sequence[Step], state: State, env: dict[str, str], exter
 _DONE: Iterator[Any] = iter(())  # a test literal that passed: nothing more to try at its level
 
 
+class Clause(list):  # type: ignore[type-arg]
+    """The literals of one conjunction, with their match plans cached per set of initially bound variables."""
+
+    __slots__ = ("plans",)
+
+    def __init__(self, steps: Iterable[Step] = ()) -> None:
+        super().__init__(steps)
+        self.plans: dict[frozenset[str], tuple] = {}
+
+
+def _plan(steps: Sequence[Step], bound: frozenset[str]) -> tuple:
+    """Per literal, what is bound when it is reached (left to right), so matching does no analysis."""
+    have = set(bound)
+    ops = []
+    for step in steps:
+        kind = step[0]
+        if kind not in (POS, DPOS):
+            ops.append(("X", step))
+            continue
+        pred = step[1]
+        getters: list[tuple[bool, str]] = []
+        free: list[tuple[int, str, int]] = []
+        first_position: dict[str, int] = {}
+        for position, arg in enumerate(step[2], start=1):
+            if isinstance(arg, Var):
+                if arg.name in have:
+                    getters.append((True, arg.name))
+                    continue
+                getters.append((True, arg.name))
+                free.append((position, arg.name, first_position.get(arg.name, 0)))
+                first_position.setdefault(arg.name, position)
+            else:
+                getters.append((False, arg))
+        if not free:
+            ops.append(("T", kind, pred, tuple(getters)))
+            continue
+        free_positions = {position for position, _, _ in free}
+        bound_positions = [p for p in range(1, len(getters) + 1) if p not in free_positions]
+        pool = bound_positions[0] if bound_positions else 0
+        fixed = tuple((p, *getters[p - 1]) for p in bound_positions[1:])
+        pool_getter = getters[pool - 1] if pool else (False, "")
+        ops.append(("F", kind, pred, step[2], pool, pool_getter, fixed, tuple(free), len(getters) + 1))
+        have.update(name for _, name, _ in free)
+    return tuple(ops)
+
+
 def _match_many(steps: Sequence[Step], state: State, env: dict[str, str], external: ExternalFn | None,
                 axioms: Any, derived_source: Callable[[str], Any] | None) -> Iterator[dict[str, str]]:
     """Iterative backtracking over the literals of a clause (no recursion).
 
     One binding dict is updated in place: a level binds its free variables from each candidate fact and
     unbinds them when it is exhausted; only complete matches are copied. Tests (``not``, ``==``, ``!=``,
-    ground atoms, external atoms) are evaluated once when their level opens.
+    ground atoms, external atoms) are evaluated once when their level opens. What is bound at each level is
+    worked out once per clause and set of initially bound variables (:func:`_plan`).
     """
     env = dict(env)
-    count = len(steps)
+    bound = frozenset(env)
+    plans = getattr(steps, "plans", None)
+    if plans is None:
+        ops = _plan(steps, bound)
+    else:
+        ops = plans.get(bound)
+        if ops is None:
+            ops = plans[bound] = _plan(steps, bound)
+    count = len(ops)
     last = count - 1
     iters: list[Any] = [None] * count
-    frees: list[Any] = [None] * count
-    fixeds: list[Any] = [None] * count
-    lengths = [0] * count
-    streamed = [False] * count
     level = 0
     while level >= 0:
+        op = ops[level]
         it = iters[level]
         if it is None:  # open the level
-            step = steps[level]
-            kind = step[0]
-            if kind in (POS, DPOS):
-                pred = step[1]
-                vals: list[Any] = [pred]
-                free: list[tuple[int, str, int]] | None = None
-                for arg in step[2]:
-                    if arg.__class__ is Var:
-                        name = arg.name
-                        value = env.get(name)
-                        if value is None:
-                            if free is None:
-                                free = []
-                            same = 0
-                            for position, other, _ in free:
-                                if other == name:
-                                    same = position
-                                    break
-                            free.append((len(vals), name, same))
-                            vals.append(None)
-                            continue
-                        vals.append(value)
-                    else:
-                        vals.append(arg)
-                if free is None:
-                    atom = tuple(vals)
-                    if kind == POS:
-                        ok = atom in state
-                    elif derived_source is not None:
-                        ok = atom in derived_source(pred)
-                    else:
-                        ok = axioms.holds(state, atom)
-                    if not ok:
-                        level -= 1
-                        continue
-                    iters[level] = _DONE
+            tag = op[0]
+            if tag == "T":
+                atom = (op[2], *[env[v] if is_var else v for is_var, v in op[3]])
+                if op[1] == POS:
+                    ok = atom in state
+                elif derived_source is not None:
+                    ok = atom in derived_source(op[2])
                 else:
-                    frees[level] = free
-                    if kind == DPOS and derived_source is None:
-                        iters[level] = iter(axioms.query(state, pred, step[2], env))
-                        streamed[level] = True
-                    else:
-                        source = state if kind == POS else derived_source(pred)  # type: ignore[misc]
-                        length = len(vals)
-                        for position in range(1, length):
-                            value = vals[position]
-                            if value is not None:
-                                pool: Iterable[Atom] = source.with_arg(pred, position, value)
-                                fixeds[level] = [(i, v) for i, v in enumerate(vals) if i > position and v is not None]
-                                break
-                        else:
-                            pool = source.atoms_of(pred)
-                            fixeds[level] = ()
-                        iters[level] = iter(pool)
-                        lengths[level] = length
-                        streamed[level] = False
-                    continue  # consume the first candidate below
+                    ok = axioms.holds(state, atom)
+            elif tag == "X":
+                ok = bool(_step_results(op[1], state, env, external, axioms, derived_source))
             else:
-                if not _step_results(step, state, env, external, axioms, derived_source):
-                    level -= 1
-                    continue
-                iters[level] = _DONE
-            # a passed test
+                pred = op[2]
+                if op[1] == DPOS and derived_source is None:
+                    iters[level] = iter(axioms.query(state, pred, op[3], env))
+                else:
+                    source = state if op[1] == POS else derived_source(pred)  # type: ignore[misc]
+                    position = op[4]
+                    if position:
+                        is_var, v = op[5]
+                        iters[level] = iter(source.with_arg(pred, position, env[v] if is_var else v))
+                    else:
+                        iters[level] = iter(source.atoms_of(pred))
+                continue  # consume the first candidate below
+            if not ok:
+                level -= 1
+                continue
             if level == last:
-                iters[level] = None
                 yield dict(env)
                 level -= 1
             else:
+                iters[level] = _DONE
                 level += 1
             continue
         if it is _DONE:  # back at a passed test: nothing else to try here
             iters[level] = None
             level -= 1
             continue
-        free = frees[level]
-        if streamed[level]:
+        free = op[7]
+        if op[1] == DPOS and derived_source is None:  # a stream of bindings from the axiom evaluator
             for _, name, _ in free:  # the stream extends the live env: drop the previous candidate's values
                 env.pop(name, None)
             found = next(it, None)
@@ -691,8 +707,8 @@ def _match_many(steps: Sequence[Step], state: State, env: dict[str, str], extern
                 for _, name, _ in free:
                     env[name] = found[name]
         else:
-            length = lengths[level]
-            fixed = fixeds[level]
+            length = op[8]
+            fixed = [(p, env[v] if is_var else v) for p, is_var, v in op[6]] if op[6] else ()
             while True:
                 found = next(it, None)
                 if found is None:

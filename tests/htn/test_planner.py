@@ -388,3 +388,25 @@ def test_plans_do_not_depend_on_the_string_hash_seed():
         for seed in ("1", "2")
     }
     assert len(outputs) == 1
+
+
+@pytest.mark.parametrize(("text", "acyclic"), [(AXIOMS, False), (PATH, True), (PATH, False)])
+def test_inherited_axiom_memos_agree_with_fresh_proofs_along_random_changes(text, acyclic):
+    import random
+
+    domain = load(text).domain
+    rng = random.Random(7)
+    nodes = ["a", "b", "c", "d", "e", "f"]
+    state = State([("start", "a"), ("here", "a"), ("edge", "a", "b"), ("edge", "b", "c")])
+    derived = sorted(domain.axiom_set.rules)
+    arity = {a.head_pred: len(a.head_args) for a in domain.axioms}
+    queries = [(p, x, y) for p in derived if arity[p] == 2 for x in nodes for y in nodes]
+    queries += [(p, x) for p in derived if arity[p] == 1 for x in nodes]
+    for _ in range(80):
+        x, y = sorted(rng.sample(nodes, 2)) if acyclic else (rng.choice(nodes), rng.choice(nodes))
+        change = [("edge", x, y)] if rng.random() < 0.7 else [("blocked", y)]
+        state = state.apply(add=change) if rng.random() < 0.6 else state.apply(delete=change)
+        asked = rng.sample(queries, 10)
+        inherited = [domain.axiom_set.holds(state, q) for q in asked]  # memo inherited from the parent state
+        fresh = [domain.axiom_set.holds(State(state), q) for q in asked]  # no parent: proved from scratch
+        assert inherited == fresh, asked

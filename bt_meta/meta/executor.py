@@ -33,6 +33,7 @@ from typing import Any
 
 from py_trees.common import Status
 
+from bt_meta.bt.actions import PrimitiveAction
 from bt_meta.bt.compiler import compile_plan
 from bt_meta.bt.context import RunContext
 from bt_meta.bt.domain_nodes import domain_registry
@@ -40,7 +41,7 @@ from bt_meta.bt.failures import Failure, FailureKind
 from bt_meta.errors import BtMetaError
 from bt_meta.htn.state import atom_text
 from bt_meta.meta.proposals import PlanState, ProposalError, apply_proposal
-from bt_meta.meta.reasoner import Attempt, Diagnosis, Limits, MetaReasoner
+from bt_meta.meta.reasoner import Attempt, Decision, Diagnosis, Limits, MetaReasoner
 
 __all__ = ["MetaExecutor", "RunReport", "Verifier", "goal_verifier", "run_task_file"]
 
@@ -197,7 +198,10 @@ class MetaExecutor:
                                     step=plan_state.cursor)]
                 run.record_failure(failures[0])
             diagnosis = self.reasoner.diagnose(failures, plan_state, run, report.attempts)
-            decision = self.reasoner.decide(diagnosis, run, plan_state, report.attempts, tried, started)
+            if report.ticks >= self.limits.max_ticks:
+                decision = Decision([], stop=True, reason=f"tick budget spent ({self.limits.max_ticks} ticks)")
+            else:
+                decision = self.reasoner.decide(diagnosis, run, plan_state, report.attempts, tried, started)
             if decision.stop:
                 report.stop_reason = decision.reason
                 report.reported.append(self.reasoner.report_entry(diagnosis))
@@ -219,8 +223,9 @@ class MetaExecutor:
 
     def _segment(self, run: RunContext, plan_state: PlanState, registry: Any, domain: Any, report: RunReport,
                  started: float) -> tuple[list[Failure], Status]:
-        """Tick the steps from the cursor on until the tree finishes; returns the new failures and the status."""
-        from bt_meta.testing import HarnessError, TreeHarness
+        """Tick the steps from the cursor on until the tree finishes or a budget runs out; returns the new failures
+        and the tree's status."""
+        from bt_meta.testing import TreeHarness
 
         report.segments += 1
         first = len(run.failures)
@@ -228,28 +233,39 @@ class MetaExecutor:
         steps = {n.step: n for n in plan_state.steps()}
         if not remaining.roots:
             return [], Status.SUCCESS
-        root = compile_plan(remaining, domain, registry=registry, name=f"plan {report.problem} segment "
-                                                                           f"{report.segments}")
+        root = compile_plan(remaining, domain, registry=registry,
+                            name=f"plan {report.problem} segment {report.segments}")
         harness = TreeHarness(root, run)
+        deadline = started + self.limits.max_seconds
         ticks_left = self.limits.max_ticks - report.ticks
-        try:
-            status = harness.tick_until("done", max_ticks=max(ticks_left, 1))
-        except HarnessError:
-            status = Status.FAILURE
-            run.record_failure(Failure(kind=FailureKind.INTERNAL, step=None,
-                                       message=f"tick budget spent ({self.limits.max_ticks} ticks)",
-                                       evidence={"ticks": report.ticks + len(harness.history)}))
+        status = Status.RUNNING
+        while status is Status.RUNNING and len(harness.history) < ticks_left and time.perf_counter() < deadline:
+            status = harness.tick()
         report.ticks += len(harness.history)
+        if status is Status.RUNNING:  # a budget ran out mid-step: cancel the running skill, say which budget
+            running = next((b for b in root.iterate() if isinstance(b, PrimitiveAction)
+                            and b.status is Status.RUNNING), None)
+            root.stop(Status.INVALID)
+            budget = "tick" if len(harness.history) >= ticks_left else "time"
+            limit = (f"{self.limits.max_ticks} ticks" if budget == "tick" else f"{self.limits.max_seconds} s")
+            run.record_failure(Failure(
+                kind=FailureKind.INTERNAL, message=f"{budget} budget spent ({limit}) while ticking",
+                step=None if running is None else running.step, node_id=None if running is None else running.node_id,
+                action=None if running is None else running.action,
+                args=() if running is None or running.context is None else tuple(running.context.args),
+                evidence={"budget": budget, "ticks": report.ticks}))
+            status = Status.FAILURE
         failures = run.failures[first:]
-        failed_step = next((f.step for f in reversed(failures) if f.step is not None), None)
-        last = len(steps) if status is Status.SUCCESS else (failed_step if failed_step is not None else
-                                                            plan_state.cursor)
-        for step in range(plan_state.cursor, min(last + 1, len(steps))):
+        last = len(steps) if status is Status.SUCCESS else _failed_step(failures, plan_state)
+        for step in range(plan_state.cursor, min(last, len(steps))):
             node = steps[step]
-            ok = status is Status.SUCCESS or step < last
             report.executed.append({"segment": report.segments, "step": step, "action": node.task[0],
-                                    "args": list(node.task[1:]), "node_id": node.id,
-                                    "status": "SUCCESS" if ok else "FAILURE"})
+                                    "args": list(node.task[1:]), "node_id": node.id, "status": "SUCCESS"})
+        failed = next((f for f in reversed(failures) if f.step is not None and f.step in steps), None)
+        if status is not Status.SUCCESS and failed is not None and failed.step == last:
+            node = steps[last]
+            report.executed.append({"segment": report.segments, "step": last, "action": node.task[0],
+                                    "args": list(node.task[1:]), "node_id": node.id, "status": "FAILURE"})
         return failures, status
 
     def _apply(self, proposals: list[Any], diagnosis: Diagnosis, plan_state: PlanState, run: RunContext,
@@ -302,6 +318,18 @@ class MetaExecutor:
         log.info("meta: run %s %s after %d attempt(s) in %.3f s%s", report.problem, report.status,
                  len(report.attempts), report.seconds, f" ({report.stop_reason})" if report.stop_reason else "")
         return report
+
+
+def _failed_step(failures: list[Failure], plan_state: PlanState) -> int:
+    """The step a segment stopped at: the last failure's step, or the first step below a failed guard's node."""
+    for failure in reversed(failures):
+        if failure.step is not None:
+            return failure.step
+        if failure.node_id in plan_state.tree.nodes:
+            below = [n.step for n in plan_state.tree.primitives(failure.node_id) if n.step is not None]
+            if below:
+                return min(below)
+    return plan_state.cursor
 
 
 def _objects(world: Any) -> dict[str, Any]:

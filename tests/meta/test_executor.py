@@ -78,6 +78,8 @@ def test_a_method_guard_catches_a_precondition_the_robot_saw_change_and_its_node
     assert failure["evidence"]["localisation"] == {"step": 2, "node_id": "n4", "ancestors": [
         {"id": "n0", "task": ["draw"], "method": "draw_two"}]}
     assert report.attempts[0].proposal["changes"] == {"node_id": "n4"}
+    assert [(e["segment"], e["step"], e["status"]) for e in report.executed] == [
+        (1, 0, "SUCCESS"), (1, 1, "SUCCESS"), (2, 2, "SUCCESS"), (2, 3, "SUCCESS")]
     assert [(a.proposal["action"], a.outcome) for a in report.attempts] == [("replan", "repaired")]
     assert report.plan[2:] == [["pick", "b2"], ["put", "b2", "1", "0"]]
     assert [s.record()["args"][0] for s in world.executed] == ["b0", "b0", "b2", "b2"]  # pick(b1) never started
@@ -117,6 +119,28 @@ def test_time_is_bounded(blocks):
                           plan_seconds=5).run()
     assert report.status == "failed" and report.attempts == []
     assert report.stop_reason.startswith("time budget spent")
+
+
+def test_ticks_are_bounded_and_the_running_skill_is_cancelled(blocks):
+    problem = blocks.problem("two")
+    world = FakeWorld(blocks.domain, problem, ticks_per_skill={"put": 50})
+    report = MetaExecutor(blocks.domain, problem, world, make_host(), limits=Limits(max_ticks=10)).run()
+    assert report.status == "failed" and report.ticks == 10
+    assert report.failures[0]["message"] == "tick budget spent (10 ticks) while ticking"
+    assert report.failures[0]["evidence"]["budget"] == "tick"
+    assert world.executed[1].cancelled
+    assert (report.failures[0]["step"], report.failures[0]["action"]) == (1, "put")  # the step that was running
+    assert report.attempts == [] and report.stop_reason == "tick budget spent (10 ticks)"
+
+
+def test_wall_time_is_bounded_while_ticking(blocks):
+    problem = blocks.problem("two")
+    world = FakeWorld(blocks.domain, problem, ticks_per_skill={"pick": 10**9})
+    report = MetaExecutor(blocks.domain, problem, world, make_host(), limits=Limits(max_seconds=0.2)).run()
+    assert report.status == "failed" and report.attempts == []
+    assert report.failures[0]["message"] == "time budget spent (0.2 s) while ticking"
+    assert report.stop_reason.startswith("time budget spent")
+    assert world.executed[0].cancelled
 
 
 def test_bad_limits_are_refused():

@@ -325,10 +325,14 @@ def _axes(points: np.ndarray) -> tuple[float, float, float]:
             math.atan2(major[1], major[0]))
 
 
-def _square_angle(points: np.ndarray) -> float:
-    """Orientation of a square's sides (mod 90 degrees) from its minimum-area rectangle."""
-    (_, _), (_, _), degrees = cv2.minAreaRect((points * 1000.0).astype(np.float32))
-    return _fold(math.radians(degrees), math.pi / 2.0)
+def _footprint(points: np.ndarray) -> tuple[tuple[float, float], float]:
+    """(centre, side angle mod 90 degrees) of the minimum-area rectangle around plan points (N x 2, metres).
+
+    The rectangle's centre, not the points' mean, is the footprint's centroid: seen in perspective, a stud hides
+    a strip of the top face behind it and shows its side instead, which moves the mean towards the camera's
+    nadir by a millimetre or two, but never the outline (the top face's corners stay in view)."""
+    (cx, cy), (_, _), degrees = cv2.minAreaRect((points * 1000.0).astype(np.float32))
+    return (cx / 1000.0, cy / 1000.0), _fold(math.radians(degrees), math.pi / 2.0)
 
 
 def detect_blocks(
@@ -372,8 +376,8 @@ def detect_blocks(
                 plan = np.stack([xs, ys], axis=1)
             length, width, angle = _axes(plan)
             shape = classify_shape(length, width, lb)
-            orientation = _square_angle(plan) if shape == "1x1" else _fold(angle, math.pi)
-            centroid = plan.mean(axis=0)
+            centroid, square_angle = _footprint(plan)
+            orientation = square_angle if shape == "1x1" else _fold(angle, math.pi)
             bbox = tuple(int(stats[label, i]) for i in (cv2.CC_STAT_LEFT, cv2.CC_STAT_TOP,
                                                          cv2.CC_STAT_WIDTH, cv2.CC_STAT_HEIGHT))
             pixel_centroid = (float(u.mean()), float(v.mean()))

@@ -72,6 +72,7 @@ class _ArmSolver:
     lower: np.ndarray
     upper: np.ndarray
     tasks: dict[str, tuple[mink.FrameTask, int]]
+    reach: dict[str, tuple[np.ndarray, float]]
     damping: np.ndarray
     """``_SOLVE_DAMPING`` times the identity."""
     no_constraints: np.ndarray
@@ -110,6 +111,7 @@ class InverseKinematics:
                 self.kinematics.lower[idx],
                 self.kinematics.upper[idx],
                 {},
+                {},
                 _SOLVE_DAMPING * np.eye(n),
                 np.zeros((0, n)),
                 np.zeros(n, dtype=np.intc),
@@ -121,6 +123,7 @@ class InverseKinematics:
         return solver
 
     def _task(self, solver: _ArmSolver, arm: str, frame: str) -> tuple[mink.FrameTask, int]:
+        """The frame task for ``frame`` and its MuJoCo body (made once per frame)."""
         entry = solver.tasks.get(frame)
         if entry is None:
             self.kinematics.frame_id(frame)  # unknown frames fail here with the usual message
@@ -139,7 +142,27 @@ class InverseKinematics:
             )
             entry = (task, body)
             solver.tasks[frame] = entry
+            solver.reach[frame] = self._reach(arm, frame)
         return entry
+
+    def _reach(self, arm: str, frame: str) -> tuple[np.ndarray, float]:
+        """(position of the arm's first joint, an upper bound on its distance to ``frame``).
+
+        The bound is the sum of the link offsets along the chain; a target farther than that is out of reach
+        whatever the joints do, so it is reported at once instead of after every restart.
+        """
+        kin = self.kinematics
+        model = kin.model
+        first = model.getJointId(kin.robot.arm(arm).joints[0])
+        fid = kin.frame_id(frame)
+        reach = float(np.linalg.norm(model.frames[fid].placement.translation))
+        joint = model.frames[fid].parentJoint
+        while joint != first and joint > 0:
+            reach += float(np.linalg.norm(model.jointPlacements[joint].translation))
+            joint = model.parents[joint]
+        data = model.createData()
+        pin.forwardKinematics(model, data, kin.home)
+        return np.array(data.oMi[first].translation), reach
 
     def _step(self, solver: _ArmSolver, task: mink.FrameTask) -> np.ndarray | None:
         """One IK step: the same QP as ``mink.solve_ik(configuration, [task], dt=1, limits=[ConfigurationLimit])``.
@@ -343,6 +366,10 @@ class _Run:
         kin = self.ik.kinematics
         solver = self.solver
         mj = solver.mj
+        shoulder, reach = solver.reach[self.frame]
+        distance = float(np.linalg.norm(self.target.translation - shoulder))
+        if distance > reach + settings.position_tolerance:
+            return self.out_of_reach(distance, reach)
         starts = [np.clip(mj.to_mujoco(self.base), solver.lower, solver.upper)]
         home = np.clip(mj.to_mujoco(kin.home), solver.lower, solver.upper)
         if not np.array_equal(home, starts[0]):
@@ -388,6 +415,29 @@ class _Run:
                 rotation,
             )
         return self.failure(attempt)
+
+    def out_of_reach(self, distance: float, reach: float) -> IKResult:
+        target_xyz = [round(float(v), 6) for v in self.target.translation]
+        return IKResult(
+            False,
+            None,
+            REACHABILITY,
+            f"no IK solution for {self.frame} at {target_xyz}: {distance:.3f} m from the {self.arm} arm's first "
+            f"joint, beyond its reach of {reach:.3f} m",
+            {
+                "frame": self.frame,
+                "target_xyz": target_xyz,
+                "target_rpy": [round(float(v), 6) for v in pin.rpy.matrixToRpy(self.target.rotation)],
+                "distance": distance,
+                "reach": reach,
+                "best_position_error": distance - reach,
+                "tolerance": [self.settings.position_tolerance, self.settings.orientation_tolerance],
+            },
+            0,
+            0,
+            0.0,
+            distance - reach,
+        )
 
     def failure(self, attempts: int) -> IKResult:
         target_xyz = [round(float(v), 6) for v in self.target.translation]

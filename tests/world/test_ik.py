@@ -70,16 +70,40 @@ def test_other_joints_keep_their_start_values(kin, ik):
     assert result.q[kin.q_index("left_s0")] == 0.4 and result.q[kin.q_index("head_pan")] == -0.3
 
 
-def test_far_target_is_a_reachability_failure(ik):
+def test_far_target_is_a_reachability_failure_without_searching(ik):
     target = pose_from_xyz_rpy(2.0, -0.2, 0.1, math.pi, 0.0, 0.0)
     result = ik.solve("right", target)
     assert not result.success and result.q is None
     assert result.kind == REACHABILITY
-    assert "no IK solution for right_gripper at [2.0, -0.2, 0.1]" in result.message
+    assert "no IK solution for right_gripper at [2.0, -0.2, 0.1]: 1.937 m from the right arm's first joint" in (
+        result.message
+    )
+    assert "beyond its reach of 1.414 m" in result.message
     assert result.evidence["target_xyz"] == [2.0, -0.2, 0.1]
-    assert result.evidence["best_position_error"] > 0.5  # the arm is about 1.1 m long: 2 m is far out
-    assert len(result.evidence["best_q"]) == 19
+    assert result.evidence["distance"] > result.evidence["reach"]
+    assert result.attempts == 0 and result.iterations == 0
+
+
+def test_reach_bound_holds(kin, ik):
+    shoulder, reach = ik._arm("right").reach["right_gripper"]
+    rng = np.random.default_rng(2)
+    farthest = max(
+        np.linalg.norm(kin.end_effector_pose(kin.random_q(rng, "right"), "right").translation - shoulder)
+        for _ in range(2000)
+    )
+    assert reach - 0.02 < farthest <= reach
+
+
+def test_unreachable_target_within_reach_is_searched_then_classified(ik):
+    shoulder, _ = ik._arm("right").reach["right_gripper"]
+    x, y, z = shoulder + np.array([0.05, -0.05, 0.0])
+    target = pose_from_xyz_rpy(x, y, z, 0.0, 0.0, 0.0)  # the hand cannot fold back onto its shoulder
+    result = ik.solve("right", target)
+    assert not result.success and result.kind == REACHABILITY
     assert result.attempts == load_robot("baxter").ik.max_attempts
+    assert "after 40 attempts; best residual" in result.message
+    assert result.evidence["best_position_error"] > 0.01
+    assert len(result.evidence["best_q"]) == 19
 
 
 def test_target_inside_the_table_is_a_collision_failure_naming_the_pair(ik, table):

@@ -137,6 +137,16 @@ class State:
         more = f", ... ({self._len} atoms)" if self._len > 8 else ""
         return f"State({shown}{more})"
 
+    # Immutable: copies are the state itself; pickling keeps only the atoms (not the parent chain or caches).
+    def __copy__(self) -> State:
+        return self
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> State:
+        return self
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (State, (list(self),))
+
     def to_list(self) -> list[list[str]]:
         """The atoms as sorted lists, the JSON form."""
         return [list(atom) for atom in sorted(self)]

@@ -410,3 +410,19 @@ def test_inherited_axiom_memos_agree_with_fresh_proofs_along_random_changes(text
         inherited = [domain.axiom_set.holds(state, q) for q in asked]  # memo inherited from the parent state
         fresh = [domain.axiom_set.holds(State(state), q) for q in asked]  # no parent: proved from scratch
         assert inherited == fresh, asked
+
+
+def test_states_are_immutable_values_that_copy_and_pickle_without_their_history():
+    import copy
+    import pickle
+
+    state = State([("a", "1"), ("b", "2", "3")])
+    later = state
+    for i in range(3000):  # a long parent chain must not make pickling recurse
+        later = later.apply(add=[("c", str(i))], delete=[("c", str(i - 1))])
+    assert copy.deepcopy(later) is later and copy.copy(later) is later
+    again = pickle.loads(pickle.dumps(later))
+    assert again == later and hash(again) == hash(later) and sorted(again) == sorted(later)
+    assert later.holds(("c", "2999")) and not later.holds(("c", "2998")) and len(later) == 3
+    assert later.with_arg("b", 2, "3") == (("b", "2", "3"),)
+    assert state.apply() is state  # no change, no new state

@@ -74,3 +74,17 @@ def test_every_primitive_of_the_shipped_files_keeps_an_expectations_slot():
     for name in ("letters.yaml", "magnetic_attach.yaml", "housing_insertion.yaml"):
         domain = load_task_file(shipped_tree(name)).domain
         assert all(p.expectations == {} for p in domain.primitives.values()), name
+
+
+def test_the_complete_example_of_the_format_reference_loads_and_plans():
+    import re
+    from pathlib import Path
+
+    from bt_meta.htn import load_task_text
+
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "task-files.md").read_text(encoding="utf-8")
+    example = re.findall(r"```yaml\n(.*?)```", doc, re.S)[0]
+    taskfile = load_task_text(example)
+    result = plan(taskfile.domain, taskfile.problems["A"], external=lambda name, args, state: True)
+    assert result.status == "success"
+    assert [a.as_list() for a in result.plan][-1] == ["place", "b5", "1.5", "1"]

@@ -430,3 +430,29 @@ def test_recorded_nominal_attach_then_part_on_its_side_raises_keypoint_mismatch(
         assert status == "SUCCESS" and failures == []
     finally:
         memory.close()
+
+
+def test_gridmap_colour_is_ignored_unless_asked(letters_memory):
+    """A red 1x2 instead of the blue one (section 6.4, first variant) has the same form: only compare_colour sees it."""
+    projection = top_view_projection()
+    image = blank(projection)
+    for name, x, y, shape, *_ in PLAN[:5]:
+        draw_block(image, projection, *cell(x, y), -math.pi / 2, shape, "red" if name == "b5" else "blue")
+    observations = {"image": analyse(image, projection)}
+    context = make_context(letters_run(None), 4, "place", ("b5", "1.5", "1"))
+    plain = gridmap_plugin.GridMapExpectations(letters_memory).bt_meta_expectations(context)[0]
+    assert gridmap_plugin.compare(plain, observations).matched
+    strict = gridmap_plugin.GridMapExpectations(letters_memory, compare_colour=True).bt_meta_expectations(context)[0]
+    verdict = gridmap_plugin.compare(strict, observations)
+    assert not verdict.matched and verdict.evidence["cells"] == 8
+
+
+def test_camera_perception_needs_a_camera():
+    import bt_meta_plugins.camera_perception as camera_plugin
+
+    assert camera_plugin.bt_meta_observe(world=SimpleNamespace(), context=None) is None
+    assert camera_plugin.CameraPerception().camera_for(None) is None
+    from bt_meta.perception.hsv import PerceptionConfigError
+
+    with pytest.raises(PerceptionConfigError, match="expected a mapping with a 'colours' key"):
+        camera_plugin.CameraPerception(thresholds={"colour": {}})

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 from typing import Any
 
 import pytest
@@ -260,4 +261,6 @@ def test_run_task_file_with_the_fake_world(tmp_path):
     path.write_text(BLOCKS, encoding="utf-8")
     report = run_task_file(path, "two", plugins=make_host(), faults=["pick#2=fail:physical"])
     assert report.ok and _actions(report) == ["retry"]
-    assert report.to_dict()["attempts"][0]["kind"] == FailureKind.PHYSICAL.value
+    record = json.loads(json.dumps(report.to_dict()))
+    assert record["attempts"][0]["kind"] == FailureKind.PHYSICAL.value
+    assert record["repairs"][0]["action"] == "retry" and record["status"] == "success"

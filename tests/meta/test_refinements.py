@@ -169,6 +169,23 @@ def test_cli_lists_and_exports_refinements(attach, tmp_path, capsys):
     assert set(loaded.problems) == {"attach"}
 
 
+def test_cli_export_finds_the_recorded_task_file(tmp_path, capsys):
+    from .conftest import ATTACH
+
+    task_path = tmp_path / "attach.yaml"
+    task_path.write_text(ATTACH, encoding="utf-8")
+    memory = tmp_path / "memory.sqlite"
+    with RefinementStore.open(memory) as store:
+        report, _ = _run(load_task_file(task_path), VARIANT_POSE, store)
+        assert store.list()[0].domain_path == str(task_path.resolve())
+    assert main(["refinements", "export", "--memory", str(memory)]) == 0
+    loaded = load_task_text(capsys.readouterr().out, "<stdout>")
+    assert loaded.domain.methods[0].name == report.refinement_saved["method"]
+    task_path.unlink()
+    assert main(["refinements", "export", "--memory", str(memory)]) == 2
+    assert "the task file of domain attach is unknown or gone" in capsys.readouterr().err
+
+
 def test_cli_errors(tmp_path, capsys):
     missing = tmp_path / "none.sqlite"
     assert main(["refinements", "ls", "--memory", str(missing)]) == 1  # like `bt-meta memory ls`

@@ -364,6 +364,10 @@ def test_unsupported_builtins_and_attributes_say_so():
     assert error.message.startswith("attribute '_skipIf' is not supported")
     assert error_of(xml('<AlwaysSuccess _monitor="maybe"/>')).message == '_monitor="maybe" must be "true" or "false"'
     assert error_of(xml('<AlwaysSuccess _autoremap="true"/>')).message == "_autoremap is only valid on <SubTree>"
+    v3 = xml('<SubTree ID="S" __shared_blackboard="true"/>', '<BehaviorTree ID="S"><AlwaysSuccess/></BehaviorTree>')
+    assert error_of(v3).message == (
+        '__shared_blackboard is BehaviorTree.CPP v3 syntax; in v4 use _autoremap="true" or remap ports'
+    )
 
 
 def test_parallel_thresholds_are_checked_when_literal():

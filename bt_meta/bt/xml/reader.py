@@ -203,6 +203,11 @@ class _Resolver:
         for attr, value in element.attrib.items():
             if attr in _RESERVED or attr in ("_monitor", "_autoremap", "_description"):
                 continue
+            if attr == "__shared_blackboard":
+                raise self.error(
+                    "__shared_blackboard is BehaviorTree.CPP v3 syntax; in v4 use _autoremap=\"true\" or remap ports",
+                    element,
+                )
             if attr.startswith("_"):
                 raise self.error(
                     f"attribute {attr!r} is not supported (BehaviorTree.CPP pre/post conditions need its "

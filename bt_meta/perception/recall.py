@@ -1,9 +1,10 @@
 """How expectation plugins find the episodic memory and what it remembers about the step being monitored.
 
 The memory a run uses is, in order: the one a plugin was built with, ``context.run.memory`` when the run carries
-one, else the file ``--memory``/``BT_META_MEMORY``/``./.bt-meta/memory.sqlite`` names (see
+one, else the file ``BT_META_MEMORY`` or ``./.bt-meta/memory.sqlite`` names (see
 :func:`bt_meta.memory.resolve_memory_path`) when it exists, opened read-only. No memory means no low-level
-expectations, never an error: a task nobody demonstrated has nothing to expect.
+expectations, never an error: a task nobody demonstrated has nothing to expect. A file that exists but is not a
+usable memory raises :class:`~bt_meta.memory.MemoryStoreError` (a monitor records it as an ``internal`` failure).
 
 A monitored step is matched with stored steps by the root task of the run's problem and the plan step index
 (``expected_states(task, i)``), keeping those with the same action and arguments; when the plan has changed
@@ -26,7 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bt_meta.memory import EpisodicMemory, MemoryStoreError, StepRecord, resolve_memory_path
+from bt_meta.memory import EpisodicMemory, StepRecord, resolve_memory_path
 
 __all__ = ["Remembered", "memory_for", "remember", "root_task"]
 
@@ -49,10 +50,8 @@ def memory_for(context: Any, explicit: EpisodicMemory | None = None) -> Episodic
     cached = _OPENED.get(path)
     if cached is not None and cached[0] == stamp:
         return cached[1]
-    try:
-        opened = EpisodicMemory.open(path, readonly=True)
-    except MemoryStoreError:
-        return None
+    # A file that is there but unusable is an error worth seeing (the monitor records it as ``internal``).
+    opened = EpisodicMemory.open(path, readonly=True)
     if cached is not None:
         cached[1].close()
     _OPENED[path] = (stamp, opened)
@@ -114,13 +113,19 @@ def remember(memory: EpisodicMemory, context: Any, n: int) -> Remembered | None:
 
 
 def _ends_task(memory: EpisodicMemory, records: list[StepRecord]) -> bool:
-    """Whether each stored step is the last of its parent-task occurrence (no next step under the same node)."""
+    """Whether each stored step is the last of its parent-task occurrence (no next step under the same node).
+
+    Reads P_a (steps without their states) once per root task, not the states of the next steps."""
+    plans: dict[str, dict[tuple[int, int], Any]] = {}
     for record in records:
         step = record.step
         if step.parent_node is None and step.parent_task is None:
             return False
-        following = memory.expected_states(record.task, step.index + 1)
-        nxt = next((r.step for r in following if r.episode_id == record.episode_id), None)
+        rows = plans.get(record.task)
+        if rows is None:
+            rows = plans[record.task] = {(p.episode_id, p.step_index): p
+                                         for p in memory.plan_executions(record.task)}
+        nxt = rows.get((record.episode_id, step.index + 1))
         if nxt is not None and nxt.parent_task == step.parent_task and nxt.parent_node == step.parent_node:
             return False
     return True

@@ -174,6 +174,17 @@ def test_no_memory_no_expectations(tmp_path, monkeypatch):
     assert keypoint_plugin.KeypointExpectations().bt_meta_expectations(context) is None
 
 
+def test_unusable_memory_file_is_an_error_not_silence(tmp_path, monkeypatch):
+    from bt_meta.memory import MemoryStoreError
+
+    bad = tmp_path / "memory.sqlite"
+    bad.write_text("not a database")
+    monkeypatch.setenv("BT_META_MEMORY", str(bad))
+    context = make_context(letters_run(None), 4, "place", ("b5", "1.5", "1"))
+    with pytest.raises(MemoryStoreError, match=r"memory\.sqlite"):
+        gridmap_plugin.GridMapExpectations().bt_meta_expectations(context)
+
+
 def test_memory_from_environment(letters_memory, monkeypatch):
     monkeypatch.setenv("BT_META_MEMORY", str(letters_memory.path))
     plugin = gridmap_plugin.GridMapExpectations()

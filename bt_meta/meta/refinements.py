@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import logging
 import math
 import sqlite3
 from collections.abc import Iterable, Sequence
@@ -55,6 +56,8 @@ __all__ = [
 
 POSE_PREDICATE = "pose_within"
 POSE_ARITY = 9
+log = logging.getLogger("bt_meta.meta")
+
 DEFAULT_TOLERANCE = {"position": 0.02, "angle": 0.1}
 """Metres and radians: a refinement applies when every object starts this close to its recorded pose."""
 
@@ -135,14 +138,20 @@ def domain_with_pose_predicate(domain: Any) -> Any:
 
 def with_refinements(domain: Any, refinements: Iterable[Refinement]) -> tuple[Any, list[str]]:
     """A copy of ``domain`` whose first methods are ``refinements`` (in the order given); returns the copy and the
-    names of the methods added (refinements already in the domain are skipped)."""
+    names of the methods added (refinements already in the domain, or that no longer fit it, are skipped; the
+    latter with a warning on the ``bt_meta.meta`` logger)."""
     refinements = list(refinements)
     copy = domain_with_pose_predicate(domain) if refinements else domain
     added: list[str] = []
     for refinement in reversed(refinements):  # add_method(first=True) puts each in front: keep the given order
         if any(m.name == refinement.method for m in copy.methods):
             continue
-        copy.add_method(refinement.to_method(copy), first=True)
+        try:
+            method = refinement.to_method(copy)
+        except RefinementError as error:  # the domain changed since it was learned: plan without it
+            log.warning("skipping a stored refinement: %s", error)
+            continue
+        copy.add_method(method, first=True)
         added.append(refinement.method)
     return copy, list(reversed(added))
 

@@ -137,6 +137,15 @@ def test_a_refinement_that_does_not_fit_its_domain_is_a_clear_error(attach):
         broken.to_method(domain_with_pose_predicate(attach.domain))
 
 
+def test_a_stored_refinement_that_no_longer_fits_is_skipped_with_a_warning(attach, tmp_path, caplog):
+    with RefinementStore.open(tmp_path / "m.sqlite") as store:
+        store.add(Refinement(domain="attach", task="MagneticAttach(active, reference)", method="refined_old",
+                             precondition="true", subtasks=["Fly(active)"]))
+        report, _ = _run(attach, VARIANT_POSE, store)
+    assert report.ok and report.refinements_used == [] and len(report.attempts) == 1
+    assert "skipping a stored refinement: refinement refined_old does not fit domain attach" in caplog.text
+
+
 def test_a_method_name_is_stored_once(attach, tmp_path):
     refinement = Refinement(domain="attach", task="MagneticAttach(active, reference)", method="refined_y",
                             precondition="true", subtasks=["MoveTo(g_alt)"])

@@ -604,6 +604,10 @@ def _plan(steps: Sequence[Step], bound: frozenset[str]) -> tuple:
     ops = []
     for step in steps:
         kind = step[0]
+        if kind in (NEG, DNEG):  # variables are bound (checked at load time): a ground test
+            getters_neg = tuple((True, a.name) if isinstance(a, Var) else (False, a) for a in step[2])
+            ops.append(("T", kind, step[1], getters_neg))
+            continue
         if kind not in (POS, DPOS):
             ops.append(("X", step))
             continue
@@ -663,12 +667,15 @@ def _match_many(steps: Sequence[Step], state: State, env: dict[str, str], extern
             tag = op[0]
             if tag == "T":
                 atom = (op[2], *[env[v] if is_var else v for is_var, v in op[3]])
-                if op[1] == POS:
+                kind = op[1]
+                if kind in (POS, NEG):
                     ok = atom in state
                 elif derived_source is not None:
                     ok = atom in derived_source(op[2])
                 else:
                     ok = axioms.holds(state, atom)
+                if kind in (NEG, DNEG):
+                    ok = not ok
             elif tag == "X":
                 ok = bool(_step_results(op[1], state, env, external, axioms, derived_source))
             else:

@@ -164,8 +164,13 @@ def _required(found: dict[str, Any], key: str, path: Path) -> Any:
 
 
 def _derived_clear(pos: dict[Any, Any]) -> dict[Any, bool]:
+    """GTPyhop's ``clear`` for ``pos``, in block order as its examples build it (``{x: False for x in ..}``)."""
     below = set(pos.values())
-    return {block: block not in below for block in pos}
+    try:
+        blocks = sorted(pos)
+    except TypeError:  # mixed names: keep the order of pos
+        blocks = list(pos)
+    return {block: block not in below for block in blocks}
 
 
 def _check_blocks_state(name: str, pos: dict[Any, Any]) -> None:

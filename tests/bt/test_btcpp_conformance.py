@@ -55,6 +55,10 @@ class _Generator:
         self.subtrees: dict[str, str] = {}
         self.nodes = 0
         self.kinds: set[str] = set()
+        # Blackboard entries read by Repeat/Retry ports: name -> value, set by SetBlackboard at the root. The stack
+        # holds the entries each (sub)tree body being generated reads, so that SubTrees can remap them.
+        self.variables: dict[str, str] = {}
+        self.used: list[set[str]] = [set()]
 
     def leaf(self) -> str:
         name = f"L{len(self.leaves)}"
@@ -66,7 +70,17 @@ class _Generator:
         choices = [1, 2, 3]
         if self.forever:
             choices.append(-1)
-        return str(self.rng.choice(choices))
+        value = str(self.rng.choice(choices))
+        if self.rng.random() < (0.6 if len(self.used) > 1 else 0.3):
+            name = f"c{len(self.variables)}"
+            self.variables[name] = value
+            if len(self.used) > 1 and self.rng.random() < 0.3:
+                self.used[0].add(name)  # BT.CPP's {@key}: the root blackboard, from any depth
+                self.kinds.add("@key")
+                return "{@" + name + "}"
+            self.used[-1].add(name)
+            return "{" + name + "}"
+        return value
 
     def node(self, depth: int) -> str:
         self.nodes += 1
@@ -102,8 +116,20 @@ class _Generator:
         if kind == "SubTree":
             sub_id = f"Sub{len(self.subtrees)}"
             self.subtrees[sub_id] = ""
+            self.used.append(set())
             self.subtrees[sub_id] = self.node(depth - 1)
-            return f'<SubTree ID="{sub_id}"/>'
+            used = sorted(self.used.pop())
+            mode = rng.choice(["autoremap", "remap", "literal"])
+            self.kinds.add(f"SubTree {mode}")
+            if mode == "autoremap":
+                self.used[-1].update(used)
+                return f'<SubTree ID="{sub_id}" _autoremap="true"/>'
+            if mode == "remap":
+                self.used[-1].update(used)
+                ports = "".join(f' {name}="{{{name}}}"' for name in used)
+            else:
+                ports = "".join(f' {name}="{self.variables[name]}"' for name in used)
+            return f'<SubTree ID="{sub_id}"{ports}/>'
         if kind in {"Inverter", "ForceSuccess", "ForceFailure", "KeepRunningUntilFailure"}:
             return f"<{kind}>{self.node(depth - 1)}</{kind}>"
         if kind == "Repeat":
@@ -131,6 +157,9 @@ class _Generator:
 def generate(seed: int, *, forever: bool, depth: int = 4) -> Generated:
     gen = _Generator(random.Random(seed), forever=forever)
     main = gen.node(depth)
+    if gen.variables:
+        setters = "".join(f'<SetBlackboard output_key="{k}" value="{v}"/>' for k, v in gen.variables.items())
+        main = f"<Sequence>{setters}{main}</Sequence>"
     trees = [f'<BehaviorTree ID="Main">{main}</BehaviorTree>']
     trees += [f'<BehaviorTree ID="{sub_id}">{body}</BehaviorTree>' for sub_id, body in gen.subtrees.items()]
     xml = f'<root BTCPP_format="4" main_tree_to_execute="Main">{"".join(trees)}</root>'
@@ -227,7 +256,10 @@ def test_random_trees_tick_like_behaviortree_cpp(mode: str) -> None:
         "RetryUntilSuccessful",
         "KeepRunningUntilFailure",
         "Timeout",
-        "SubTree",
+        "SubTree autoremap",
+        "SubTree remap",
+        "SubTree literal",
+        "@key",
         "AlwaysSuccess",
         "AlwaysFailure",
     }
@@ -278,3 +310,43 @@ def test_the_comparison_can_fail() -> None:
         trace.append((wrong.status.name, list(log)))
         log.clear()
     assert trace != expected
+
+
+SCOPES = """<root BTCPP_format="4" main_tree_to_execute="Main">
+<BehaviorTree ID="Main"><Sequence>
+  <SetBlackboard output_key="n" value="2"/>
+  <Repeat num_cycles="{n}"><L0/></Repeat>
+  <SubTree ID="WritesThrough" count="{n}"/>
+  <Repeat num_cycles="{n}"><L1/></Repeat>
+  <SubTree ID="Auto" _autoremap="true"/>
+  <SubTree ID="Private" n="3"/>
+  <Repeat num_cycles="{n}"><L5/></Repeat>
+</Sequence></BehaviorTree>
+<BehaviorTree ID="WritesThrough"><SetBlackboard output_key="count" value="3"/></BehaviorTree>
+<BehaviorTree ID="Auto"><Sequence><Repeat num_cycles="{n}"><L2/></Repeat><SubTree ID="Nested" k="{n}"/></Sequence>
+</BehaviorTree>
+<BehaviorTree ID="Nested"><Repeat num_cycles="{k}"><L6/></Repeat></BehaviorTree>
+<BehaviorTree ID="Private"><Sequence>
+  <Repeat num_cycles="{n}"><L3/></Repeat>
+  <SetBlackboard output_key="count" value="1"/>
+  <Repeat num_cycles="{@n}"><L4/></Repeat>
+  <SetBlackboard output_key="m" value="{@n}"/>
+  <Repeat num_cycles="{m}"><L7/></Repeat>
+  <Repeat num_cycles="{count}"><L8/></Repeat>
+</Sequence></BehaviorTree>
+</root>"""
+
+
+@pytest.mark.parametrize("mode", ["exactly_once", "once"])
+def test_subtree_scoping_matches_behaviortree_cpp(mode: str) -> None:
+    """Remapping that writes through, _autoremap, nested remaps, literal remaps, private entries and {@key}."""
+    generated = Generated(SCOPES, {f"L{i}": ["SUCCESS"] for i in range(9)})
+    expected = run_btcpp(generated, 40, mode)
+    assert run_ours(generated, 40, mode) == expected
+    statuses = [status for status, _ in expected]
+    assert statuses.count("SUCCESS") >= 2
+    first_pass = [name for _, log in expected[: statuses.index("SUCCESS") + 1] for name, _ in log]
+    # L0 twice (n=2); L1 three times (the subtree wrote 3 through "count"); L2 and L6 three times (autoremap, nested
+    # remap); L3 three times (literal 3); L4, L7 three times ({@n} is the root's n); L5 three; L8 once (the private
+    # "count" is 1 and not the parent's, which the main tree never remapped).
+    assert [first_pass.count(f"L{i}") for i in range(9)] == [2, 3, 3, 3, 3, 3, 3, 3, 1]

@@ -50,6 +50,7 @@ PROBLEMS_DIR = Path(__file__).resolve().parent / "problems"
 STRATEGIES = ("recursive_dfs", "iterative_dfs_backtracking", "iterative_greedy")
 SHORT_STRATEGY = {"recursive_dfs": "rec", "iterative_dfs_backtracking": "iter-bt", "iterative_greedy": "greedy"}
 TARGET_RATIO = 2.0
+_COMMAND = "bt-meta bench htn"
 GENERATED_SIZES = (100, 200)
 
 Atom = tuple[str, ...]
@@ -477,7 +478,7 @@ def select_problems(problems: list[BenchProblem], only: str | None) -> list[Benc
     unmatched = [pat for pat in patterns if not any(fnmatch.fnmatchcase(p.name, pat) for p in problems)]
     if unmatched or not chosen:
         names = ", ".join(p.name for p in problems)
-        raise UserInputError(f"--only {','.join(unmatched) or only!r} matches no problem; problems: {names}")
+        raise UserInputError(f"--only {','.join(unmatched) or only!r} matches no problem; problems: {names}", _COMMAND)
     return chosen
 
 
@@ -730,7 +731,7 @@ def _print_report(report: dict[str, Any]) -> None:
 
 def _handle(args: argparse.Namespace) -> int:
     if args.repeat < 1:
-        raise UserInputError(f"--repeat must be at least 1, got {args.repeat}")
+        raise UserInputError(f"--repeat must be at least 1, got {args.repeat}", _COMMAND)
     strategies = args.strategy or list(STRATEGIES)
 
     def progress(row: dict[str, Any]) -> None:
@@ -760,7 +761,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "htn",
         help="our HTN planner vs GTPyhop on blocks-world and Childsnack problems",
-        description=__doc__.split("\n\n")[0],
+        description="Our HTN planner against GTPyhop on the same problems (GTPyhop's examples), in one process.",
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     parser.add_argument("--repeat", type=int, default=3, help="runs per planner and problem; the best counts")

@@ -131,6 +131,7 @@ def test_cli_table_names_both_planners(capsys):
 def test_unknown_problem_is_an_input_error(capsys):
     assert main(["bench", "htn", "--only", "no_such_problem"]) == 2
     err = capsys.readouterr().err
+    assert err.startswith("bt-meta bench htn: --only ")
     assert "no_such_problem" in err and "matches no problem" in err and "sussman" in err
 
 
@@ -139,3 +140,8 @@ def test_missing_gtpyhop_is_a_clear_error(monkeypatch, capsys):
     assert main(["bench", "htn", "--only", "sussman"]) == 2
     err = capsys.readouterr().err
     assert "GTPyhop is not installed" in err and "bt-meta[bench]" in err
+
+
+def test_repeat_below_one_is_an_input_error(capsys):
+    assert main(["bench", "htn", "--only", "sussman", "--repeat", "0"]) == 2
+    assert capsys.readouterr().err.strip() == "bt-meta bench htn: --repeat must be at least 1, got 0"

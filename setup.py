@@ -24,7 +24,7 @@ setup(
     package_dir=package_dir,
     package_data={
         "bt_meta.data.robots": ["*.yaml"],
-        "bt_meta.data.trees": ["*.yaml", "*.xml"],
+        "bt_meta.data.trees": ["*.yaml", "*.xml", "*.md", "scenes/*.yaml", "poses/*.yaml", "poses/*.md"],
         "bt_meta_plugins": ["*.yaml"],
         "bt_meta.bench": ["problems/*.yaml"],
     },

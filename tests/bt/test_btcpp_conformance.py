@@ -9,6 +9,8 @@ the root status *and the whole ordered event log* must be equal. Both BT.CPP tic
 from __future__ import annotations
 
 import random
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import behaviortreepy as btpy
@@ -166,7 +168,11 @@ def generate(seed: int, *, forever: bool, depth: int = 4) -> Generated:
     return Generated(xml, gen.leaves, 1 + len(gen.subtrees), gen.nodes, gen.kinds)
 
 
-def run_btcpp(generated: Generated, ticks: int, mode: str) -> list[tuple[str, list[tuple[str, str]]]]:
+Trace = list[tuple[str, list[tuple[str, str]]]]
+
+
+def btcpp_stepper(generated: Generated, mode: str = "exactly_once") -> Callable[[], tuple[str, list[tuple[str, str]]]]:
+    """Load into BehaviorTree.CPP; each call ticks once and returns (root status, events since the last call)."""
     log: list[tuple[str, str]] = []
     factory = btpy.BehaviorTreeFactory()
     for name, script in generated.leaves.items():
@@ -182,12 +188,20 @@ def run_btcpp(generated: Generated, ticks: int, mode: str) -> list[tuple[str, li
 
         factory.register_simple_stateful_action(name, step, step, halted)
     tree = factory.create_tree_from_text(generated.xml)
-    trace = []
-    for _ in range(ticks):
+
+    def step() -> tuple[str, list[tuple[str, str]]]:
         status = tree.tick_exactly_once() if mode == "exactly_once" else tree.tick_once()
-        trace.append((status.name, list(log)))
+        events = list(log)
         log.clear()
-    return trace
+        return status.name, events
+
+    step.tree = tree  # type: ignore[attr-defined]  # keeps the tree (and its timer thread) alive
+    return step
+
+
+def run_btcpp(generated: Generated, ticks: int, mode: str) -> Trace:
+    step = btcpp_stepper(generated, mode)
+    return [step() for _ in range(ticks)]
 
 
 class ScriptedBehaviour(py_trees.behaviour.Behaviour):
@@ -208,7 +222,8 @@ class ScriptedBehaviour(py_trees.behaviour.Behaviour):
             self.log.append((self.leaf.name, "HALT"))
 
 
-def run_ours(generated: Generated, ticks: int, mode: str) -> list[tuple[str, list[tuple[str, str]]]]:
+def our_stepper(generated: Generated, mode: str = "exactly_once") -> Callable[[], tuple[str, list[tuple[str, str]]]]:
+    """Load into bt-meta; each call ticks once and returns (root status, events since the last call)."""
     log: list[tuple[str, str]] = []
     registry = default_registry()
     for name, script in generated.leaves.items():
@@ -219,12 +234,19 @@ def run_ours(generated: Generated, ticks: int, mode: str) -> list[tuple[str, lis
 
         registry.register(NodeType(name, "Action", [], factory))
     root = load_tree_text(generated.xml, registry)
-    trace = []
-    for _ in range(ticks):
+
+    def step() -> tuple[str, list[tuple[str, str]]]:
         status = tick_exactly_once(root) if mode == "exactly_once" else tick_once(root)
-        trace.append((status.name, list(log)))
+        events = list(log)
         log.clear()
-    return trace
+        return status.name, events
+
+    return step
+
+
+def run_ours(generated: Generated, ticks: int, mode: str) -> Trace:
+    step = our_stepper(generated, mode)
+    return [step() for _ in range(ticks)]
 
 
 def compare(seed: int, mode: str, ticks: int = 12, depth: int = 4) -> Generated:
@@ -350,3 +372,26 @@ def test_subtree_scoping_matches_behaviortree_cpp(mode: str) -> None:
     # remap); L3 three times (literal 3); L4, L7 three times ({@n} is the root's n); L5 three; L8 once (the private
     # "count" is 1 and not the parent's, which the main tree never remapped).
     assert [first_pass.count(f"L{i}") for i in range(9)] == [2, 3, 3, 3, 3, 3, 3, 3, 1]
+
+
+def test_timeout_fires_like_behaviortree_cpp() -> None:
+    """A real (wall-clock) Timeout: BT.CPP halts the child from its timer thread, we at the next tick."""
+    generated = Generated(
+        '<root BTCPP_format="4"><BehaviorTree ID="Main"><Timeout msec="40"><L0/></Timeout></BehaviorTree></root>',
+        {"L0": ["RUNNING"]},
+    )
+
+    def trace(run_tick: Callable[[], tuple[str, list[tuple[str, str]]]]) -> Trace:
+        result = []
+        for pause in (0.0, 0.2, 0.0):
+            time.sleep(pause)
+            result.append(run_tick())
+        return result
+
+    expected = trace(btcpp_stepper(generated))
+    assert expected == [
+        ("RUNNING", [("L0", "RUNNING")]),
+        ("FAILURE", [("L0", "HALT")]),
+        ("RUNNING", [("L0", "RUNNING")]),
+    ]
+    assert trace(our_stepper(generated)) == expected

@@ -458,3 +458,20 @@ def test_show_bad_xml_exits_2_with_one_line(tmp_path):
     assert result.returncode == 2
     assert result.stderr == f"{bad}:3:1: unknown node ID 'Sequense'; did you mean Sequence?\n"
     assert result.stdout == ""
+
+
+def test_two_loaded_trees_do_not_share_subtree_scopes():
+    text = xml(
+        '<Sequence><SubTree ID="S" n="{@start}"/><SetBlackboard output_key="seen" value="{@out}"/></Sequence>',
+        '<BehaviorTree ID="S"><Sequence><SetBlackboard output_key="own" value="{n}"/>'
+        '<SetBlackboard output_key="@out" value="{own}"/></Sequence></BehaviorTree>',
+    )
+    first, second = load_tree_text(text), load_tree_text(text)
+    py_trees.blackboard.Blackboard.set("/start", "one")
+    assert tick_once(first) == Status.SUCCESS
+    py_trees.blackboard.Blackboard.set("/start", "two")
+    assert tick_once(second) == Status.SUCCESS
+    private = sorted(k for k in py_trees.blackboard.Blackboard.storage if k.endswith("/own"))
+    assert len(private) == 2
+    assert sorted(py_trees.blackboard.Blackboard.get(k) for k in private) == ["one", "two"]
+    assert py_trees.blackboard.Blackboard.get("/seen") == "two"

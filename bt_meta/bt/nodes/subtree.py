@@ -24,13 +24,15 @@ class SubTree(DecoratorNode):
     ) -> None:
         super().__init__(name, child)
         self.tree_id = tree_id
-        # Literal remappings (``<SubTree ID="X" speed="3"/>``) written into the private scope before the first
-        # tick unless already there (BT.CPP writes them when the tree is created).
+        # Literal remappings (``<SubTree ID="X" speed="3"/>``) written into the private scope once, before the first
+        # tick (BT.CPP writes them when the tree is created; nothing else can write a private entry before that).
         self.init_values = dict(init or {})
+        self._initialised = False
 
     def initialise(self) -> None:
-        for key, value in self.init_values.items():
-            if not py_trees.blackboard.Blackboard.exists(key):
+        if not self._initialised:
+            self._initialised = True
+            for key, value in self.init_values.items():
                 py_trees.blackboard.Blackboard.set(key, value)
 
     def execute(self) -> TickGenerator:

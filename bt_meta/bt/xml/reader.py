@@ -17,7 +17,7 @@ Blackboard scoping: every SubTree instance gets a private scope, as in BT.CPP. T
 inside a subtree to the key it denotes at the root: a remapped port ``p="{k}"`` maps ``{p}`` to the parent's ``k``
 (``{=}`` = same name), ``_autoremap="true"`` maps every other key to the same name in the parent, ``{@k}`` is
 always the root's ``k``, a literal remapping ``p="3"`` initialises the private entry, and anything else becomes a
-key private to that instance (``/_<TreeID>_<n>/key``).
+key private to that instance (``/_<TreeID>_<n>/key``, ``n`` unique in the process).
 
 TreeNodesModel: an ID declared in ``<TreeNodesModel>`` but not registered is an error for :func:`load_tree_*`
 (there is no implementation to instantiate) and names the model; :func:`resolve_document` accepts it and checks
@@ -54,6 +54,9 @@ from bt_meta.errors import TreeXMLError
 WrapAction = Callable[[py_trees.behaviour.Behaviour, NodeInstance], py_trees.behaviour.Behaviour]
 
 _RESERVED = {"name", "ID"}
+# Numbers SubTree instances across every load in this process: py_trees has one global blackboard, so two loaded
+# trees must not share a private scope.
+_INSTANCES = itertools.count(1)
 _TRUE = {"true", "1"}
 _FALSE = {"false", "0"}
 
@@ -146,7 +149,6 @@ class _Resolver:
         self.document = document
         self.registry = registry
         self.allow_models = allow_models
-        self.counter = itertools.count(1)
 
     def error(self, message: str, element: XMLElement) -> TreeXMLError:
         return self.document.error(message, element)
@@ -309,7 +311,7 @@ class _Resolver:
         ports = self.split_attributes(element, True)
         remap: dict[str, str] = {}
         init: dict[str, str] = {}
-        prefix = f"/_{tree_id}_{next(self.counter)}"
+        prefix = f"/_{tree_id}_{next(_INSTANCES)}"
         for port, value in ports.items():
             key = blackboard_key(value)
             if key is None:

@@ -296,3 +296,17 @@ def test_every_compiled_tree_of_the_shipped_task_files_loads_in_behaviortree_cpp
             assert tree_to_xml(again, registry=compiled.registry) == text
             checked += 1
     assert checked >= len(loaded.problems) + 1  # every policy and at least one plan
+
+
+def test_subtrees_built_from_the_registry_are_written_as_their_own_tree():
+    registry = default_registry()
+    body = registry.create("Sequence", children=[registry.create("AlwaysSuccess")])
+    subtree = registry.create("SubTree", name="step", ports={"ID": "Step"}, children=[body])
+    text = tree_to_xml(registry.create("Sequence", children=[subtree, nodes.SubTree("again", body, "Step")]))
+    document = ET.fromstring(text)
+    assert [t.get("ID") for t in document.findall("BehaviorTree")] == ["MainTree", "Step"]
+    assert [s.attrib for s in document.findall(".//SubTree")] == [
+        {"ID": "Step", "name": "step"},
+        {"ID": "Step", "name": "again"},
+    ]
+    assert load_in_btcpp(text).tick_while_running(0) == btpy.NodeStatus.SUCCESS

@@ -93,6 +93,7 @@ UNSUPPORTED_BUILTINS: frozenset[str] = frozenset(
 NUM_CYCLES = PortSpec("num_cycles", "input", "int", None, "repeat a successful child this many times (-1: forever)")
 NUM_ATTEMPTS = PortSpec("num_attempts", "input", "int", None, "retry a failing child this many times (-1: forever)")
 MSEC = PortSpec("msec", "input", "unsigned int", None, "halt the child after this many milliseconds")
+SUBTREE_ID = PortSpec("ID", "input", "std::string", None, "the <BehaviorTree ID> this SubTree runs")
 VALUE = PortSpec("value", "input", "std::string", None, "value to write")
 OUTPUT_KEY = PortSpec("output_key", "inout", "std::string", None, "blackboard entry to write")
 
@@ -172,5 +173,5 @@ def builtin_node_types() -> list[NodeType]:
         node("AlwaysSuccess", "Action", _leaf(AlwaysSuccess)),
         node("AlwaysFailure", "Action", _leaf(AlwaysFailure)),
         node("SetBlackboard", "Action", _set_blackboard, [VALUE, OUTPUT_KEY]),
-        node("SubTree", "SubTree", _subtree, children=(1, 1)),
+        node("SubTree", "SubTree", _subtree, [SUBTREE_ID], children=(1, 1)),
     ]

@@ -123,6 +123,10 @@ def describe(behaviour: Behaviour) -> NodeInstance:
     """The :class:`NodeInstance` the writer uses for ``behaviour`` (raises :class:`TreeWriteError`)."""
     instance = getattr(behaviour, "bt_node", None)
     if isinstance(instance, NodeInstance):
+        if instance.category == "SubTree" and instance.id == "SubTree" and "ID" in instance.ports:
+            # Built with registry.create("SubTree", ports={"ID": ...}): the ID port names the tree.
+            ports = {k: v for k, v in instance.ports.items() if k != "ID"}
+            return NodeInstance(instance.ports["ID"], "SubTree", ports, instance.monitor, instance.line, instance.path)
         return instance
     for cls, (node_id, category) in _OWN_CLASSES.items():
         if type(behaviour) is cls:

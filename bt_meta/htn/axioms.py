@@ -16,13 +16,14 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from bt_meta.htn.conditions import DNEG, DPOS, Clause, Condition, Step, Term, Var, candidates, ground, match_clause
+from bt_meta.htn.conditions import DNEG, DPOS, POS, Clause, Condition, Step, Term, Var, candidates, ground, match_clause
 from bt_meta.htn.state import Atom, State
 
 MAX_DEPTH = 200  # nested top-down proofs before falling back to the bottom-up extension
 INHERIT_DEPTH = 16  # how far up the parent chain a state looks for a memo to inherit
 
 _IN_PROGRESS = object()
+_NO_ENTRIES: dict[Any, Any] = {}
 
 
 class _Fallback(Exception):
@@ -176,7 +177,21 @@ class AxiomSet:
                 if any(step[0] == DPOS and step[1] in self.group[axiom.head_pred] for step in clause):
                     self.recursive.update(self.group[axiom.head_pred])
         self._memo_key = (self._key, "memo")
+        self._volatile_key = (self._key, "volatile")
         self._depth = 0
+        self.incremental = True  # memo inheritance and per-seed units (off only to test they change nothing)
+        # Shared by every state: which memo entries read a fact key / used a derived atom (append-only, so
+        # an invalidation may drop more than needed, never less).
+        self._readers: dict[tuple[str, str | None], set[Any]] = {}
+        self._dependents: dict[Any, set[Any]] = {}
+        # Clauses of non-recursive derived predicates that start with a fact pattern: evaluated per seed.
+        self._units: dict[int, tuple] = {}
+        for axiom in self.axioms:
+            if axiom.head_pred in self.recursive:
+                continue
+            for clause in axiom.condition.clauses:
+                if clause and clause[0][0] == POS:
+                    self._units[id(clause)] = (object(), clause[0], Clause(clause[1:]))
         # Semi-naive join plans: for each rule clause, each positive literal of the same component first.
         self._recursive: dict[str, list[tuple[Axiom, int, Step, list[Step]]]] = {}
         for axiom in self.axioms:
@@ -202,25 +217,33 @@ class AxiomSet:
     def holds(self, state: State, atom: Atom) -> bool:
         """Truth of one ground derived atom, top-down with a per-state memo inherited from the parent state.
 
-        Each memo entry records which facts its proof read (as (predicate, first argument) keys) and which
-        derived atoms it used; a successor state inherits every entry that no changed fact and no invalidated
-        dependency touches, so a move of one block re-proves only what depends on that block. Deep or cyclic
-        derivations (an atom needed to prove itself, or more than ``MAX_DEPTH`` nested atoms) fall back to the
-        bottom-up extension of the predicate, which is exact and needs no Python recursion beyond the number
-        of strata.
+        Each proof records which facts it read (as (predicate, first argument) keys) and which derived atoms it
+        used, in indexes shared by all states; a successor state copies its parent's memo and drops what its
+        changed facts reach through those indexes, so a move of one block re-proves only what depends on that
+        block. Deep or cyclic derivations (an atom needed to prove itself, or more than ``MAX_DEPTH`` nested
+        atoms) fall back to the bottom-up extension of the predicate, which is exact and needs no Python
+        recursion beyond the number of strata.
         """
+        recorder_in = None
         if isinstance(state, _Recorder):
+            recorder_in = state
             state.deps.append(atom)
             state = state.state
         cache = state._derived
         pred = atom[0]
         extension = cache.get((self._key, pred))
         if extension is not None:
+            if recorder_in is not None:  # not tracked by the indexes: the caller's proof is not reusable
+                recorder_in.volatile = True
             return atom in extension
         memo = cache.get(self._memo_key)
         if memo is None:
             memo = cache[self._memo_key] = self._inherit(state)
         known = memo.get(atom)
+        if known is None:
+            known = cache.get(self._volatile_key, _NO_ENTRIES).get(atom)
+            if known is not None and recorder_in is not None:
+                recorder_in.volatile = True
         if known is not None:
             if known is _IN_PROGRESS:
                 raise _Fallback
@@ -238,15 +261,42 @@ class AxiomSet:
                 self._depth -= 1
                 if memo.get(atom) is _IN_PROGRESS:
                     del memo[atom]
-            memo[atom] = (result, frozenset(recorder.keys), tuple(recorder.deps), recorder.volatile)
+            self._store(state, memo, atom, (result,), recorder)
+            if recorder.volatile and recorder_in is not None:  # not reusable, so neither is the caller's proof
+                recorder_in.volatile = True
             return result
         except _Fallback:
             if not outermost:
                 raise
             return atom in self.extension(state, pred)
 
-    def _inherit(self, state: State) -> dict[Atom, Any]:
+    def _store(self, state: State, memo: dict[Any, Any], key: Any, entry: tuple, recorder: _Recorder) -> None:
+        if recorder.volatile or not self.incremental:
+            volatile = state._derived.get(self._volatile_key)
+            if volatile is None:
+                volatile = state._derived[self._volatile_key] = {}
+            volatile[key] = entry
+            return
+        memo[key] = entry
+        readers = self._readers
+        for fact_key in recorder.keys:
+            found = readers.get(fact_key)
+            if found is None:
+                readers[fact_key] = {key}
+            else:
+                found.add(key)
+        dependents = self._dependents
+        for dep in recorder.deps:
+            found = dependents.get(dep)
+            if found is None:
+                dependents[dep] = {key}
+            else:
+                found.add(key)
+
+    def _inherit(self, state: State) -> dict[Any, Any]:
         """The memo of ``state``: the nearest ancestor's entries that the changes since then leave valid."""
+        if not self.incremental:
+            return {}
         changed: set[tuple[str, str | None]] = set()
         cursor = state
         for _ in range(INHERIT_DEPTH):
@@ -263,15 +313,18 @@ class AxiomSet:
             cursor = parent
         else:
             return {}
-        memo: dict[Atom, Any] = {}
-        for atom, entry in parent_memo.items():
-            if entry is _IN_PROGRESS or entry[3] or not changed.isdisjoint(entry[1]):
-                continue
-            for dep in entry[2]:
-                if dep not in memo:  # invalidated, or answered from an extension: re-prove
-                    break
-            else:
-                memo[atom] = entry
+        memo = dict(parent_memo)
+        readers = self._readers
+        dependents = self._dependents
+        todo: list[Any] = []
+        for fact_key in changed:
+            for key in readers.get(fact_key, ()):
+                if memo.pop(key, None) is not None:
+                    todo.append(key)
+        while todo:
+            for key in dependents.get(todo.pop(), ()):
+                if memo.pop(key, None) is not None:
+                    todo.append(key)
         return memo
 
     def _prove(self, state: Any, atom: Atom) -> bool:
@@ -298,9 +351,15 @@ class AxiomSet:
 
     def _stream(self, state: State, pred: str, args: Sequence[Term], env: dict[str, str]
                 ) -> Iterator[dict[str, str]]:
-        pattern: list[str | None] = [
+        """Satisfiers of a non-recursive derived atom with unbound arguments, rule by rule, in matching order.
+
+        A clause that starts with a positive fact pattern is evaluated per *seed* (each fact the pattern
+        matches, in state order): the rest of the clause for one seed is a memo unit, recorded and inherited
+        like a proof, so successor states re-evaluate only the seeds their changes touch.
+        """
+        pattern: tuple[str | None, ...] = tuple(
             (env.get(a.name) if isinstance(a, Var) else a) for a in args  # type: ignore[misc]
-        ]
+        )
         seen: set[Atom] = set()
         for axiom in self.rules[pred]:
             head_env: dict[str, str] | None = {}
@@ -320,14 +379,76 @@ class AxiomSet:
             if head_env is None:
                 continue
             for clause in axiom.condition.clauses:
-                for body_env in match_clause(clause, state, head_env, None, self):
-                    atom = ground(pred, axiom.head_args, body_env)
+                split = self._units.get(id(clause)) if self.incremental else None
+                if split is None:
+                    heads: Iterable[Atom] = (ground(pred, axiom.head_args, body_env)
+                                             for body_env in match_clause(clause, state, head_env, None, self))
+                else:
+                    heads = self._unit_heads(state, axiom, split, head_env, pattern)
+                for atom in heads:
                     if atom in seen:
                         continue
                     seen.add(atom)
                     result = _unify(args, atom, env)
                     if result is not None:
                         yield result
+
+    def _unit_heads(self, state: State, axiom: Axiom, split: tuple, head_env: dict[str, str],
+                    pattern: tuple[str | None, ...]) -> Iterator[Atom]:
+        token, first, rest = split
+        cache = state._derived
+        memo = cache.get(self._memo_key)
+        if memo is None:
+            memo = cache[self._memo_key] = self._inherit(state)
+        pred = first[1]
+        vals: list[Any] = [pred]
+        free: list[tuple[int, str]] = []
+        for arg in first[2]:
+            if isinstance(arg, Var):
+                value = head_env.get(arg.name)
+                if value is None:
+                    free.append((len(vals), arg.name))
+                vals.append(value)
+            else:
+                vals.append(arg)
+        length = len(vals)
+        pool: Iterable[Atom]
+        fixed: list[tuple[int, str]] = []
+        if not free:
+            atom = tuple(vals)
+            pool = (atom,) if atom in state else ()
+        else:
+            bound = [i for i in range(1, length) if vals[i] is not None]
+            pool = state.with_arg(pred, bound[0], vals[bound[0]]) if bound else state.atoms_of(pred)
+            fixed = [(i, vals[i]) for i in bound[1:]]
+        volatile_memo = cache.get(self._volatile_key, _NO_ENTRIES)
+        for seed in pool:
+            if len(seed) != length:
+                continue
+            if fixed and any(seed[i] != v for i, v in fixed):
+                continue
+            key = (token, seed, pattern)
+            unit = memo.get(key)
+            if unit is None:
+                unit = volatile_memo.get(key)
+            if unit is None:
+                seed_env = dict(head_env)
+                consistent = True
+                for i, name in free:
+                    prior = seed_env.get(name)
+                    if prior is None:
+                        seed_env[name] = seed[i]
+                    elif prior != seed[i]:
+                        consistent = False
+                        break
+                if not consistent:
+                    continue
+                recorder = _Recorder(state)
+                unit = (tuple(ground(axiom.head_pred, axiom.head_args, body_env)
+                              for body_env in match_clause(rest, recorder, seed_env, None, self)),)
+                self._store(state, memo, key, unit, recorder)
+                volatile_memo = cache.get(self._volatile_key, _NO_ENTRIES)
+            yield from unit[0]
 
     def derived_atoms(self, state: State) -> list[Atom]:
         """Every derived atom true in ``state`` (for display and tests)."""

@@ -213,6 +213,10 @@ class State:
         successor = State._make(new_preds, length, hash_ & _MASK, new_by_arg)
         # parent and changed atoms let axiom memos be inherited (see AxiomSet.holds)
         successor._parent = self
-        successor._delta = (*(a for atoms in removed.values() for a in atoms), *(a for atoms in added.values()
-                                                                                  for a in atoms))
+        delta: list[Atom] = []
+        for atoms in removed.values():
+            delta.extend(atoms)
+        for atoms in added.values():
+            delta.extend(atoms)
+        successor._delta = tuple(delta)
         return successor

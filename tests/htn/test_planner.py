@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import subprocess
 import sys
 import textwrap
@@ -426,3 +427,45 @@ def test_states_are_immutable_values_that_copy_and_pickle_without_their_history(
     assert later.holds(("c", "2999")) and not later.holds(("c", "2998")) and len(later) == 3
     assert later.with_arg("b", 2, "3") == (("b", "2", "3"),)
     assert state.apply() is state  # no change, no new state
+
+
+def _random_towers(blocks: list[str], rng) -> list[list[str]]:
+    towers: list[list[str]] = []
+    for block in rng.sample(blocks, len(blocks)):
+        if towers and rng.random() < 0.7:
+            rng.choice(towers).append(block)
+        else:
+            towers.append([block])
+    return towers
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_incremental_axiom_evaluation_changes_no_plan(seed):
+    """Memo inheritance and per-seed units are an optimisation: plans are identical without them."""
+    import random
+    from pathlib import Path
+
+    from bt_meta.htn import load_task_file
+
+    rng = random.Random(seed)
+    blocks = [f"b{i}" for i in range(30)]
+    init: list[tuple[str, ...]] = [("hand_empty",)]
+    for tower in _random_towers(blocks, rng):
+        init.append(("on_table", tower[0]))
+        init.extend(("on", upper, lower) for lower, upper in itertools.pairwise(tower))
+        init.append(("clear", tower[-1]))
+    goal: list[tuple[str, ...]] = []
+    for tower in _random_towers(blocks, rng):
+        init.append(("goal_on_table", tower[0]))
+        init.extend(("goal_on", upper, lower) for lower, upper in itertools.pairwise(tower))
+        goal.extend(("on", upper, lower) for lower, upper in itertools.pairwise(tower))
+    path = Path(__file__).resolve().parents[2] / "bt_meta" / "bench" / "problems" / "blocks_htn.yaml"
+    plans = []
+    for incremental in (True, False):
+        domain = load_task_file(path).domain
+        domain.axiom_set.incremental = incremental
+        problem = problem_from_atoms(domain, "random", init=init, tasks=[("achieve",)], goal=goal)
+        result = plan(domain, problem)
+        assert result.status == "success", result.message
+        plans.append([a.as_list() for a in result.plan])
+    assert plans[0] == plans[1]

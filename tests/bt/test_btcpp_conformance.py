@@ -69,7 +69,7 @@ class _Generator:
         return f"<{name}/>"
 
     def count(self) -> str:
-        choices = [1, 2, 3]
+        choices = [0, 1, 2, 3]
         if self.forever:
             choices.append(-1)
         value = str(self.rng.choice(choices))
@@ -87,7 +87,7 @@ class _Generator:
     def node(self, depth: int) -> str:
         self.nodes += 1
         rng = self.rng
-        if depth <= 0 or rng.random() < 0.3:
+        if depth <= 0 or rng.random() < 0.2:
             pick = rng.random()
             if pick < 0.08:
                 self.kinds.add("AlwaysSuccess")

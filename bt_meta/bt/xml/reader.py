@@ -207,7 +207,7 @@ class _Resolver:
                 continue
             if attr == "__shared_blackboard":
                 raise self.error(
-                    "__shared_blackboard is BehaviorTree.CPP v3 syntax; in v4 use _autoremap=\"true\" or remap ports",
+                    '__shared_blackboard is BehaviorTree.CPP v3 syntax; in v4 use _autoremap="true" or remap ports',
                     element,
                 )
             if attr.startswith("_"):

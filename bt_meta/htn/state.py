@@ -50,7 +50,7 @@ class State:
             for atom in atoms_of:
                 total += hash(atom)
         self._hash = total & _MASK
-        self._by_arg: dict[tuple[str, int], dict[str, tuple[Atom, ...]]] = {}
+        self._by_arg: dict[str, dict[int, dict[str, tuple[Atom, ...]]]] = {}
         self._derived: dict[Any, Any] = {}
         self._parent: State | None = None
         self._delta: tuple[Atom, ...] = ()
@@ -61,7 +61,7 @@ class State:
         preds: dict[str, dict[Atom, None]],
         length: int,
         hash_: int,
-        by_arg: dict[tuple[str, int], dict[str, tuple[Atom, ...]]],
+        by_arg: dict[str, dict[int, dict[str, tuple[Atom, ...]]]],
     ) -> State:
         state = cls.__new__(cls)
         state._preds = preds
@@ -95,15 +95,18 @@ class State:
         The index of a (predicate, position) is built the first time it is asked for in a state and updated
         incrementally by :meth:`apply`, so successors inherit it.
         """
-        key = (pred, position)
-        index = self._by_arg.get(key)
+        by_position = self._by_arg.get(pred)
+        index = by_position.get(position) if by_position is not None else None
         if index is None:
             built: dict[str, list[Atom]] = {}
             for atom in self._preds.get(pred, _EMPTY):
                 if len(atom) > position:
                     built.setdefault(atom[position], []).append(atom)
             index = {k: tuple(v) for k, v in built.items()}
-            self._by_arg[key] = index
+            if by_position is None:
+                self._by_arg[pred] = {position: index}
+            else:
+                by_position[position] = index
         return index.get(value, ())
 
     def with_first(self, pred: str, first: str) -> tuple[Atom, ...]:
@@ -180,7 +183,9 @@ class State:
         length = self._len
         for pred in removed.keys() | added.keys():
             gone = removed.get(pred, ())
-            new = sorted(added[pred]) if pred in added else ()
+            new = added.get(pred, ())
+            if len(new) > 1:
+                new = sorted(new)
             updated = dict(preds.get(pred, _EMPTY))
             for atom in gone:
                 del updated[atom]
@@ -193,23 +198,25 @@ class State:
             else:
                 new_preds.pop(pred, None)
             length += len(new) - len(gone)
-            if by_arg:
-                for key, index in by_arg.items():
-                    if key[0] != pred:
-                        continue
-                    position = key[1]
+            by_position = by_arg.get(pred) if by_arg else None
+            if by_position:
+                new_position: dict[int, dict[str, tuple[Atom, ...]]] = {}
+                for position, index in by_position.items():
                     index = dict(index)
                     for atom in gone:
                         if len(atom) > position:
-                            remaining = tuple(a for a in index.get(atom[position], ()) if a != atom)
+                            key = atom[position]
+                            remaining = tuple(a for a in index.get(key, ()) if a != atom)
                             if remaining:
-                                index[atom[position]] = remaining
+                                index[key] = remaining
                             else:
-                                index.pop(atom[position], None)
+                                index.pop(key, None)
                     for atom in new:
                         if len(atom) > position:
-                            index[atom[position]] = (*index.get(atom[position], ()), atom)
-                    new_by_arg[key] = index
+                            key = atom[position]
+                            index[key] = (*index.get(key, ()), atom)
+                    new_position[position] = index
+                new_by_arg[pred] = new_position
         successor = State._make(new_preds, length, hash_ & _MASK, new_by_arg)
         # parent and changed atoms let axiom memos be inherited (see AxiomSet.holds)
         successor._parent = self

@@ -1,0 +1,151 @@
+"""``bt-meta record FILE --problem P``: run the nominal plan in the simulator as the instructor's demonstration and
+store its trace in the episodic memory.
+
+Offers:
+
+* :func:`register` -- adds ``record FILE [--problem P] [--variant V] [--seed S] [--memory PATH] [--json]
+  [--max-ticks N] [--grounding FILE] [--check-expectations] [--plugins DIR] [--no-entry-points]``
+* :func:`record` -- the handler
+* :data:`MEMORY_EXPECTATIONS` -- the shipped expectation plugins a demonstration runs without
+
+The problem is planned and compiled with a Monitor around every primitive and ticked on a
+:class:`~bt_meta.world.sim_world.SimWorld` (headless) with a :class:`~bt_meta.memory.recorder.TraceRecorder`
+registered; at the end the trace is written in one transaction and its episode id printed with its steps. A
+demonstration teaches the expectations, so it is not checked against the memory's grid-map and keypoint
+expectations (``--check-expectations`` keeps them); preconditions and skills are checked as in any run. A
+demonstration that fails is refused: nothing is stored, the failure is printed and the exit status is 1.
+``--json`` prints ``{episode_id, memory, task, problem, variant, seed, outcome, steps: [{index, action, args,
+node_id, parent_task, parent_node, objects, grid_maps}], expectations, ticks, seconds, failures}``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from typing import Any
+
+from py_trees.common import Status
+
+from bt_meta.commands._common import print_json
+from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
+from bt_meta.errors import BtMetaError, PlanningError, UserInputError
+from bt_meta.memory import add_memory_argument, resolve_memory_path
+
+#: Expectation plugins whose expectations come from the memory a demonstration is about to teach.
+MEMORY_EXPECTATIONS = ("gridmap_expectations", "keypoint_expectations")
+
+
+class DemonstrationFailed(BtMetaError):
+    """The demonstration did not succeed, so it was not stored."""
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "record", help="run a problem's nominal plan in the simulator and store it as a demonstration")
+    parser.add_argument("file", help="YAML task file")
+    parser.add_argument("--problem", help="problem name (required when the file has several)")
+    parser.add_argument("--variant", help="scene variant (default: the grounding file's for the problem, else nominal)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of every random draw (default 0)")
+    parser.add_argument("--max-ticks", type=int, default=5000, help="give up after this many ticks (default 5000)")
+    parser.add_argument("--grounding", help="grounding file (default: poses/<domain>.yaml beside FILE or shipped)")
+    parser.add_argument("--check-expectations", action="store_true",
+                        help="keep the memory's grid-map and keypoint expectations switched on while demonstrating")
+    parser.add_argument("--json", action="store_true", help="print one JSON object with the stored episode")
+    add_memory_argument(parser)
+    add_plugin_arguments(parser)
+    parser.set_defaults(func=record)
+
+
+def record(args: argparse.Namespace) -> int:
+    from bt_meta.htn import load_task_file
+    from bt_meta.memory import EpisodicMemory
+    from bt_meta.memory.recorder import TraceRecorder
+    from bt_meta.testing import TreeHarness
+    from bt_meta.world.sim_world import SimWorld, load_grounding, quiet_stdout
+
+    if args.max_ticks < 1:
+        raise UserInputError("--max-ticks must be at least 1")
+    task_file = load_task_file(args.file)
+    problem = task_file.problem(args.problem)  # unknown names list the known ones (exit 2)
+    grounding = load_grounding(task_file.domain.name, args.file, args.grounding)
+    grounding.problem(problem.name)
+    plugins = plugin_host_from_args(args, args.file)
+    if not args.check_expectations:
+        for name in MEMORY_EXPECTATIONS:
+            if name in plugins.plugin_names():
+                plugins.unregister(name)
+    memory_path = resolve_memory_path(args)
+    started = time.perf_counter()
+    with quiet_stdout():
+        world = SimWorld(task_file.domain, problem, grounding, variant=args.variant, seed=args.seed)
+    try:
+        with EpisodicMemory.open(memory_path) as memory:
+            recorder = TraceRecorder(memory, variant=world.variant, seed=args.seed,
+                                     config={"demonstration": True, "scene": world.scene.name})
+            plugins.register(recorder, "recorder", source="bt-meta record")
+            try:
+                harness = TreeHarness.from_file(args.file, problem.name, world=world, plugins=plugins)
+            except PlanningError as error:
+                raise DemonstrationFailed(f"{problem.name}: no plan to demonstrate ({error}); nothing stored") from None
+            recorder.tree = harness.compiled.plan_result.tree
+            status = Status.RUNNING
+            while status is Status.RUNNING and harness.run.tick_count < args.max_ticks:
+                status = harness.tick()
+            harness.run.finish(status)
+            ticks = harness.run.tick_count
+            failures = [f.to_dict() for f in harness.failures]
+            harness.close()
+            seconds = time.perf_counter() - started
+            if recorder.error is not None:
+                raise recorder.error
+            if status is not Status.SUCCESS or recorder.episode_id is None:
+                raise DemonstrationFailed(_refusal(problem.name, world.variant, status, ticks, failures))
+            trace = memory.trace(recorder.episode_id)
+            return _report(args, memory, trace, ticks, seconds, recorder.seconds)
+    finally:
+        world.close()
+
+
+def _refusal(problem: str, variant: str, status: Status, ticks: int, failures: list[dict[str, Any]]) -> str:
+    if status is Status.RUNNING:
+        why = f"still running after {ticks} ticks (--max-ticks)"
+    elif failures:
+        first = failures[0]
+        where = f"step {first['step']} {first.get('action') or ''}{tuple(first.get('args') or ())}" \
+            if first.get("step") is not None else (first.get("node_id") or "the tree")
+        why = f"{first['kind']} failure at {where}: {first['message']}"
+    else:
+        why = f"the tree ended {status.value}"
+    return f"demonstration of {problem} ({variant}) failed, nothing stored: {why}"
+
+
+def _report(args: argparse.Namespace, memory: Any, trace: Any, ticks: int, seconds: float,
+            recording: float) -> int:
+    episode = trace.episode
+    steps = [{
+        "index": s.index, "action": s.action, "args": list(s.args), "node_id": s.node_id,
+        "parent_task": s.parent_task, "parent_node": s.parent_node, "task_index": s.task_index,
+        "objects": len(s.state.objects),
+        "grid_maps": [{"object": g.object_name, "colour": g.colour, "shape": g.shape} for g in s.state.grid_maps],
+    } for s in trace.steps]
+    if args.json:
+        print_json({
+            "episode_id": episode.id, "memory": str(memory.path), "task": episode.task, "problem": episode.problem,
+            "task_file": episode.task_file, "variant": episode.variant, "seed": episode.seed,
+            "outcome": episode.outcome, "steps": steps, "expectations": len(trace.expectations), "ticks": ticks,
+            "seconds": round(seconds, 3), "recording_seconds": round(recording, 3),
+        })
+        return 0
+    print(f"recorded episode {episode.id}: {episode.task} (problem {episode.problem}, variant {episode.variant}, "
+          f"seed {episode.seed}), {len(steps)} steps, outcome {episode.outcome}")
+    for step in steps:
+        call = f"{step['action']}({', '.join(step['args'])})"
+        maps = ", ".join(f"{m['object']} {m['colour']} {m['shape']}" for m in step["grid_maps"])
+        print(f"  {step['index']:>3}  {step['node_id'] or '-':<5} {call:<28} in {step['parent_task'] or '-'}"
+              f" ({step['parent_node'] or '-'})  {step['objects']} objects" + (f", grid-map {maps}" if maps else ""))
+    print(f"{len(trace.expectations)} expectations in E_db; {ticks} ticks in {seconds:.2f} s "
+          f"(recording {recording:.3f} s) -> {memory.path}")
+    return 0
+
+
+__all__ = ["MEMORY_EXPECTATIONS", "DemonstrationFailed", "record", "register"]

@@ -3,7 +3,8 @@
 Offers:
 
 * :func:`register` -- adds ``run FILE [--problem P] [--variant V] [--seed S] [--json] [--plugins DIR]
-  [--max-ticks N] [--gui] [--grounding FILE]``
+  [--max-ticks N] [--gui] [--grounding FILE] [--memory PATH] [--record] [--record-failed] [--repair]
+  [--max-attempts N]``
 * :func:`run` -- the handler
 
 The problem is planned and compiled with a Monitor around every primitive, then ticked on a
@@ -12,12 +13,25 @@ problem's scene with the chosen variant, headless unless ``--gui``. The tick log
 some primitive changed status. ``--json`` prints ``{status, ticks, failures: [{kind, step, node_id, action, args,
 evidence, message}], objects (final object states), ...}``. Exit status: 0 SUCCESS, 1 FAILURE (a failed step, no
 plan, or still running after ``--max-ticks``), 2 bad input (unknown problem or variant: the known ones are listed).
+
+Memory: the expectation plugins read the run's ``memory`` (``--memory PATH``, else ``$BT_META_MEMORY``, else
+``./.bt-meta/memory.sqlite``; an explicit ``--memory`` file must exist unless the run writes to it). ``--record``
+stores the run's trace with a :class:`~bt_meta.memory.recorder.TraceRecorder` when it succeeds (``--record-failed``:
+also when it fails, with its outcome); the episode id is printed (JSON ``episode_id``). ``--repair`` runs through
+the :class:`~bt_meta.meta.executor.MetaExecutor` with the plugin host, the memory and its learned refinements:
+failures are diagnosed and repaired (at most ``--max-attempts``), a successful repair is saved as a refinement; it
+prints the attempts and repairs (JSON gains ``attempts``, ``repairs``, ``refinement_saved``,
+``refinements_used``, ``stop_reason``, ``reported``, ``initial_plan``).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import time
+from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 from py_trees.common import Status
@@ -25,6 +39,7 @@ from py_trees.common import Status
 from bt_meta.commands._common import print_json
 from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
 from bt_meta.errors import PlanningError, UserInputError
+from bt_meta.memory import ENV_VAR, add_memory_argument, resolve_memory_path
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -37,6 +52,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--gui", action="store_true", help="open the pybullet window and run in real time")
     parser.add_argument("--grounding", help="grounding file (default: poses/<domain>.yaml beside FILE or shipped)")
     parser.add_argument("--json", action="store_true", help="print one JSON object with the outcome")
+    parser.add_argument("--record", action="store_true",
+                        help="store this run's trace in the episodic memory when it succeeds")
+    parser.add_argument("--record-failed", action="store_true",
+                        help="store this run's trace even when it fails (its outcome is recorded); implies --record")
+    parser.add_argument("--repair", action="store_true",
+                        help="diagnose and repair failures with the meta-reasoner (memory, refinements, repairs)")
+    parser.add_argument("--max-attempts", type=int, default=5,
+                        help="with --repair: at most this many applied repairs (default 5)")
+    add_memory_argument(parser)
     add_plugin_arguments(parser)
     parser.set_defaults(func=run)
 
@@ -49,63 +73,175 @@ def _shown(behaviour: Any) -> bool:
 
 
 def run(args: argparse.Namespace) -> int:
-    from bt_meta.bt.failures import Failure, FailureKind
     from bt_meta.htn import load_task_file
-    from bt_meta.testing import TreeHarness
     from bt_meta.world.sim_world import SimWorld, load_grounding, quiet_stdout
 
     if args.max_ticks < 1:
         raise UserInputError("--max-ticks must be at least 1")
+    if args.max_attempts < 0:
+        raise UserInputError("--max-attempts must be at least 0")
     task_file = load_task_file(args.file)
     problem = task_file.problem(args.problem)  # unknown names list the known ones (exit 2)
     grounding = load_grounding(task_file.domain.name, args.file, args.grounding)
     grounding.problem(problem.name)
     plugins = plugin_host_from_args(args, args.file)
-    started = time.perf_counter()
-    with quiet_stdout():
-        world = SimWorld(task_file.domain, problem, grounding, variant=args.variant, seed=args.seed, gui=args.gui)
-    built = time.perf_counter()
-    out: dict[str, Any] = {"file": str(args.file), "problem": problem.name, "variant": world.variant,
-                           "scene": world.scene.name, "seed": args.seed}
-    try:
+    with _memory(args) as memory:
+        recorder = None
+        if args.record or args.record_failed:
+            from bt_meta.memory.recorder import TraceRecorder
+
+            recorder = TraceRecorder(memory, record_failed=args.record_failed, seed=args.seed,
+                                     config={"command": "bt-meta run" + (" --repair" if args.repair else "")})
+            plugins.register(recorder, "recorder", source="bt-meta run --record")
+        started = time.perf_counter()
+        with quiet_stdout():
+            world = SimWorld(task_file.domain, problem, grounding, variant=args.variant, seed=args.seed, gui=args.gui)
+        built = time.perf_counter()
+        out: dict[str, Any] = {"file": str(args.file), "problem": problem.name, "variant": world.variant,
+                               "scene": world.scene.name, "seed": args.seed}
         try:
-            harness = TreeHarness.from_file(args.file, problem.name, world=world, plugins=plugins)
-        except PlanningError as error:
-            failure = Failure(kind=FailureKind.PRECONDITION, message=str(error), evidence={"planner": str(error)})
-            return _report(args, out, "FAILURE", 0, [failure.to_dict()], world, [], started, built)
-        plan = [" ".join((p.name, *p.args)) for p in harness.compiled.plan_result.plan]
-        if not args.json:
-            print(f"{problem.name} in scene {world.scene.name} ({world.variant}), seed {args.seed}: "
-                  f"{len(plan)} primitives planned")
-        shown = {b.name for b in harness.root.iterate() if _shown(b)}
-        last: dict[str, str] = {}
-        status = Status.RUNNING
-        reported = 0
-        while harness.run.tick_count < args.max_ticks:
-            status = harness.tick()
-            seen = harness.statuses()
-            nodes = {name: seen.get(f"Monitor<{name}>", value) for name, value in seen.items() if name in shown}
-            changed = {name: value for name, value in nodes.items() if last.get(name) != value}
-            last.update(nodes)
-            new_failures = harness.failures[reported:]
-            reported = len(harness.failures)
-            if not args.json and (changed or new_failures or status is not Status.RUNNING):
-                listed = "  ".join(f"{name}={value}" for name, value in changed.items())
-                print(f"tick {harness.run.tick_count:>4}  {status.value:<8} {listed}")
-                for failure in new_failures:
-                    print(f"           failure {failure.summary()}")
-            if status is not Status.RUNNING:
-                break
-        failures = [f.to_dict() for f in harness.failures]
-        harness.close()
-        return _report(args, out, status.value, harness.run.tick_count, failures, world, plan, started, built)
+            if args.repair:
+                return _run_repaired(args, task_file, problem, world, plugins, memory, recorder, out, started, built)
+            return _run_plain(args, problem, world, plugins, memory, recorder, out, started, built)
+        finally:
+            world.close()
+
+
+@contextlib.contextmanager
+def _memory(args: argparse.Namespace) -> Iterator[Any]:
+    """The run's episodic memory (or ``None``), with ``$BT_META_MEMORY`` pointing at it while the run lasts so
+    plugins that open the memory themselves read the same file."""
+    from bt_meta.memory import EpisodicMemory
+
+    path = resolve_memory_path(args)
+    writes = args.record or args.record_failed or args.repair
+    if writes:
+        memory = EpisodicMemory.open(path)
+    elif args.memory:
+        memory = EpisodicMemory.open(path, create=False, readonly=not os.access(path, os.W_OK))
+    else:
+        memory = None
+    if memory is None:
+        yield None
+        return
+    previous = os.environ.get(ENV_VAR)
+    os.environ[ENV_VAR] = str(memory.path)
+    try:
+        yield memory
     finally:
-        world.close()
+        memory.close()
+        if previous is None:
+            os.environ.pop(ENV_VAR, None)
+        else:
+            os.environ[ENV_VAR] = previous
+
+
+def _run_plain(args: argparse.Namespace, problem: Any, world: Any, plugins: Any, memory: Any, recorder: Any,
+               out: dict[str, Any], started: float, built: float) -> int:
+    from bt_meta.bt.failures import Failure, FailureKind
+    from bt_meta.testing import TreeHarness
+
+    try:
+        harness = TreeHarness.from_file(args.file, problem.name, world=world, plugins=plugins)
+    except PlanningError as error:
+        failure = Failure(kind=FailureKind.PRECONDITION, message=str(error), evidence={"planner": str(error)})
+        return _report(args, out, "FAILURE", 0, [failure.to_dict()], world, [], started, built, recorder)
+    if memory is not None:
+        harness.run.memory = memory  # what the grid-map and keypoint expectation plugins read
+    if recorder is not None:
+        recorder.tree = harness.compiled.plan_result.tree
+    plan = [" ".join((p.name, *p.args)) for p in harness.compiled.plan_result.plan]
+    if not args.json:
+        print(f"{problem.name} in scene {world.scene.name} ({world.variant}), seed {args.seed}: "
+              f"{len(plan)} primitives planned")
+    shown = {b.name for b in harness.root.iterate() if _shown(b)}
+    last: dict[str, str] = {}
+    status = Status.RUNNING
+    reported = 0
+    while harness.run.tick_count < args.max_ticks:
+        status = harness.tick()
+        seen = harness.statuses()
+        nodes = {name: seen.get(f"Monitor<{name}>", value) for name, value in seen.items() if name in shown}
+        changed = {name: value for name, value in nodes.items() if last.get(name) != value}
+        last.update(nodes)
+        new_failures = harness.failures[reported:]
+        reported = len(harness.failures)
+        if not args.json and (changed or new_failures or status is not Status.RUNNING):
+            listed = "  ".join(f"{name}={value}" for name, value in changed.items())
+            print(f"tick {harness.run.tick_count:>4}  {status.value:<8} {listed}")
+            for failure in new_failures:
+                print(f"           failure {failure.summary()}")
+        if status is not Status.RUNNING:
+            break
+    harness.run.finish(status)
+    failures = [f.to_dict() for f in harness.failures]
+    harness.close()
+    return _report(args, out, status.value, harness.run.tick_count, failures, world, plan, started, built, recorder)
+
+
+def _run_repaired(args: argparse.Namespace, task_file: Any, problem: Any, world: Any, plugins: Any, memory: Any,
+                  recorder: Any, out: dict[str, Any], started: float, built: float) -> int:
+    from bt_meta.meta.executor import MetaExecutor
+    from bt_meta.meta.reasoner import Limits
+    from bt_meta.meta.refinements import RefinementStore
+
+    class Executor(MetaExecutor):
+        """Hands every segment's run the memory (expectation plugins read ``run.memory``) and the recorder the
+        segment's decomposition tree (parent tasks of repaired steps)."""
+
+        def _segment(self, run: Any, plan_state: Any, *rest: Any) -> Any:  # type: ignore[override]
+            run.memory = memory
+            if recorder is not None:
+                recorder.tree = plan_state.tree
+            return super()._segment(run, plan_state, *rest)
+
+    if not args.json:
+        print(f"{problem.name} in scene {world.scene.name} ({world.variant}), seed {args.seed}: "
+              f"running with repairs (at most {args.max_attempts} attempts)")
+    with RefinementStore.open(memory.path) as refinements:
+        report = Executor(task_file.domain, problem, world, plugins, task_file=task_file, variant=world.variant,
+                          refinements=refinements, limits=Limits(max_attempts=args.max_attempts,
+                                                                 max_ticks=args.max_ticks)).run()
+    status = "SUCCESS" if report.ok else "FAILURE"
+    out.update({
+        "attempts": [a.to_dict() for a in report.attempts],
+        "repairs": report.repairs,
+        "refinement_saved": report.refinement_saved,
+        "refinements_used": report.refinements_used,
+        "stop_reason": report.stop_reason,
+        "reported": report.reported,
+        "initial_plan": [" ".join(step) for step in report.initial_plan],
+        "repair_status": report.status,
+    })
+    if not args.json:
+        if report.refinements_used:
+            print(f"learned refinements used: {', '.join(report.refinements_used)}")
+        print(f"initial plan: {len(report.initial_plan)} primitives; {len(report.attempts)} repair attempt(s)")
+        for attempt in report.attempts:
+            proposal = attempt.proposal
+            failure = attempt.failure
+            call = f"{failure.get('action') or ''}{tuple(failure.get('args') or ())}"
+            print(f"  attempt {attempt.number}: {attempt.kind} at step {attempt.step} {call} -> "
+                  f"{proposal.get('action')} by {proposal.get('plugin')} (score {proposal.get('score', 0):.2f}): "
+                  f"{attempt.change} [{attempt.outcome}]")
+        if report.stop_reason:
+            print(f"  stopped: {report.stop_reason}")
+        if report.refinement_saved:
+            saved = report.refinement_saved
+            print(f"refinement saved: {saved.get('method') or saved.get('reason') or saved}")
+    plan = [" ".join(step) for step in report.plan]
+    return _report(args, out, status, report.ticks, report.failures, world, plan, started, built, recorder)
 
 
 def _report(args: argparse.Namespace, out: dict[str, Any], status: str, ticks: int, failures: list[dict[str, Any]],
-            world: Any, plan: list[str], started: float, built: float) -> int:
+            world: Any, plan: list[str], started: float, built: float, recorder: Any = None) -> int:
     finished = time.perf_counter()
+    if recorder is not None:
+        if recorder.error is not None:
+            raise recorder.error
+        out["episode_id"] = recorder.episode_id
+        out["recording"] = ("stored" if recorder.episode_id is not None
+                            else recorder.skipped or "the run never started (no plan)")
     observed = world.observe()
     keys = ("kind", "step", "node_id", "action", "args", "evidence", "message")
     out.update({
@@ -134,6 +270,9 @@ def _report(args: argparse.Namespace, out: dict[str, Any], status: str, ticks: i
             pose = ", ".join(f"{v:.3f}" for v in state["pose"][:3])
             print(f"  {name:<10} at ({pose})" + (f" held by {state['held_by']}" if state["held_by"] else "")
                   + (f" joined to {', '.join(state['attached_to'])}" if state["attached_to"] else ""))
+        if recorder is not None:
+            print(f"recorded episode {recorder.episode_id} in {Path(recorder.memory.path)}"
+                  if recorder.episode_id is not None else f"not recorded: {out['recording']}")
     return 0 if status == "SUCCESS" else 1
 
 

@@ -1,0 +1,44 @@
+"""``bt-meta demo``: the paper's scenario end to end on the simulator, with an HTML report.
+
+Offers (each in its own module):
+
+* :func:`run_demo`, :func:`run_variant`, :func:`record_demonstration`, :class:`DemoResult` -- record the
+  demonstrations, run the variants with monitors and repairs, run them again with the learned refinements
+  (``runner``)
+* :func:`write_report` -- ``report.html``: trees, camera images, grid-maps, R_p / R_n plots, repair log,
+  refinements (``report``)
+* :class:`Demonstration`, :class:`VariantRun`, :func:`demonstrations`, :func:`variants` -- the scenario as data
+  (``scenario``)
+* :data:`CONFIGURATIONS`, :func:`plugin_host` -- which plugins a run has: dual, symbolic, low-level, retry
+  (``configurations``)
+* :class:`Progress`, :class:`RunCapture`, :class:`CapturingExecutor` -- what the demo watches (``capture``)
+* :func:`tree_svg`, :func:`line_plot_svg` -- the inline SVG pictures (``svg``)
+"""
+
+from __future__ import annotations
+
+from bt_meta.demo.capture import CapturingExecutor, Progress, RunCapture
+from bt_meta.demo.configurations import CONFIGURATIONS, plugin_host
+from bt_meta.demo.report import write_report
+from bt_meta.demo.runner import DemoResult, record_demonstration, run_demo, run_variant
+from bt_meta.demo.scenario import Demonstration, VariantRun, demonstrations, variants
+from bt_meta.demo.svg import line_plot_svg, tree_svg
+
+__all__ = [
+    "CONFIGURATIONS",
+    "CapturingExecutor",
+    "DemoResult",
+    "Demonstration",
+    "Progress",
+    "RunCapture",
+    "VariantRun",
+    "demonstrations",
+    "line_plot_svg",
+    "plugin_host",
+    "record_demonstration",
+    "run_demo",
+    "run_variant",
+    "tree_svg",
+    "variants",
+    "write_report",
+]

@@ -1,0 +1,328 @@
+"""The demo's report: one self-contained HTML file (images as base64 PNG, pictures as inline SVG, no scripts).
+
+Sections: the summary table, the demonstrations recorded, one section per variant run (top-view camera images
+before and after, the behaviour tree of each segment with its node statuses, grid-maps remembered / observed at the
+failure / at the end, R_p and R_n over the steps against the remembered traces, the repair log: failure kind,
+evidence, proposals, the chosen repair, attempts and time), and the learned refinements as YAML.
+
+Offers:
+
+* :func:`write_report` -- ``report.html`` of a :class:`~bt_meta.demo.runner.DemoResult`
+* :func:`render_report` -- the same as a string
+* :func:`grid_svg` -- a grid-map (the ``render`` text of :mod:`bt_meta.perception.gridmap`) as coloured cells
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from bt_meta.demo.svg import TreeNode, line_plot_svg, tree_svg
+
+__all__ = ["grid_svg", "render_report", "write_report"]
+
+_CELL_COLOURS = {".": "#ffffff", "b": "#1e63d6", "r": "#d62f2f", "g": "#2e9d44", "y": "#e8c619", "#": "#777777"}
+
+_CSS = """
+body{font-family:system-ui,sans-serif;margin:24px;max-width:1250px;color:#263238}
+h1{font-size:24px}h2{font-size:19px;border-bottom:2px solid #cfd8dc;padding-bottom:4px;margin-top:36px}
+h3{font-size:16px;margin:18px 0 6px}h4{font-size:14px;margin:12px 0 4px}
+table{border-collapse:collapse;font-size:13px;margin:6px 0}td,th{border:1px solid #cfd8dc;padding:3px 7px;
+vertical-align:top;text-align:left}th{background:#eceff1}
+.success{background:#e8f5e9}.failed,.crashed,.no_plan{background:#ffebee}.reused{background:#f3e5f5}
+.pill{display:inline-block;border-radius:9px;padding:0 7px;font-size:12px;color:#fff}
+.ok{background:#43a047}.bad{background:#e53935}.neutral{background:#78909c}
+.row{display:flex;flex-wrap:wrap;gap:18px;align-items:flex-start}.fig{font-size:12px;color:#546e7a}
+pre{background:#f5f5f5;padding:8px;font-size:12px;overflow-x:auto;max-height:420px}
+details{margin:6px 0}summary{cursor:pointer;font-weight:600}.small{font-size:12px;color:#607d8b}
+"""
+
+
+def _e(value: Any) -> str:
+    return html.escape(str(value), quote=True)
+
+
+def _img(png: bytes | None, alt: str, width: int = 320) -> str:
+    if not png:
+        return f'<div class="small">({_e(alt)}: no image)</div>'
+    data = base64.b64encode(png).decode("ascii")
+    return f'<img alt="{_e(alt)}" width="{width}" src="data:image/png;base64,{data}">'
+
+
+def grid_svg(grid: str | None, *, cell: int = 14, title: str = "") -> str:
+    """A grid-map drawn from its text rendering (``.`` empty, a colour's first letter otherwise)."""
+    if not grid:
+        return '<div class="small">(no map)</div>'
+    rows = grid.splitlines()
+    cols = max(len(r) for r in rows)
+    width, height = cols * cell + 2, len(rows) * cell + 2 + (14 if title else 0)
+    top = 14 if title else 0
+    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" font-size="11" '
+           f'font-family="sans-serif">']
+    if title:
+        out.append(f'<text x="1" y="11">{_e(title)}</text>')
+    for r, row in enumerate(rows):
+        for c, char in enumerate(row):
+            colour = _CELL_COLOURS.get(char, "#777777")
+            out.append(f'<rect x="{1 + c * cell}" y="{top + 1 + r * cell}" width="{cell}" height="{cell}" '
+                       f'fill="{colour}" stroke="#b0bec5" stroke-width="0.5"/>')
+    out.append("</svg>")
+    return "".join(out)
+
+
+def _status_pill(status: str) -> str:
+    css = "ok" if status in ("success", "recorded", "reused") else "bad" if status in (
+        "failed", "crashed", "no_plan") else "neutral"
+    return f'<span class="pill {css}">{_e(status)}</span>'
+
+
+def _summary_table(summary: dict[str, Any]) -> str:
+    head = ("<tr><th>pass</th><th>family</th><th>problem / variant</th><th>status</th><th>attempts</th>"
+            "<th>failure kinds seen</th><th>repairs applied</th><th>refinement used</th><th>refinement learned</th>"
+            "<th>not repaired because</th><th>ticks</th><th>time (s)</th></tr>")
+    rows = []
+    for run in summary["runs"]:
+        repairs = "<br>".join(f"#{r['number']} {_e(r['action'])} ({_e(r['plugin'])}) → {_e(r['outcome'])}"
+                              for r in run["repairs"]) or "-"
+        kinds = ", ".join(sorted({str(k) for k in run["failure_kinds"]})) or "-"
+        rows.append(
+            f'<tr class="{_e(run["status"])}"><td>{run["pass"]}</td><td>{_e(run["family"])}</td>'
+            f'<td>{_e(run["problem"])} / <b>{_e(run["variant"])}</b></td><td>{_status_pill(run["status"])}</td>'
+            f'<td>{run["attempts"]}</td><td>{_e(kinds)}</td><td>{repairs}</td>'
+            f'<td>{_e(", ".join(run["refinements_used"]) or "-")}</td><td>{_e(run["refinement_saved"] or "-")}</td>'
+            f'<td>{_e(run["stop_reason"] or run["error"] or "") if run["status"] != "success" else ""}</td>'
+            f'<td>{run["ticks"]}</td><td>{run["seconds"]}</td></tr>')
+    return f"<table>{head}{''.join(rows)}</table>"
+
+
+def _demonstrations(summary: dict[str, Any]) -> str:
+    rows = "".join(
+        f'<tr class="{_e(d["status"])}"><td>{_e(d["task_file"])}</td><td>{_e(d["problem"])}</td><td>{d["seed"]}</td>'
+        f'<td>{_status_pill(d["status"])}</td><td>{_e(d["episode_id"])}</td><td>{d["steps"]}</td><td>{d["ticks"]}</td>'
+        f'<td>{d["seconds"]}</td><td>{_e(d["message"])}</td></tr>' for d in summary["demonstrations"])
+    return ("<table><tr><th>task file</th><th>problem</th><th>seed</th><th>status</th><th>episode</th><th>steps</th>"
+            f"<th>ticks</th><th>time (s)</th><th>note</th></tr>{rows}</table>")
+
+
+def _short(value: Any, limit: int = 600) -> str:
+    text = json.dumps(value, default=str) if not isinstance(value, str) else value
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _evidence(evidence: dict[str, Any]) -> str:
+    items = []
+    for key, value in evidence.items():
+        if key == "mismatches":
+            for mismatch in value or []:
+                if isinstance(mismatch, dict):
+                    items.append(f"<li><b>mismatch</b> {_e(mismatch.get('kind') or mismatch.get('expectation', ''))}"
+                                 f": {_e(_short(mismatch.get('message', '')))}</li>")
+            continue
+        items.append(f"<li><b>{_e(key)}</b>: {_e(_short(value, 300))}</li>")
+    return f"<ul class='small'>{''.join(items)}</ul>" if items else ""
+
+
+def _dropped(items: str) -> str:
+    if not items:
+        return ""
+    return f"<details><summary class=small>dropped</summary><ul class=small>{items}</ul></details>"
+
+
+def _repair_log(outcome: Any) -> str:
+    capture = outcome.capture
+    if capture is None or not capture.decisions:
+        return "<p class='small'>No failure: the meta-reasoner had nothing to do.</p>"
+    attempts = {a.get("number"): a for a in outcome.attempts}
+    applied = [a for a in outcome.attempts]
+    rows = []
+    next_attempt = 0
+    for number, decision in enumerate(capture.decisions, 1):
+        proposals = "".join(
+            f"<li>{_e(p.get('action'))} <b>{p.get('score', 0):.2f}</b> by {_e(p.get('plugin'))}: "
+            f"{_e(_short(p.get('description', ''), 200))}"
+            f"{' <span class=small>' + _e(_short(p.get('changes'), 200)) + '</span>' if p.get('changes') else ''}"
+            f"</li>" for p in decision["proposals"])
+        dropped = "".join(f"<li>{_e(_short(d, 200))}</li>" for d in decision.get("dropped") or [])
+        if decision["stop"]:
+            chosen = f"<b>stop</b>: {_e(decision['reason'])}"
+        elif next_attempt < len(applied):
+            attempt = applied[next_attempt]
+            next_attempt += 1
+            proposal = attempt.get("proposal") or {}
+            chosen = (f"attempt #{attempt.get('number')}: <b>{_e(proposal.get('action'))}</b> by "
+                      f"{_e(proposal.get('plugin'))} -- {_e(attempt.get('change'))}<br>outcome: "
+                      f"<b>{_e(attempt.get('outcome'))}</b>, applied in {attempt.get('seconds', 0) * 1000:.1f} ms")
+        else:
+            chosen = "no proposal could be applied"
+        rows.append(
+            f"<tr><td>{number}</td><td>{decision.get('segment')}</td><td><b>{_e(decision['kind'])}</b><br>"
+            f"<span class=small>by {_e(decision.get('classified_by') or 'monitor')}</span></td>"
+            f"<td>{_e(decision.get('step'))} {_e(decision.get('action') or '')}"
+            f"({_e(', '.join(decision.get('args') or []))})</td>"
+            f"<td>{_e(_short(decision['message'], 400))}{_evidence(decision['evidence'])}</td>"
+            f"<td><ol class=small>{proposals or '<li>none</li>'}</ol>"
+            f"{_dropped(dropped)}"
+            f"</td><td>{chosen}</td></tr>")
+    total = sum(float(a.get("seconds") or 0.0) for a in attempts.values())
+    return ("<table><tr><th>#</th><th>segment</th><th>failure kind</th><th>step</th><th>evidence</th>"
+            "<th>proposals (ranked)</th><th>chosen repair</th></tr>" + "".join(rows) + "</table>"
+            f"<p class='small'>{len(attempts)} attempt(s); applying them took {total * 1000:.1f} ms; the whole run "
+            f"{outcome.seconds:.2f} s.</p>")
+
+
+def _what(title: str, grid: dict[str, Any]) -> str:
+    return f"{title} ({grid.get('colour') or 'nothing'} {grid.get('shape') or ''})".replace(" )", ")")
+
+
+def _gridmaps(outcome: Any) -> str:
+    if not outcome.gridmaps:
+        return ""
+    cells = []
+    for entry in outcome.gridmaps:
+        expected, observed = entry.get("expected") or {}, entry.get("observed") or {}
+        cells.append(
+            f"<div><div class='fig'>step {_e(entry['step'])}, {_e(entry['object'])}: {entry['cells']} cells differ "
+            f"({_e(entry['kind'])})</div><div class='row'>"
+            f"{grid_svg(expected.get('grid'), title=_what('remembered', expected))}"
+            f"{grid_svg(observed.get('grid'), title=_what('at the failure', observed))}"
+            f"{grid_svg(entry.get('after'), title='end of the run')}</div></div>")
+    return "<h4>Grid-maps: remembered, observed at the failure, at the end of the run</h4><div class='row'>" + \
+        "".join(cells) + "</div>"
+
+
+def _keypoints(outcome: Any) -> str:
+    data = outcome.keypoints
+    if not data:
+        return ""
+    observed = data["observed"]
+    expected = data["expected"]
+    markers = []
+    for index, entry in enumerate(observed):
+        if entry["status"] != "SUCCESS":
+            markers.append((float(index), f"{entry['status'].lower()} step {entry['step']}"))
+    plots = []
+    for key, unit, name in (("r_p_mm", "mm", "R_p"), ("r_n_deg", "deg", "R_n")):
+        series = {f"{name} this run": [(float(i), e[key]) for i, e in enumerate(observed)]}
+        band: list[tuple[float, float, float]] = []
+        mean: list[tuple[float, float | None]] = []
+        for i, entry in enumerate(observed):
+            remembered = expected.get(str(entry["step"])) if entry.get("segment") == 1 else None
+            if remembered is None and entry.get("step") is not None:
+                remembered = expected.get(str(entry["step"]))
+            if remembered is None:
+                mean.append((float(i), None))
+                continue
+            mean.append((float(i), remembered[key]["mean"]))
+            band.append((float(i), remembered[key]["min"], remembered[key]["max"]))
+        label = f"{name} mean of {data['traces']} trace(s)"
+        series[label] = mean
+        plots.append(line_plot_svg(series, title=f"{name} ({data['active']} vs {data['reference']})",
+                                   x_label="executed step (in order, repairs included)", y_label=f"{name} ({unit})",
+                                   bands={label: band}, markers=markers))
+    calls = ", ".join(f"{i}: {e['call']}" for i, e in enumerate(observed))
+    return ("<h4>Keypoint relations over the executed steps</h4><div class='row'>" + "".join(plots) +
+            f"</div><p class='small'>Executed steps: {_e(calls)}. The band is the min..max over the remembered traces "
+            "at the same plan step.</p>")
+
+
+def _trees(outcome: Any) -> str:
+    if not outcome.trees:
+        return ""
+    parts = []
+    for entry in outcome.trees:
+        if entry.get("tree") is None:
+            parts.append(f"<p class='small'>segment {entry['segment']}: no tree ({_e(entry.get('error'))})</p>")
+            continue
+        tree = TreeNode.from_dict(entry["tree"])
+        title = f"segment {entry['segment']} (from step {entry['cursor']})"
+        parts.append(f"<div>{tree_svg(tree, title=title)}</div>")
+    open_attr = " open" if len(parts) <= 2 else ""
+    return (f"<details{open_attr}><summary>Behaviour tree{'s' if len(parts) > 1 else ''} as ticked "
+            f"({len(parts)} segment(s))</summary><div class='row'>{''.join(parts)}</div></details>")
+
+
+def _plain(evidence: dict[str, Any]) -> dict[str, Any]:
+    """Evidence without the executor's bookkeeping (the whole plan, the repair history, the localisation)."""
+    return {k: v for k, v in evidence.items() if k not in ("plan", "repair_history", "localisation")}
+
+
+def _run_section(outcome: Any) -> str:
+    data = outcome.to_dict()
+    anchor = f"run-{data['pass']}-{data['family']}-{data['variant']}"
+    head = (f"<h3 id='{_e(anchor)}'>Pass {data['pass']}: {_e(data['label'])} {_status_pill(data['status'])}</h3>"
+            f"<p class='small'>{_e(data['task_file'])}, problem {_e(data['problem'])}, variant {_e(data['variant'])}, "
+            f"seed {data['seed']}: {data['attempts']} repair attempt(s), {data['ticks']} ticks, {data['seconds']} s. ")
+    if data["refinements_used"]:
+        head += f"Planned with the learned refinement {_e(', '.join(data['refinements_used']))}. "
+    if data["refinement_saved"]:
+        head += f"Learned the refinement {_e(data['refinement_saved'])}. "
+    if data["status"] != "success":
+        head += f"<b>Not repaired</b>: {_e(data['stop_reason'] or data['error'])}"
+    head += "</p>"
+    if outcome.error:
+        return head + f"<pre>{_e(outcome.error)}</pre>"
+    plans = (f"<details><summary>Plans</summary><p class='small'>initial: "
+             f"{_e(' ; '.join(' '.join(map(str, s)) for s in data['initial_plan']))}</p><p class='small'>final: "
+             f"{_e(' ; '.join(' '.join(map(str, s)) for s in data['plan']))}</p></details>")
+    images = (f"<div class='row'><div>{_img(outcome.before_png, 'top view before')}<div class='fig'>top view before "
+              f"the run</div></div><div>{_img(outcome.after_png, 'top view after')}<div class='fig'>top view after "
+              f"the run</div></div></div>")
+    reported = ""
+    if outcome.report.get("reported"):
+        items = "".join(f"<li><b>{_e(r.get('kind'))}</b> at step {_e(r.get('step'))}: "
+                        f"{_e(_short(r.get('message', ''), 300))}{_evidence(_plain(r.get('evidence') or {}))}</li>"
+                        for r in outcome.report["reported"])
+        reported = f"<h4>Reported (not repaired)</h4><ul>{items}</ul>"
+    return (head + images + _trees(outcome) + _gridmaps(outcome) + _keypoints(outcome) + "<h4>Repair log</h4>" +
+            _repair_log(outcome) + reported + plans)
+
+
+def _refinements(summary: dict[str, Any]) -> str:
+    if not summary["refinements"]:
+        return "<p>No refinement learned (no run was repaired with a changed plan).</p>"
+    parts = []
+    for refinement in summary["refinements"]:
+        method = {"name": refinement["method"], "task": refinement["task"],
+                  "precondition": refinement["precondition"], "subtasks": refinement["subtasks"]}
+        text = yaml.safe_dump([method], sort_keys=False, width=110)
+        parts.append(f"<h4>{_e(refinement['method'])}</h4><p class='small'>domain {_e(refinement['domain'])}, "
+                     f"learned from problem {_e(refinement.get('problem'))}, variant {_e(refinement.get('variant'))}, "
+                     f"{_e(refinement.get('created'))}</p><pre>{_e(text)}</pre>")
+    return "".join(parts)
+
+
+def render_report(result: Any) -> str:
+    summary = result.summary()
+    totals = summary["totals"]
+    first = [r for r in result.runs if r.pass_number == 1]
+    second = [r for r in result.runs if r.pass_number == 2]
+    intro = (f"<p>Memory <code>{_e(summary['memory'])}</code> ({'new' if summary['fresh_memory'] else 'reused'}), "
+             f"seed {summary['seed']}{', quick' if summary['quick'] else ''}; repair plugins installed: "
+             f"{_e(', '.join(summary['repair_plugins']))}. Demo {'completed' if summary['completed'] else 'INCOMPLETE'}"
+             f" in {summary['seconds']} s.</p><p>First pass: {totals['first_pass_success']}/{totals['variants']} "
+             f"variants succeeded ({totals['first_pass_repaired']} after repairs, {totals['first_pass_attempts']} "
+             f"attempts in all). Second pass: {totals['second_pass_success']}/{len(second)} succeeded, "
+             f"{totals['second_pass_zero_attempts']} with zero attempts, {totals['second_pass_using_refinements']} "
+             "planned with a learned refinement.</p>")
+    if summary["crashed"]:
+        intro += "<p><b>Crashed steps of the demo:</b></p><ul>" + "".join(
+            f"<li>{_e(c)}</li>" for c in summary["crashed"]) + "</ul>"
+    body = [f"<h1>bt-meta demo report</h1>{intro}", "<h2>Summary</h2>", _summary_table(summary),
+            "<h2>Demonstrations recorded</h2>", _demonstrations(summary),
+            "<h2>First pass: variants with monitors and the meta-reasoner</h2>",
+            *(_run_section(o) for o in first),
+            "<h2>Second pass: the same variants again</h2>", *(_run_section(o) for o in second),
+            "<h2>Learned refinements</h2>", _refinements(summary)]
+    return ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>bt-meta demo report</title>"
+            f"<style>{_CSS}</style></head><body>{''.join(body)}</body></html>\n")
+
+
+def write_report(result: Any, path: str | Path) -> Path:
+    path = Path(path)
+    path.write_text(render_report(result), encoding="utf-8")
+    return path

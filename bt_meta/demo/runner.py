@@ -1,0 +1,473 @@
+"""The demo scenario, end to end: record demonstrations, run the variants with repairs, run them again.
+
+On the episodic memory ``DIR/memory.sqlite`` (created when absent, reused when present):
+
+1. **record** the instructor's demonstrations (letters A and H, magnetic-attach nominal with a few seeds, the
+   housing nominal) through the :class:`~bt_meta.memory.recorder.TraceRecorder` plugin; demonstrations the memory
+   already holds (same task, problem and seed) are not recorded again;
+2. **run the variants** (A with substituted blocks, magnetic attach with variant poses, the upside-down housing) on
+   the simulator with monitors and the meta-reasoner (:class:`~bt_meta.meta.executor.MetaExecutor`): classified
+   failures, repair proposals, applied repairs, verification; a repaired run is stored as a refinement;
+3. **run each variant again**: a learned refinement is used and the run needs zero repair attempts.
+
+Progress is printed one line per step, failure and repair (:class:`~bt_meta.demo.capture.Progress`); everything
+the report needs is collected in :class:`DemoResult` (``summary()`` is ``DIR/summary.json``).
+
+Offers:
+
+* :func:`run_demo` -- the whole scenario; returns a :class:`DemoResult`
+* :func:`record_demonstration` -- one demonstration into a memory
+* :func:`run_variant` -- one monitored, repaired variant run (used by the ablation experiment too)
+* :class:`DemoResult`, :class:`RecordOutcome`, :class:`VariantOutcome`
+* :func:`memory_environment` -- ``BT_META_MEMORY`` pointed at the demo's memory while it runs
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import time
+import traceback
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from bt_meta.demo.capture import CapturingExecutor, Progress, RunCapture, top_view_png
+from bt_meta.demo.configurations import available_repairs, plugin_host
+from bt_meta.demo.scenario import FAMILIES, Demonstration, VariantRun, demonstrations, variants
+from bt_meta.errors import BtMetaError
+
+__all__ = ["DemoResult", "RecordOutcome", "VariantOutcome", "memory_environment", "record_demonstration",
+           "run_demo", "run_variant"]
+
+MEMORY_FILE = "memory.sqlite"
+
+
+@contextlib.contextmanager
+def memory_environment(path: Path) -> Iterator[None]:
+    """Point ``BT_META_MEMORY`` at ``path`` (plugins that find the memory themselves read it), then restore it."""
+    from bt_meta.memory import ENV_VAR
+
+    saved = os.environ.get(ENV_VAR)
+    os.environ[ENV_VAR] = str(path)
+    try:
+        yield
+    finally:
+        if saved is None:
+            os.environ.pop(ENV_VAR, None)
+        else:
+            os.environ[ENV_VAR] = saved
+
+
+@dataclass
+class RecordOutcome:
+    demonstration: Demonstration
+    status: str
+    """``recorded``, ``reused`` (the memory had it) or ``failed``."""
+    episode_id: int | None = None
+    steps: int = 0
+    ticks: int = 0
+    seconds: float = 0.0
+    message: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        d = self.demonstration
+        return {"task_file": d.task_file, "problem": d.problem, "seed": d.seed, "status": self.status,
+                "episode_id": self.episode_id, "steps": self.steps, "ticks": self.ticks,
+                "seconds": round(self.seconds, 3), "message": self.message}
+
+
+@dataclass
+class VariantOutcome:
+    variant: VariantRun
+    pass_number: int
+    report: dict[str, Any] = field(default_factory=dict)
+    capture: RunCapture | None = None
+    before_png: bytes | None = None
+    after_png: bytes | None = None
+    gridmaps: list[dict[str, Any]] = field(default_factory=list)
+    keypoints: dict[str, Any] | None = None
+    trees: list[dict[str, Any]] = field(default_factory=list)
+    error: str | None = None
+    seconds: float = 0.0
+
+    @property
+    def status(self) -> str:
+        return "crashed" if self.error else str(self.report.get("status", "failed"))
+
+    @property
+    def attempts(self) -> list[dict[str, Any]]:
+        return list(self.report.get("attempts") or [])
+
+    def to_dict(self) -> dict[str, Any]:
+        v = self.variant
+        report = self.report
+        refinement = report.get("refinement_saved") or None
+        return {
+            "label": v.label, "family": v.family, "task_file": v.task_file, "problem": v.problem,
+            "variant": v.variant, "seed": v.seed, "pass": self.pass_number, "status": self.status,
+            "repaired": self.status == "success" and bool(self.attempts),
+            "attempts": len(self.attempts),
+            "repairs": [{"number": a.get("number"), "kind": a.get("kind"), "step": a.get("step"),
+                         "action": (a.get("proposal") or {}).get("action"),
+                         "plugin": (a.get("proposal") or {}).get("plugin"),
+                         "score": (a.get("proposal") or {}).get("score"),
+                         "change": a.get("change"), "outcome": a.get("outcome"), "seconds": a.get("seconds")}
+                        for a in self.attempts],
+            "failure_kinds": [f.get("kind") for f in report.get("failures") or []],
+            "reported": [{k: r.get(k) for k in ("kind", "step", "action", "args", "message")}
+                         for r in report.get("reported") or []],
+            "stop_reason": report.get("stop_reason", ""),
+            "refinements_used": list(report.get("refinements_used") or []),
+            "refinement_saved": None if not refinement else refinement.get("method", refinement),
+            "initial_plan": report.get("initial_plan", []), "plan": report.get("plan", []),
+            "ticks": report.get("ticks", 0), "seconds": round(self.seconds, 3), "error": self.error,
+        }
+
+
+@dataclass
+class DemoResult:
+    out: Path
+    seed: int
+    quick: bool
+    fresh_memory: bool
+    records: list[RecordOutcome] = field(default_factory=list)
+    runs: list[VariantOutcome] = field(default_factory=list)
+    refinements: list[dict[str, Any]] = field(default_factory=list)
+    repair_plugins: list[str] = field(default_factory=list)
+    seconds: float = 0.0
+    crashed: list[str] = field(default_factory=list)
+
+    @property
+    def memory_path(self) -> Path:
+        return self.out / MEMORY_FILE
+
+    @property
+    def completed(self) -> bool:
+        """Every demonstration is in memory and every run ran to a status (repaired or not): the exit-0 rule."""
+        return not self.crashed and all(r.status != "failed" for r in self.records)
+
+    def summary(self) -> dict[str, Any]:
+        first = [r for r in self.runs if r.pass_number == 1]
+        second = [r for r in self.runs if r.pass_number == 2]
+        return {
+            "out": str(self.out), "memory": str(self.memory_path), "seed": self.seed, "quick": self.quick,
+            "fresh_memory": self.fresh_memory, "completed": self.completed, "seconds": round(self.seconds, 3),
+            "repair_plugins": self.repair_plugins,
+            "demonstrations": [r.to_dict() for r in self.records],
+            "runs": [r.to_dict() for r in self.runs],
+            "totals": {
+                "variants": len(first),
+                "first_pass_success": sum(r.status == "success" for r in first),
+                "first_pass_repaired": sum(r.to_dict()["repaired"] for r in first),
+                "first_pass_attempts": sum(len(r.attempts) for r in first),
+                "second_pass_success": sum(r.status == "success" for r in second),
+                "second_pass_zero_attempts": sum(r.status == "success" and not r.attempts for r in second),
+                "second_pass_using_refinements": sum(bool(r.report.get("refinements_used")) for r in second),
+            },
+            "refinements": self.refinements,
+            "crashed": self.crashed,
+        }
+
+
+# -- recording ------------------------------------------------------------------------------------------------------
+
+
+def _world(task_path: Path, problem: str, variant: str | None, seed: int) -> tuple[Any, Any, Any]:
+    from bt_meta.htn import load_task_file
+    from bt_meta.world.sim_world import SimWorld, load_grounding, quiet_stdout
+
+    task_file = load_task_file(task_path)
+    chosen = task_file.problem(problem)
+    with quiet_stdout():
+        world = SimWorld(task_file.domain, chosen, load_grounding(task_file.domain.name, task_path),
+                         variant=variant, seed=seed)
+    return task_file, chosen, world
+
+
+def _already_recorded(memory: Any, demo: Demonstration, task: str) -> int | None:
+    for summary in memory.episodes(task=task, outcome="success"):
+        episode = summary.episode
+        if episode.problem == demo.problem and episode.seed == demo.seed and (episode.variant in (None, "nominal")):
+            return episode.id
+    return None
+
+
+def record_demonstration(demo: Demonstration, memory: Any, progress: Progress, *, max_ticks: int = 6000
+                         ) -> RecordOutcome:
+    """Run ``demo``'s nominal problem tick by tick (monitored, no repairs) with the trace recorder; a success is
+    written to ``memory`` as one trace."""
+    from py_trees.common import Status
+
+    from bt_meta.memory.recorder import TraceRecorder, root_task_name
+    from bt_meta.plugins import create_plugin_host
+    from bt_meta.resources import trees_dir
+    from bt_meta.testing import TreeHarness
+
+    started = time.perf_counter()
+    task_path = trees_dir() / demo.task_file
+    _, problem, world = _world(task_path, demo.problem, None, demo.seed)
+    try:
+        existing = _already_recorded(memory, demo, root_task_name(problem))
+        if existing is not None:
+            return RecordOutcome(demo, "reused", existing, message=f"episode {existing} is already in memory")
+        recorder = TraceRecorder(memory, seed=demo.seed, variant="nominal", task_file=str(task_path))
+        capture = RunCapture(progress, world, label=f"record {demo.label}", echo=False)
+        # The instructor's run: perception observes, the recorder writes; no expectation compares against a memory
+        # still being filled, so every demonstration stands on its own.
+        host = create_plugin_host(project_file=task_path, entry_points=False,
+                                  plugins=[*_perception_plugins(), ("trace_recorder", recorder),
+                                           ("demo_capture", capture)])
+        harness = TreeHarness.from_file(task_path, demo.problem, world=world, plugins=host)
+        status = Status.RUNNING
+        while status is Status.RUNNING and harness.run.tick_count < max_ticks:
+            status = harness.tick()
+        harness.run.finish(status)
+        harness.close()
+        progress.done()
+        if recorder.error is not None:
+            return RecordOutcome(demo, "failed", None, len(capture.steps), capture.ticks,
+                                 time.perf_counter() - started, f"not stored: {recorder.error}")
+        if status is not Status.SUCCESS or recorder.episode_id is None:
+            failures = "; ".join(f.summary() for f in harness.run.failures) or recorder.skipped or status.value
+            return RecordOutcome(demo, "failed", None, len(capture.steps), capture.ticks,
+                                 time.perf_counter() - started, f"{status.value}: {failures}")
+        return RecordOutcome(demo, "recorded", recorder.episode_id, len(capture.steps), capture.ticks,
+                             time.perf_counter() - started)
+    finally:
+        world.close()
+
+
+def _perception_plugins() -> list[tuple[str, Any]]:
+    import bt_meta_plugins.camera_perception as camera
+    import bt_meta_plugins.ground_truth_perception as truth
+
+    return [("ground_truth_perception", truth), ("camera_perception", camera)]
+
+
+# -- variant runs ---------------------------------------------------------------------------------------------------
+
+
+def run_variant(
+    run: VariantRun,
+    memory: Any,
+    refinements: Any,
+    progress: Progress,
+    *,
+    pass_number: int = 1,
+    configuration: str = "dual",
+    max_attempts: int = 6,
+    max_seconds: float = 90.0,
+    save_refinements: bool = True,
+    pictures: bool = True,
+) -> VariantOutcome:
+    """One variant run with monitors and the meta-reasoner; collects what the report shows."""
+    from bt_meta.meta import Limits
+    from bt_meta.resources import trees_dir
+
+    outcome = VariantOutcome(run, pass_number)
+    started = time.perf_counter()
+    task_path = trees_dir() / run.task_file
+    task_file, problem, world = _world(task_path, run.problem, run.variant, run.seed)
+    try:
+        capture = RunCapture(progress, world, label=run.label, echo=not progress.quiet)
+        outcome.capture = capture
+        host = plugin_host(task_path, memory, configuration=configuration, extra=[("demo_capture", capture)])
+        if pictures:
+            outcome.before_png, _ = top_view_png(world)
+        executor = CapturingExecutor(
+            task_file.domain, problem, world, host, capture=capture,
+            limits=Limits(max_attempts=max_attempts, max_seconds=max_seconds), refinements=refinements,
+            save_refinements=save_refinements, task_file=task_file, variant=run.variant)
+        report = executor.run()
+        progress.done()
+        outcome.report = report.to_dict()
+        if pictures:
+            outcome.after_png, after_view = top_view_png(world)
+            outcome.gridmaps = _gridmap_pictures(capture, after_view)
+            outcome.trees = _tree_pictures(capture)
+            pair = FAMILIES[run.family].keypoint_pair
+            if pair is not None:
+                outcome.keypoints = _keypoint_series(capture, memory, problem, pair, report.to_dict())
+    except BtMetaError as error:
+        outcome.error = f"{type(error).__name__}: {error}"
+    except Exception as error:  # a crash of one run is reported in the summary, the demo goes on
+        outcome.error = f"{type(error).__name__}: {error}\n{traceback.format_exc(limit=6)}"
+    finally:
+        world.close()
+        outcome.seconds = time.perf_counter() - started
+    return outcome
+
+
+def _tree_pictures(capture: RunCapture) -> list[dict[str, Any]]:
+    from bt_meta.demo.svg import tree_from_behaviour
+
+    out = []
+    for segment in capture.segments:
+        if segment.tree is None or isinstance(segment.tree, Exception):
+            out.append({"segment": segment.number, "cursor": segment.cursor, "tree": None,
+                        "error": None if segment.tree is None else str(segment.tree)})
+            continue
+        tree = tree_from_behaviour(segment.tree, segment.statuses, segment.guards)
+        out.append({"segment": segment.number, "cursor": segment.cursor, "tree": tree.to_dict()})
+    return out
+
+
+def _gridmap_pictures(capture: RunCapture, after_view: Any) -> list[dict[str, Any]]:
+    """For each grid-map mismatch: the remembered map, the map observed at the failure and, at the end of the run,
+    the map at the same place (after the repair, when there was one)."""
+    from bt_meta.perception.gridmap import render
+
+    out = []
+    seen: set[tuple[Any, Any]] = set()
+    for failure in capture.failures:
+        for mismatch in (failure.get("evidence") or {}).get("mismatches") or []:
+            evidence = mismatch.get("evidence") if isinstance(mismatch, dict) else None
+            maps = (evidence or {}).get("maps") or []
+            for entry in maps:
+                key = (failure.get("step"), entry.get("object"))
+                if key in seen or not entry.get("cells"):
+                    continue
+                seen.add(key)
+                centroid = entry.get("expected", {}).get("centroid")
+                after = None
+                if after_view is not None and centroid is not None:
+                    block = after_view.block_near(centroid, 0.25 * 0.061)
+                    if block is not None and block.shape != "unknown":
+                        after = render(after_view.grid_map_at(block.centroid, z=block.top_z))
+                    else:
+                        after = render(after_view.grid_map_at(centroid))
+                out.append({"step": failure.get("step"), "object": entry.get("object"), "cells": entry.get("cells"),
+                            "kind": failure.get("kind"), "segment": failure.get("segment"),
+                            "expected": entry.get("expected"), "observed": entry.get("observed"), "after": after})
+    return out
+
+
+def _keypoint_series(capture: RunCapture, memory: Any, problem: Any, pair: tuple[str, str],
+                     report: dict[str, Any]) -> dict[str, Any] | None:
+    """R_p (mm) and R_n (deg) of ``pair`` after each executed step of this run, and their means (with min/max) over
+    the remembered nominal traces at the same plan step."""
+    import math
+
+    from bt_meta.memory.recorder import root_task_name
+    from bt_meta.perception.keypoints import KeypointError, relation
+
+    active, reference = pair
+    observed: list[dict[str, Any]] = []
+    for index, step in enumerate(capture.steps):
+        objects = step.get("objects") or {}
+        if active not in objects or reference not in objects:
+            continue
+        try:
+            rel = relation(objects[active], objects[reference])
+        except KeypointError:
+            continue
+        observed.append({"index": index, "step": step.get("step"), "segment": step.get("segment"),
+                         "call": f"{step.get('action')}({', '.join(step.get('args') or ())})",
+                         "status": step.get("status"), "r_p_mm": rel.r_p * 1000.0, "r_n_deg": math.degrees(rel.r_n)})
+    expected: dict[int, dict[str, Any]] = {}
+    try:
+        traces = memory.last_traces(root_task_name(problem), 5)
+    except BtMetaError:
+        traces = []
+    for trace in traces:
+        for step in trace.steps:
+            names = {o.name for o in step.state.objects}
+            if active not in names or reference not in names:
+                continue
+            rel = relation(step.state.object(active), step.state.object(reference))
+            entry = expected.setdefault(step.index, {"r_p_mm": [], "r_n_deg": []})
+            entry["r_p_mm"].append(rel.r_p * 1000.0)
+            entry["r_n_deg"].append(math.degrees(rel.r_n))
+    if not observed and not expected:
+        return None
+    return {"active": active, "reference": reference, "observed": observed, "traces": len(traces),
+            "expected": {str(k): {name: {"mean": sum(v) / len(v), "min": min(v), "max": max(v)}
+                                  for name, v in entry.items()} for k, entry in sorted(expected.items())},
+            "failed_steps": [f.get("step") for f in (report.get("failures") or []) if f.get("step") is not None]}
+
+
+# -- the scenario ---------------------------------------------------------------------------------------------------
+
+
+def _print_outcome(progress: Progress, outcome: VariantOutcome) -> None:
+    if outcome.error:
+        progress.line(f"  => CRASHED: {outcome.error.splitlines()[0]}")
+        return
+    report = outcome.report
+    attempts = len(outcome.attempts)
+    used = report.get("refinements_used") or []
+    saved = report.get("refinement_saved") or {}
+    text = (f"  => {str(report.get('status')).upper()} after {attempts} repair attempt(s), {report.get('ticks')} "
+            f"ticks, {outcome.seconds:.1f} s")
+    if used:
+        text += f"; used refinement {', '.join(used)}"
+    if saved.get("method"):
+        text += f"; learned refinement {saved['method']}"
+    if report.get("status") != "success":
+        text += f"; not repaired: {report.get('stop_reason')}"
+    progress.line(text)
+
+
+def run_demo(
+    out: str | Path,
+    *,
+    seed: int = 0,
+    quick: bool = False,
+    progress: Progress | None = None,
+    write_report: bool = True,
+) -> DemoResult:
+    """The whole scenario into ``out`` (see the module docstring); writes ``summary.json`` and ``report.html``."""
+    from bt_meta.memory import EpisodicMemory
+    from bt_meta.meta import RefinementStore
+    from bt_meta.world.sim_world import quiet_stdout
+
+    progress = progress or Progress()
+    started = time.perf_counter()
+    with quiet_stdout():
+        import pybullet  # noqa: F401  (prints its build time on import)
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    memory_path = out / MEMORY_FILE
+    result = DemoResult(out, seed, quick, fresh_memory=not memory_path.exists())
+    result.repair_plugins = ["retry_repair", *available_repairs()]
+    progress.line(f"bt-meta demo: memory {memory_path} ({'new' if result.fresh_memory else 'reused'}), seed {seed}"
+                  f"{', quick' if quick else ''}; repair plugins: {', '.join(result.repair_plugins)}")
+    with memory_environment(memory_path), EpisodicMemory.open(memory_path) as memory, \
+            RefinementStore.open(memory_path) as refinements:
+        demos = demonstrations(seed, quick=quick)
+        progress.line(f"\n[1/3] recording {len(demos)} demonstrations")
+        for number, demo in enumerate(demos, 1):
+            try:
+                record = record_demonstration(demo, memory, progress)
+            except Exception as error:
+                record = RecordOutcome(demo, "failed", message=f"{type(error).__name__}: {error}")
+                result.crashed.append(f"record {demo.label}: {record.message}")
+            result.records.append(record)
+            detail = (f"episode {record.episode_id}, {record.steps} steps, {record.ticks} ticks, "
+                      f"{record.seconds:.1f} s" if record.status == "recorded" else record.message)
+            progress.line(f"  ({number}/{len(demos)}) {demo.label:<36} {record.status.upper():<9} {detail}")
+        runs = variants(seed, quick=quick)
+        for pass_number in (1, 2):
+            title = ("running the variants with monitors and the meta-reasoner" if pass_number == 1 else
+                     "running each variant again: learned refinements, zero repair attempts expected")
+            progress.line(f"\n[{pass_number + 1}/3] {title}")
+            for number, run in enumerate(runs, 1):
+                progress.line(f"\n  ({number}/{len(runs)}) {FAMILIES[run.family].task_file} problem {run.problem}, "
+                              f"variant {run.variant}, seed {run.seed}")
+                outcome = run_variant(run, memory, refinements, progress, pass_number=pass_number)
+                if outcome.error:
+                    result.crashed.append(f"{run.label} pass {pass_number}: {outcome.error.splitlines()[0]}")
+                result.runs.append(outcome)
+                _print_outcome(progress, outcome)
+        result.refinements = [r.to_dict() for r in refinements.list()]
+    result.seconds = time.perf_counter() - started
+    (out / "summary.json").write_text(json.dumps(result.summary(), indent=2, default=str) + "\n", encoding="utf-8")
+    if write_report:
+        from bt_meta.demo.report import write_report as write_html
+
+        write_html(result, out / "report.html")
+    return result

@@ -1,0 +1,246 @@
+"""Inline SVG pictures for the demo report, drawn by hand (no graphviz binary or plotting library needed).
+
+Offers:
+
+* :class:`TreeNode` -- one behaviour of a py_trees tree as the picture needs it (name, kind, status, children)
+* :func:`tree_from_behaviour` -- a py_trees tree to :class:`TreeNode` s, statuses from a node-id -> status map
+* :func:`tree_svg` -- the tree as a left-to-right indented diagram, boxes coloured by status
+* :func:`line_plot_svg` -- one or more series over steps (R_p, R_n), with axes, ticks and a legend
+* :data:`STATUS_COLOURS` -- the colour of each node status
+"""
+
+from __future__ import annotations
+
+import html
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+__all__ = ["STATUS_COLOURS", "TreeNode", "line_plot_svg", "tree_from_behaviour", "tree_svg"]
+
+STATUS_COLOURS = {
+    "SUCCESS": "#4caf50",
+    "FAILURE": "#e53935",
+    "RUNNING": "#fbc02d",
+    "INVALID": "#cfd8dc",
+}
+
+_SERIES_COLOURS = ("#1565c0", "#e65100", "#2e7d32", "#6a1b9a", "#c62828", "#00838f")
+
+
+@dataclass
+class TreeNode:
+    """One behaviour: ``kind`` is the py_trees class name (Sequence, Monitor, CheckCondition, ...)."""
+
+    name: str
+    kind: str
+    status: str = "INVALID"
+    node_id: str | None = None
+    children: list[TreeNode] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "kind": self.kind, "status": self.status, "node_id": self.node_id,
+                "children": [c.to_dict() for c in self.children]}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> TreeNode:
+        return cls(data["name"], data["kind"], data.get("status", "INVALID"), data.get("node_id"),
+                   [cls.from_dict(c) for c in data.get("children", ())])
+
+
+def _node_id(behaviour: Any) -> str | None:
+    node_id = getattr(behaviour, "node_id", None)
+    if node_id is None:
+        decorated = getattr(behaviour, "decorated", None)
+        node_id = getattr(decorated, "node_id", None)
+    if node_id is None:
+        first = str(behaviour.name).split(" ", 1)[0]
+        if first.startswith("n") and first[1:].isdigit():
+            node_id = first
+    return node_id
+
+
+def tree_from_behaviour(root: Any, statuses: Mapping[str, str], guards: Mapping[str, str] | None = None) -> TreeNode:
+    """The tree under ``root``; leaves take their status from ``statuses`` (node id -> status, as the step events
+    reported it), guards from ``guards`` (node id -> status), composites the status a Sequence derives from them."""
+    guards = guards or {}
+
+    def build(behaviour: Any) -> TreeNode:
+        kind = type(behaviour).__name__
+        node_id = _node_id(behaviour)
+        children = list(getattr(behaviour, "children", []) or [])
+        decorated = getattr(behaviour, "decorated", None)
+        if decorated is not None:
+            children = [decorated]
+        node = TreeNode(str(behaviour.name), kind, node_id=node_id, children=[build(c) for c in children])
+        for position, child in enumerate(node.children):
+            if child.kind == "CheckCondition":  # a guard: failed when a failure names it, passed when work followed
+                ran = any(c.status != "INVALID" for c in node.children[position + 1:])
+                child.status = guards.get(child.node_id or "", "SUCCESS" if ran else "INVALID")
+        if kind == "CheckCondition":
+            pass  # set by the parent
+        elif not node.children:
+            node.status = statuses.get(node_id or "", "INVALID")
+        elif decorated is not None:
+            node.status = node.children[0].status
+        else:
+            node.status = _sequence_status([c.status for c in node.children])
+        return node
+
+    return build(root)
+
+
+def _sequence_status(children: Sequence[str]) -> str:
+    """A Sequence's status after its children finished their part: the first child that did not succeed decides."""
+    for status in children:
+        if status != "SUCCESS":
+            return status if status in ("FAILURE", "RUNNING") else ("RUNNING" if any(
+                s == "SUCCESS" for s in children) else "INVALID")
+    return "SUCCESS" if children else "INVALID"
+
+
+def _esc(text: Any) -> str:
+    return html.escape(str(text), quote=True)
+
+
+def tree_svg(root: TreeNode, *, title: str = "") -> str:
+    """The tree as an indented diagram (one row per behaviour, elbow edges), coloured by status."""
+    rows: list[tuple[int, TreeNode, int | None]] = []
+
+    def walk(node: TreeNode, depth: int, parent_row: int | None) -> None:
+        row = len(rows)
+        rows.append((depth, node, parent_row))
+        for child in node.children:
+            walk(child, depth + 1, row)
+
+    walk(root, 0, None)
+    indent, row_h, box_h, char_w = 22, 22, 17, 6.6
+    width = max(int(d * indent + 30 + len(_label(n)) * char_w) for d, n, _ in rows) + 20
+    top = 24 if title else 6
+    height = top + row_h * len(rows) + 26
+    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
+           f'viewBox="0 0 {width} {height}" font-family="monospace" font-size="11">']
+    if title:
+        out.append(f'<text x="4" y="15" font-weight="bold">{_esc(title)}</text>')
+    for row, (depth, node, parent_row) in enumerate(rows):
+        x, y = 8 + depth * indent, top + row * row_h
+        if parent_row is not None:
+            px, py = 8 + (depth - 1) * indent + 6, top + parent_row * row_h + box_h
+            out.append(f'<path d="M{px},{py} V{y + box_h / 2} H{x}" fill="none" stroke="#90a4ae"/>')
+        label = _label(node)
+        w = len(label) * char_w + 10
+        colour = STATUS_COLOURS.get(node.status, STATUS_COLOURS["INVALID"])
+        rx = 8 if node.kind in ("Monitor",) else 2
+        out.append(f'<g><title>{_esc(node.kind)} {_esc(node.name)}: {_esc(node.status)}</title>'
+                   f'<rect x="{x}" y="{y}" width="{w:.0f}" height="{box_h}" rx="{rx}" fill="{colour}" '
+                   f'fill-opacity="0.85" stroke="#37474f" stroke-width="0.6"/>'
+                   f'<text x="{x + 5}" y="{y + 12}">{_esc(label)}</text></g>')
+    legend_y = top + row_h * len(rows) + 12
+    lx = 8
+    for status, colour in STATUS_COLOURS.items():
+        out.append(f'<rect x="{lx}" y="{legend_y - 9}" width="10" height="10" fill="{colour}"/>'
+                   f'<text x="{lx + 14}" y="{legend_y}">{status}</text>')
+        lx += 90
+    out.append("</svg>")
+    return "".join(out)
+
+
+def _label(node: TreeNode) -> str:
+    prefix = {"Sequence": "→ ", "Monitor": "◉ ", "CheckCondition": "? "}.get(node.kind, "")
+    if node.kind == "Monitor":
+        return f"{prefix}Monitor"
+    return f"{prefix}{node.name}"
+
+
+def _nice_ticks(low: float, high: float, count: int = 5) -> list[float]:
+    if high <= low:
+        high = low + 1.0
+    raw = (high - low) / max(count, 1)
+    magnitude = 10 ** math.floor(math.log10(raw))
+    step = min((m * magnitude for m in (1, 2, 2.5, 5, 10) if m * magnitude >= raw), default=raw)
+    first = math.floor(low / step) * step
+    ticks, value = [], first
+    while value <= high + step * 1e-9:
+        ticks.append(round(value, 10))
+        value += step
+    return ticks
+
+
+def line_plot_svg(
+    series: Mapping[str, Sequence[tuple[float, float | None]]],
+    *,
+    title: str,
+    x_label: str,
+    y_label: str,
+    width: int = 460,
+    height: int = 240,
+    bands: Mapping[str, Sequence[tuple[float, float, float]]] | None = None,
+    markers: Sequence[tuple[float, str]] = (),
+) -> str:
+    """Series of (x, y) points (``None`` y breaks the line), an optional band (x, low, high) per series (the
+    expectation's tolerance), and vertical markers (x, label) such as the failing step."""
+    bands = bands or {}
+    points = [(x, y) for values in series.values() for x, y in values if y is not None]
+    points += [(x, v) for values in bands.values() for x, lo, hi in values for v in (lo, hi)]
+    if not points:
+        return (f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="40"><text x="4" y="20" '
+                f'font-family="sans-serif" font-size="12">{_esc(title)}: no data</text></svg>')
+    xs = [p[0] for p in points] + [m[0] for m in markers]
+    ys = [p[1] for p in points]
+    x_ticks = _nice_ticks(min(xs), max(xs), 6)
+    y_ticks = _nice_ticks(min(0.0, min(ys)), max(ys) * 1.05 if max(ys) > 0 else 1.0, 5)
+    x0, x1, y0, y1 = x_ticks[0], x_ticks[-1], y_ticks[0], y_ticks[-1]
+    left, right, top, bottom = 52, 12, 26, 40
+    pw, ph = width - left - right, height - top - bottom
+
+    def sx(x: float) -> float:
+        return left + (x - x0) / ((x1 - x0) or 1.0) * pw
+
+    def sy(y: float) -> float:
+        return top + ph - (y - y0) / ((y1 - y0) or 1.0) * ph
+
+    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
+           f'viewBox="0 0 {width} {height}" font-family="sans-serif" font-size="11">',
+           f'<text x="{left}" y="15" font-weight="bold" font-size="12">{_esc(title)}</text>',
+           f'<rect x="{left}" y="{top}" width="{pw}" height="{ph}" fill="#fafafa" stroke="#90a4ae"/>']
+    for t in y_ticks:
+        out.append(f'<line x1="{left}" x2="{left + pw}" y1="{sy(t):.1f}" y2="{sy(t):.1f}" stroke="#eceff1"/>'
+                   f'<text x="{left - 4}" y="{sy(t) + 4:.1f}" text-anchor="end">{t:g}</text>')
+    for t in x_ticks:
+        out.append(f'<text x="{sx(t):.1f}" y="{top + ph + 14}" text-anchor="middle">{t:g}</text>')
+    out.append(f'<text x="{left + pw / 2}" y="{height - 6}" text-anchor="middle">{_esc(x_label)}</text>')
+    out.append(f'<text x="12" y="{top + ph / 2}" text-anchor="middle" '
+               f'transform="rotate(-90 12 {top + ph / 2})">{_esc(y_label)}</text>')
+    for x, label in markers:
+        out.append(f'<line x1="{sx(x):.1f}" x2="{sx(x):.1f}" y1="{top}" y2="{top + ph}" stroke="#e53935" '
+                   f'stroke-dasharray="4 3"/><text x="{sx(x) + 3:.1f}" y="{top + 10}" fill="#e53935">'
+                   f'{_esc(label)}</text>')
+    for index, (name, values) in enumerate(series.items()):
+        colour = _SERIES_COLOURS[index % len(_SERIES_COLOURS)]
+        band = bands.get(name)
+        if band:
+            upper = " ".join(f"{sx(x):.1f},{sy(hi):.1f}" for x, _, hi in band)
+            lower = " ".join(f"{sx(x):.1f},{sy(lo):.1f}" for x, lo, _ in reversed(band))
+            out.append(f'<polygon points="{upper} {lower}" fill="{colour}" fill-opacity="0.12" stroke="none"/>')
+        segment: list[str] = []
+        segments: list[list[str]] = []
+        for x, y in values:
+            if y is None:
+                if segment:
+                    segments.append(segment)
+                segment = []
+                continue
+            segment.append(f"{sx(x):.1f},{sy(y):.1f}")
+        if segment:
+            segments.append(segment)
+        for seg in segments:
+            out.append(f'<polyline points="{" ".join(seg)}" fill="none" stroke="{colour}" stroke-width="1.8"/>')
+        for x, y in values:
+            if y is not None:
+                out.append(f'<circle cx="{sx(x):.1f}" cy="{sy(y):.1f}" r="2.6" fill="{colour}"><title>'
+                           f'{_esc(name)} step {x:g}: {y:.4g}</title></circle>')
+        out.append(f'<rect x="{left + 8}" y="{top + 8 + index * 14}" width="10" height="3" fill="{colour}"/>'
+                   f'<text x="{left + 22}" y="{top + 13 + index * 14}">{_esc(name)}</text>')
+    out.append("</svg>")
+    return "".join(out)

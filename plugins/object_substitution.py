@@ -1,0 +1,590 @@
+"""Object substitution (paper, section 6.4): when an entity the plan needs is missing and unknown ones are seen,
+find in the episodic memory a decomposition that the unknown entities can carry out, and splice it into the plan.
+
+The steps, as the paper gives them:
+
+1. **mismatch vector** -- the failed step, the *missing* entities (objects of the problem whose shape or colour
+   the world does not show: A's blue 1x2 bar) and the *unknown* ones seen (objects the problem does not know, or
+   whose shape or colour differ: two red 1x1 blocks), from the monitor's grid-map mismatch and the world's
+   object report (``world.observe()["objects"]`` with ``shape``/``colour``);
+2. the **first action of the invoked task that uses the missing entity**: the first step of
+   ``evidence["plan"]`` not done whose arguments name it;
+3. **its expectation from P_a**: the stored execution of that same call in the run's root task
+   (``EpisodicMemory.plan_executions``), its E_db grid-map (``expectations``) and its task occurrence (the
+   decomposition it was part of, with the blocks' shape and colour from the episode's initial facts);
+4. **ranked matches from E_db**: with the ``gridmap`` matcher, the nearest stored grid-maps
+   (``EpisodicMemory.nearest_grid_maps``; by default task-level expectations only -- the last primitive of each
+   task occurrence, bubbled up as section 6.2 says -- and without rotations: both letters are drawn in one
+   table frame); with the ``symbolic`` matcher, the stored task occurrences nearest in their lifted facts (the
+   multiset of ``shape``, ``colour`` and placement facts; the symbol-only baseline the paper compares with);
+5. a match is **realisable** when the blocks of its decomposition can be bound one-to-one to the unknown
+   entities: by shape for the grid-map matcher (its occupancy is colour presence: form, not colour), by shape
+   and colour for the symbolic one (its expectations are exactly those facts). Each realisable match becomes a
+   proposal: ``substitute {missing: unknown}`` when one block stands in for one (same call otherwise), else a
+   ``splice`` replacing the invoked task's remaining steps with the matched decomposition's steps, rebound to the
+   unknown entities (A's bar drawn with two 1x1 blocks at the cells of H's bar).
+
+Before proposing, the unknown entities are **anchored** in the world's symbolic state (``world.apply_symbolic``):
+their perceived ``block``/``shape``/``colour`` facts replace what the problem assumed, and an unknown entity the
+failed step itself moved is made ``available`` again (its placement did not meet the expectation, and the repair
+moves it). The executor resets its belief to ``world.symbolic_state()`` before applying a proposal, so the spliced
+steps' preconditions are checked against what was seen. ``anchor=False`` turns this off.
+
+Settings (:class:`ObjectSubstitution` arguments, :func:`configure` for the module-level plugin, or the
+environment variable ``BT_META_SUBSTITUTION_MATCHER`` = ``gridmap`` | ``symbolic`` for the module's default):
+``matcher``, ``k`` (matches kept), ``rotations``, ``level`` (``task`` | ``step``), ``max_proposals``, ``memory``.
+Nothing here is random: ties are broken by rank, then by entity name.
+
+Offers:
+
+* :class:`ObjectSubstitution` -- the plugin as an object; :meth:`ObjectSubstitution.retrieve` gives the ranked
+  matches without proposing (what ``bt-meta experiment substitution`` tabulates)
+* :class:`Entity`, :class:`MismatchVector`, :class:`Decomposition`, :class:`Match`, :class:`Retrieval`
+* :func:`mismatch_vector` -- step 1 for a failure and its context
+* :func:`bind` -- one-to-one binding of a decomposition's blocks to entities
+* :func:`bt_meta_propose_repairs` -- the module-level plugin (see :func:`configure`)
+* :data:`MATCHERS` -- ``("gridmap", "symbolic")``
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+from collections import Counter
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from bt_meta.bt.failures import FailureKind, RepairProposal
+from bt_meta.errors import ConfigError
+from bt_meta.meta.proposals import SPLICE, SUBSTITUTE
+from bt_meta.perception.recall import memory_for, root_task
+from bt_meta.plugins import hookimpl
+
+__all__ = [
+    "MATCHERS",
+    "Decomposition",
+    "Entity",
+    "Match",
+    "MismatchVector",
+    "ObjectSubstitution",
+    "Retrieval",
+    "bind",
+    "bt_meta_propose_repairs",
+    "configure",
+    "mismatch_vector",
+]
+
+MATCHERS = ("gridmap", "symbolic")
+LEVELS = ("task", "step")
+ENV_MATCHER = "BT_META_SUBSTITUTION_MATCHER"
+_KINDS = (FailureKind.UNKNOWN_ENTITY, FailureKind.UNEXPECTED_CONFIGURATION)
+_MAX_BINDING = 6  # entities bound by brute force; a variant replacing more blocks than this is not searched
+
+
+@dataclass(frozen=True)
+class Entity:
+    """A block as the plan assumes it (missing) or as it is seen (unknown)."""
+
+    name: str
+    shape: str | None
+    colour: str | None
+
+    def describe(self) -> str:
+        return f"{self.name} ({self.colour or '?'} {self.shape or '?'})"
+
+
+@dataclass(frozen=True)
+class MismatchVector:
+    """Step 1: the failed step, what is missing and what is seen instead."""
+
+    step: int | None
+    missing: tuple[Entity, ...]
+    unknown: tuple[Entity, ...]
+    maps: tuple[dict[str, Any], ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"step": self.step, "missing": [e.describe() for e in self.missing],
+                "unknown": [e.describe() for e in self.unknown]}
+
+
+@dataclass(frozen=True)
+class Decomposition:
+    """One stored task occurrence: its steps (calls) and the shape and colour of the blocks they use."""
+
+    episode_id: int
+    task: str
+    parent_task: str | None
+    parent_node: str | None
+    first_step: int
+    calls: tuple[tuple[str, tuple[str, ...]], ...]
+    blocks: Mapping[str, tuple[str | None, str | None]]
+
+    def block_args(self) -> list[str]:
+        """The blocks used, in the order the steps first name them."""
+        seen: list[str] = []
+        for _, args in self.calls:
+            for arg in args:
+                if arg in self.blocks and arg not in seen:
+                    seen.append(arg)
+        return seen
+
+    def lifted_facts(self) -> Counter[tuple[Any, ...]]:
+        """The symbolic expectation without object names: each block's shape and colour, each step's other
+        arguments (a placement's cell)."""
+        facts: Counter[tuple[Any, ...]] = Counter()
+        for name in self.block_args():
+            shape, colour = self.blocks[name]
+            facts[("shape", shape)] += 1
+            facts[("colour", colour)] += 1
+        for action, args in self.calls:
+            facts[(action, *(a for a in args if a not in self.blocks))] += 1
+        return facts
+
+    def signature(self) -> tuple[Any, ...]:
+        """What two occurrences of the same decomposition share (blocks lifted to their kind)."""
+        return (self.parent_task, tuple(
+            (action, tuple(self.blocks.get(a, a) for a in args)) for action, args in self.calls))
+
+    def describe(self) -> str:
+        return "; ".join(f"{a}({', '.join(args)})" for a, args in self.calls)
+
+
+@dataclass
+class Match:
+    """A ranked hit of one matcher, with what reusing it would take."""
+
+    rank: int
+    matcher: str
+    decomposition: Decomposition
+    distance: int
+    step_index: int
+    call: str
+    binding: dict[str, str] | None = None
+    reason: str = ""
+    rotation: int = 0
+
+    @property
+    def realisable(self) -> bool:
+        return self.binding is not None
+
+    def to_dict(self) -> dict[str, Any]:
+        d = self.decomposition
+        return {"rank": self.rank, "matcher": self.matcher, "episode": d.episode_id, "task": d.task,
+                "parent_task": d.parent_task, "step": self.step_index, "call": self.call,
+                "distance": self.distance, "rotation": self.rotation, "decomposition": d.describe(),
+                "blocks": {b: f"{d.blocks[b][1]} {d.blocks[b][0]}" for b in d.block_args()},
+                "realisable": self.realisable, "binding": self.binding, "reason": self.reason}
+
+
+@dataclass
+class Retrieval:
+    """Steps 2-4 for one failure: the query (the first step using the missing entity and its stored
+    execution) and the ranked matches."""
+
+    vector: MismatchVector
+    matcher: str
+    query_step: int | None = None
+    query_call: str | None = None
+    query: Decomposition | None = None
+    query_episode: int | None = None
+    matches: list[Match] = field(default_factory=list)
+    note: str = ""
+
+    @property
+    def found(self) -> Match | None:
+        return next((m for m in self.matches if m.realisable), None)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"matcher": self.matcher, "vector": self.vector.to_dict(), "query_step": self.query_step,
+                "query_call": self.query_call, "query_episode": self.query_episode,
+                "query": None if self.query is None else self.query.describe(),
+                "matches": [m.to_dict() for m in self.matches], "found": None if self.found is None
+                else self.found.to_dict(), "note": self.note}
+
+
+# -- step 1: the mismatch vector ----------------------------------------------------------------------------------
+
+
+def _problem_attributes(problem: Any) -> dict[str, tuple[str | None, str | None]]:
+    """(shape, colour) of every object the problem describes with ``shape``/``colour`` facts."""
+    facts = getattr(problem, "init", None)
+    if facts is None:
+        facts = getattr(problem, "state", None) or ()
+    return _attributes(facts)
+
+
+def _attributes(facts: Iterable[Sequence[Any]]) -> dict[str, tuple[str | None, str | None]]:
+    shapes: dict[str, str] = {}
+    colours: dict[str, str] = {}
+    for fact in facts:
+        if len(fact) == 3 and fact[0] == "shape":
+            shapes[str(fact[1])] = str(fact[2])
+        elif len(fact) == 3 and fact[0] == "colour":
+            colours[str(fact[1])] = str(fact[2])
+    return {name: (shapes.get(name), colours.get(name)) for name in sorted(set(shapes) | set(colours))}
+
+
+def _seen_objects(world: Any) -> dict[str, dict[str, Any]] | None:
+    observe = getattr(world, "observe", None)
+    if observe is None:
+        return None
+    objects = (observe() or {}).get("objects")
+    if not isinstance(objects, Mapping):
+        return None
+    return {str(k): dict(v) for k, v in objects.items() if isinstance(v, Mapping) and v.get("shape")}
+
+
+def mismatch_vector(failure: Any, context: Any) -> MismatchVector | None:
+    """The failed step, the missing entities and the unknown ones seen; ``None`` when nothing is missing."""
+    evidence = getattr(failure, "evidence", None) or {}
+    maps = tuple(m for mismatch in evidence.get("mismatches") or [] for m in (mismatch.get("evidence") or {})
+                 .get("maps") or [] if isinstance(m, Mapping))
+    run = getattr(context, "run", None)
+    assumed = _problem_attributes(getattr(run, "problem", None))
+    seen = _seen_objects(getattr(context, "world", None))
+    missing: dict[str, Entity] = {}
+    unknown: dict[str, Entity] = {}
+    if seen is not None:
+        for name, (shape, colour) in assumed.items():
+            obj = seen.get(name)
+            if obj is None or obj.get("shape") != shape or (colour is not None and obj.get("colour") != colour):
+                missing[name] = Entity(name, shape, colour)
+        for name, obj in seen.items():
+            if name not in assumed or name in missing:
+                unknown[name] = Entity(name, str(obj.get("shape")), obj.get("colour"))
+    for record in maps:  # the monitor's own account: a block seen with another form than remembered
+        expected, observed = record.get("expected") or {}, record.get("observed") or {}
+        name = record.get("object")
+        if name and observed.get("block_seen") and observed.get("shape") != expected.get("shape") \
+                and name not in missing:
+            missing[str(name)] = Entity(str(name), expected.get("shape"), expected.get("colour"))
+    for key, target in (("missing_entities", missing), ("unknown_entities", unknown)):
+        for name in evidence.get(key) or []:
+            if str(name) not in target:
+                shape, colour = assumed.get(str(name), (None, None))
+                if target is unknown and seen is not None and str(name) in seen:
+                    shape, colour = seen[str(name)].get("shape"), seen[str(name)].get("colour")
+                target[str(name)] = Entity(str(name), shape, colour)
+    if not missing:
+        return None
+    return MismatchVector(getattr(failure, "step", None), tuple(missing[n] for n in sorted(missing)),
+                          tuple(unknown[n] for n in sorted(unknown)), maps)
+
+
+# -- binding ------------------------------------------------------------------------------------------------------
+
+
+def bind(decomposition: Decomposition, entities: Sequence[Entity], *, colour: bool) -> dict[str, str] | None:
+    """A one-to-one binding of the decomposition's blocks to ``entities`` (all of them used), matching shape (and
+    colour when ``colour``); the first in name order, or ``None``."""
+    blocks = decomposition.block_args()
+    if len(blocks) != len(entities) or not blocks or len(blocks) > _MAX_BINDING:
+        return None
+    ordered = sorted(entities, key=lambda e: e.name)
+    for permutation in itertools.permutations(ordered):
+        ok = True
+        for block, entity in zip(blocks, permutation, strict=True):
+            shape, block_colour = decomposition.blocks[block]
+            if entity.shape != shape or (colour and entity.colour != block_colour):
+                ok = False
+                break
+        if ok:
+            return {block: entity.name for block, entity in zip(blocks, permutation, strict=True)}
+    return None
+
+
+def _why_not(decomposition: Decomposition, entities: Sequence[Entity], *, colour: bool) -> str:
+    needs = ", ".join(f"{(c or '?') + ' ' if colour else ''}{s}" for s, c in
+                      (decomposition.blocks[b] for b in decomposition.block_args()))
+    has = ", ".join(f"{(e.colour or '?') + ' ' if colour else ''}{e.shape}" for e in entities) or "nothing"
+    return f"needs {needs}; the unknown entities are {has}"
+
+
+# -- the memory's side ----------------------------------------------------------------------------------------------
+
+
+class _Library:
+    """P_a of every successful episode, indexed, with each episode's block attributes (read once per call)."""
+
+    def __init__(self, memory: Any) -> None:
+        self.memory = memory
+        self.rows = memory.plan_executions()
+        self.by_step = {(r.episode_id, r.step_index): r for r in self.rows}
+        self._attributes: dict[int, dict[str, tuple[str | None, str | None]]] = {}
+
+    def attributes(self, episode_id: int) -> dict[str, tuple[str | None, str | None]]:
+        found = self._attributes.get(episode_id)
+        if found is None:
+            trace = self.memory.trace(episode_id)
+            facts = list(trace.initial.facts) + [f for s in trace.steps for f in s.state.facts]
+            found = self._attributes[episode_id] = _attributes(facts)
+        return found
+
+    def occurrence(self, episode_id: int, step_index: int) -> Decomposition | None:
+        """The task occurrence step ``step_index`` of an episode belongs to (consecutive steps, same parent)."""
+        row = self.by_step.get((episode_id, step_index))
+        if row is None:
+            return None
+        key = (row.parent_task, row.parent_node)
+        first = step_index
+        while (prev := self.by_step.get((episode_id, first - 1))) is not None \
+                and (prev.parent_task, prev.parent_node) == key:
+            first -= 1
+        calls = []
+        index = first
+        while (r := self.by_step.get((episode_id, index))) is not None and (r.parent_task, r.parent_node) == key:
+            calls.append((r.action, tuple(str(a) for a in r.args)))
+            index += 1
+        attributes = self.attributes(episode_id)
+        blocks = {a: attributes[a] for _, args in calls for a in args if a in attributes}
+        return Decomposition(episode_id, row.task, row.parent_task, row.parent_node, first, tuple(calls), blocks)
+
+    def ends_task(self, episode_id: int, step_index: int) -> bool:
+        row = self.by_step.get((episode_id, step_index))
+        nxt = self.by_step.get((episode_id, step_index + 1))
+        return row is not None and (nxt is None or (nxt.parent_task, nxt.parent_node)
+                                    != (row.parent_task, row.parent_node))
+
+    def occurrences(self) -> list[Decomposition]:
+        out = []
+        for row in self.rows:
+            if self.ends_task(row.episode_id, row.step_index):
+                found = self.occurrence(row.episode_id, row.step_index)
+                if found is not None:
+                    out.append(found)
+        return out
+
+
+def _call(action: str, args: Sequence[Any]) -> str:
+    return f"{action}({', '.join(str(a) for a in args)})"
+
+
+# -- the plugin -----------------------------------------------------------------------------------------------------
+
+
+class ObjectSubstitution:
+    """Section 6.4's repair with one matcher (``gridmap`` or ``symbolic``); see the module docstring."""
+
+    def __init__(self, memory: Any = None, *, matcher: str | None = None, k: int = 5, rotations: bool = False,
+                 level: str = "task", max_proposals: int = 3, anchor: bool = True, candidates: int = 200) -> None:
+        matcher = matcher or os.environ.get(ENV_MATCHER) or "gridmap"
+        if matcher not in MATCHERS:
+            raise ConfigError(f"object substitution: matcher must be one of {', '.join(MATCHERS)}, got {matcher!r}")
+        if level not in LEVELS:
+            raise ConfigError(f"object substitution: level must be one of {', '.join(LEVELS)}, got {level!r}")
+        if k < 1 or max_proposals < 1 or candidates < 1:
+            raise ConfigError("object substitution: k, max_proposals and candidates must be >= 1")
+        self.memory = memory
+        self.matcher = matcher
+        self.k = k
+        self.rotations = rotations
+        self.level = level
+        self.max_proposals = max_proposals
+        self.anchor = anchor
+        self.candidates = candidates
+
+    # -- steps 2 to 4 -----------------------------------------------------------------------------------------------
+
+    def retrieve(self, vector: MismatchVector, plan: Sequence[Mapping[str, Any]], memory: Any,
+                 task: str | None) -> Retrieval:
+        """The query for ``vector`` in ``plan`` (``evidence["plan"]`` records) and this matcher's ranked matches."""
+        retrieval = Retrieval(vector, self.matcher)
+        names = {e.name for e in vector.missing}
+        first = next((p for p in plan if not p.get("done") and names.intersection(str(a) for a in p["args"])), None)
+        if first is None:
+            retrieval.note = "no step still to run uses the missing entities"
+            return retrieval
+        retrieval.query_step = int(first["step"])
+        retrieval.query_call = _call(first["action"], first["args"])
+        library = _Library(memory)
+        args = [str(a) for a in first["args"]]
+        stored = [r for r in library.rows if (task is None or r.task == task) and r.action == first["action"]
+                  and [str(a) for a in r.args] == args]
+        if not stored:
+            retrieval.note = f"P_a has no execution of {retrieval.query_call}" + (f" in {task}" if task else "")
+            return retrieval
+        row = max(stored, key=lambda r: r.episode_id)  # the newest demonstration
+        retrieval.query_episode = row.episode_id
+        retrieval.query = library.occurrence(row.episode_id, row.step_index)
+        if self.matcher == "gridmap":
+            retrieval.matches = self._gridmap_matches(library, row, vector, retrieval)
+        else:
+            retrieval.matches = self._symbolic_matches(library, vector, retrieval)
+        return retrieval
+
+    def _gridmap_matches(self, library: _Library, row: Any, vector: MismatchVector, retrieval: Retrieval
+                         ) -> list[Match]:
+        memory = library.memory
+        maps = [x for x in memory.expectations(action=row.action, task=row.task)
+                if x.episode_id == row.episode_id and x.step_index == row.step_index and x.grid_map_id is not None]
+        if not maps:
+            retrieval.note = f"E_db has no grid-map for {retrieval.query_call} (episode {row.episode_id})"
+            return []
+        missing = {e.name for e in vector.missing}
+        chosen = next((x for x in maps if set(str(a) for a in x.args_pattern) & missing), maps[0])
+        query = memory.grid_map(chosen.grid_map_id)
+        hits = memory.nearest_grid_maps(query, k=self.candidates, rotations=self.rotations)
+        matches: list[Match] = []
+        seen: set[tuple[Any, ...]] = set()
+        for hit in hits:
+            if self.level == "task" and not library.ends_task(hit.episode_id, hit.step_index):
+                continue
+            decomposition = library.occurrence(hit.episode_id, hit.step_index)
+            if decomposition is None or decomposition.signature() in seen:
+                continue
+            seen.add(decomposition.signature())
+            binding = bind(decomposition, vector.unknown, colour=False)
+            matches.append(Match(len(matches) + 1, "gridmap", decomposition, hit.distance, hit.step_index,
+                                 _call(hit.action, hit.args_pattern), binding,
+                                 "" if binding else _why_not(decomposition, vector.unknown, colour=False),
+                                 hit.rotation))
+            if len(matches) >= self.k:
+                break
+        return matches
+
+    def _symbolic_matches(self, library: _Library, vector: MismatchVector, retrieval: Retrieval) -> list[Match]:
+        query = retrieval.query
+        assert query is not None
+        wanted = query.lifted_facts()
+        scored = []
+        seen: set[tuple[Any, ...]] = set()
+        for decomposition in library.occurrences():
+            if decomposition.signature() in seen:
+                continue
+            seen.add(decomposition.signature())
+            facts = decomposition.lifted_facts()
+            distance = sum(((wanted - facts) + (facts - wanted)).values())
+            scored.append((distance, decomposition.episode_id, decomposition.first_step, decomposition))
+        scored.sort(key=lambda s: (s[0], s[1], s[2]))
+        matches = []
+        for distance, _, _, decomposition in scored[: self.k]:
+            last = decomposition.first_step + len(decomposition.calls) - 1
+            action, args = decomposition.calls[-1]
+            binding = bind(decomposition, vector.unknown, colour=True)
+            matches.append(Match(len(matches) + 1, "symbolic", decomposition, distance, last, _call(action, args),
+                                 binding, "" if binding else _why_not(decomposition, vector.unknown, colour=True)))
+        return matches
+
+    # -- step 5: proposals ------------------------------------------------------------------------------------------
+
+    def proposals(self, retrieval: Retrieval, plan: Sequence[Mapping[str, Any]]) -> list[RepairProposal]:
+        """One proposal per realisable match (best first), at most ``max_proposals``."""
+        if retrieval.query_step is None or retrieval.query is None:
+            return []
+        start = retrieval.query_step
+        query = retrieval.query
+        offset = next((i for i, (a, args) in enumerate(query.calls)
+                       if a == plan[start]["action"] and [*args] == [str(x) for x in plan[start]["args"]]), 0)
+        tail = query.calls[offset:]
+        current = [(p["action"], [str(a) for a in p["args"]]) for p in plan[start:start + len(tail)]]
+        end = start + len(tail) if [a for a, _ in current] == [a for a, _ in tail] else start + 1
+        missing = {e.name for e in retrieval.vector.missing}
+        out: list[RepairProposal] = []
+        for match in retrieval.matches:
+            if not match.realisable or len(out) >= self.max_proposals:
+                continue
+            assert match.binding is not None
+            score = self._score(match)
+            evidence = {"matcher": self.matcher, "match": match.to_dict(), "vector": retrieval.vector.to_dict(),
+                        "query": {"step": start, "call": retrieval.query_call, "episode": retrieval.query_episode,
+                                  "decomposition": query.describe()}}
+            calls = [[action, *(match.binding.get(a, a) for a in args)] for action, args in match.decomposition.calls]
+            one_for_one = (len(calls) == end - start == 1 and calls[0][0] == plan[start]["action"]
+                           and len(match.binding) == 1)
+            if one_for_one:
+                old = [str(a) for a in plan[start]["args"]]
+                mapping = {a: b for a, b in zip(old, calls[0][1:], strict=False) if a != b and a in missing}
+                if mapping and [mapping.get(a, a) for a in old] == [str(c) for c in calls[0][1:]]:
+                    pairs = ", ".join(f"{a} -> {b}" for a, b in mapping.items())
+                    out.append(RepairProposal(
+                        SUBSTITUTE, score, f"substitute {pairs} ({self.matcher} match: {match.call} of "
+                        f"{match.decomposition.task}, distance {match.distance})",
+                        changes={"mapping": mapping, "from_step": start}, evidence=evidence))
+                    continue
+                if not mapping and [str(c) for c in calls[0][1:]] == old:
+                    continue  # the same call again: nothing to substitute (the entity keeps its name)
+            shown = "; ".join(_call(c[0], c[1:]) for c in calls)
+            out.append(RepairProposal(
+                SPLICE, score, f"steps {start}..{end - 1} as {match.decomposition.parent_task} of "
+                f"{match.decomposition.task} does it: {shown} ({self.matcher} match, distance {match.distance})",
+                changes={"start": start, "end": end, "actions": calls}, evidence=evidence))
+        return out
+
+    def _score(self, match: Match) -> float:
+        """Experience-based: above the retry baseline (0.3), higher for nearer matches."""
+        scale = 36.0 if self.matcher == "gridmap" else 12.0
+        return round(max(0.35, 0.9 - 0.5 * min(match.distance / scale, 1.0) - 0.01 * (match.rank - 1)), 4)
+
+    # -- anchoring ------------------------------------------------------------------------------------------------
+
+    def anchor_entities(self, vector: MismatchVector, failure: Any, context: Any,
+                        proposals: Sequence[RepairProposal]) -> None:
+        """Give the unknown entities the proposals use their perceived facts in the world's symbolic state: the
+        missing entity's initial unary facts (type, availability), their own shape and colour; the failed step's
+        effects on an entity it moved are undone (the repair moves it again)."""
+        world = getattr(context, "world", None)
+        apply = getattr(world, "apply_symbolic", None)
+        state = getattr(world, "symbolic_state", None)
+        if apply is None or state is None:
+            return
+        used = {str(a) for p in proposals for call in p.changes.get("actions", []) for a in call[1:]}
+        used |= {str(v) for p in proposals for v in (p.changes.get("mapping") or {}).values()}
+        problem = getattr(getattr(context, "run", None), "problem", None)
+        initial = list(getattr(problem, "state", None) or getattr(problem, "init", None) or ())  # with type facts
+        missing = {e.name for e in vector.missing}
+        template = sorted({f[0] for f in initial if len(f) == 2 and str(f[1]) in missing})
+        current = set(state())
+        effects = getattr(context, "effects", None) or ([], [])
+        add: list[tuple[str, ...]] = []
+        delete: list[tuple[str, ...]] = []
+        for entity in vector.unknown:
+            if entity.name not in used:
+                continue
+            delete += [f for f in current if len(f) == 3 and f[0] in ("shape", "colour") and f[1] == entity.name]
+            add += [(name, entity.name) for name in template]
+            add += [("shape", entity.name, str(entity.shape)), ("colour", entity.name, str(entity.colour))]
+            added, deleted = effects
+            delete += [tuple(f) for f in added if entity.name in f[1:] and tuple(f) in current]
+            add += [tuple(f) for f in deleted if entity.name in f[1:]]
+        delete = [f for f in delete if f not in add]
+        if add or delete:
+            apply(add=add, delete=delete)
+
+    # -- the hook -------------------------------------------------------------------------------------------------
+
+    @hookimpl
+    def bt_meta_propose_repairs(self, failure: Any, context: Any) -> list[RepairProposal] | None:
+        if failure.kind not in _KINDS:
+            return None
+        vector = mismatch_vector(failure, context)
+        if vector is None or not vector.unknown:
+            return None
+        memory = memory_for(context, self.memory)
+        if memory is None:
+            return None
+        plan = failure.evidence.get("plan") or []
+        retrieval = self.retrieve(vector, plan, memory, root_task(context))
+        proposals = self.proposals(retrieval, plan)
+        if proposals and self.anchor:
+            self.anchor_entities(vector, failure, context, proposals)
+        return proposals or None
+
+
+_plugin: ObjectSubstitution | None = None
+
+
+def configure(**settings: Any) -> ObjectSubstitution:
+    """Replace the module-level plugin's settings (keyword arguments of :class:`ObjectSubstitution`); with no
+    settings, back to the defaults (the matcher from ``BT_META_SUBSTITUTION_MATCHER``, read on first use)."""
+    global _plugin
+    _plugin = ObjectSubstitution(**settings) if settings else None
+    return _plugin or ObjectSubstitution()
+
+
+@hookimpl
+def bt_meta_propose_repairs(failure: Any, context: Any) -> list[RepairProposal] | None:
+    global _plugin
+    if _plugin is None:
+        _plugin = ObjectSubstitution()
+    return _plugin.bt_meta_propose_repairs(failure, context)

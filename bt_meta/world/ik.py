@@ -95,6 +95,7 @@ class InverseKinematics:
         self.collision = collision
         self.settings = settings or kinematics.robot.ik
         self._arms: dict[str, _ArmSolver] = {}
+        self._rigid: dict[tuple[str, str], frozenset[str]] = {}
 
     def _arm(self, arm: str) -> _ArmSolver:
         solver = self._arms.get(arm)
@@ -144,6 +145,14 @@ class InverseKinematics:
             solver.tasks[frame] = entry
             solver.reach[frame] = self._reach(arm, frame)
         return entry
+
+    def _rigid_links(self, arm: str, frame: str) -> frozenset[str]:
+        key = (arm, frame)
+        links = self._rigid.get(key)
+        if links is None:
+            links = _links_moving_with(self.kinematics, frame, self.kinematics.robot.arm(arm).joints)
+            self._rigid[key] = links
+        return links
 
     def _reach(self, arm: str, frame: str) -> tuple[np.ndarray, float]:
         """(position of the arm's first joint, an upper bound on its distance to ``frame``).
@@ -201,16 +210,18 @@ class InverseKinematics:
         configuration = solver.configuration
         data = configuration.data
         model = configuration.model
-        weight = self.settings.orientation_cost
-        target_rotation = target.rotation.ravel()
-        samples = rng.uniform(solver.lower, solver.upper, size=(self.settings.restart_samples, len(solver.lower)))
-        scores = np.empty(len(samples))
+        count = self.settings.restart_samples
+        samples = rng.uniform(solver.lower, solver.upper, size=(count, len(solver.lower)))
+        positions = np.empty((count, 3))
+        rotations = np.empty((count, 9))
         for i, sample in enumerate(samples):
             data.qpos[:] = sample
             mujoco.mj_kinematics(model, data)
-            position = np.linalg.norm(data.xpos[body] - target.translation)
-            cosine = (np.vdot(data.xmat[body], target_rotation) - 1.0) / 2.0
-            scores[i] = position + weight * np.arccos(min(1.0, max(-1.0, cosine)))
+            positions[i] = data.xpos[body]
+            rotations[i] = data.xmat[body]
+        cosines = np.clip((rotations @ target.rotation.ravel() - 1.0) / 2.0, -1.0, 1.0)
+        offsets = positions - target.translation
+        scores = np.sqrt(np.einsum("ij,ij->i", offsets, offsets)) + self.settings.orientation_cost * np.arccos(cosines)
         order = np.argsort(scores, kind="stable")
         best = samples[order[0]]
         if collision_free_in is not None and self.collision is not None:
@@ -287,7 +298,7 @@ class _Run:
         self.best: tuple[float, float, float, np.ndarray | None] = (np.inf, np.inf, np.inf, None)
         self.colliding: list[tuple[Contact, np.ndarray]] = []
         self.escapes_tried = 0
-        self.rigid_links = _links_moving_with(ik.kinematics, frame, ik.kinematics.robot.arm(arm).joints)
+        self.rigid_links = ik._rigid_links(arm, frame)
 
     def residual(self) -> tuple[float, float]:
         """(position error, orientation error) of the frame at the current configuration."""

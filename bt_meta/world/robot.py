@@ -117,12 +117,12 @@ class RobotDescription:
     urdf: UrdfSummary = field(repr=False)
 
     def arm(self, name: str) -> ArmDescription:
-        from bt_meta.world.kinematics import KinematicsError
+        arm = self.arms.get(name)
+        if arm is None:
+            from bt_meta.world.kinematics import KinematicsError  # kinematics imports this module
 
-        try:
-            return self.arms[name]
-        except KeyError:
-            raise KinematicsError(f"robot {self.name!r} has no arm {name!r}; arms: {', '.join(self.arms)}") from None
+            raise KinematicsError(f"robot {self.name!r} has no arm {name!r}; arms: {', '.join(self.arms)}")
+        return arm
 
     @property
     def cameras(self) -> dict[str, str]:

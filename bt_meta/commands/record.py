@@ -6,6 +6,8 @@ Offers:
 * :func:`register` -- adds ``record FILE [--problem P] [--variant V] [--seed S] [--memory PATH] [--json]
   [--max-ticks N] [--grounding FILE] [--check-expectations] [--plugins DIR] [--no-entry-points]``
 * :func:`record` -- the handler
+* :func:`demonstrate` -- the same from Python: run and store one demonstration, return a :class:`Demonstration`
+* :class:`DemonstrationFailed` -- a demonstration that did not succeed (nothing stored; the CLI exits 1)
 * :data:`MEMORY_EXPECTATIONS` -- the shipped expectation plugins a demonstration runs without
 
 The problem is planned and compiled with a Monitor around every primitive and ticked on a
@@ -22,6 +24,8 @@ from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from py_trees.common import Status
@@ -56,54 +60,103 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=record)
 
 
-def record(args: argparse.Namespace) -> int:
+@dataclass
+class Demonstration:
+    """A stored demonstration: the trace as read back from the memory, and what it took."""
+
+    episode_id: int
+    trace: Any
+    ticks: int
+    seconds: float
+    recording_seconds: float
+
+
+def demonstrate(
+    file: str | Path,
+    problem: str | None,
+    memory: Any,
+    *,
+    variant: str | None = None,
+    seed: int = 0,
+    max_ticks: int = 5000,
+    grounding: str | Path | None = None,
+    plugins: Any = None,
+    check_expectations: bool = False,
+) -> Demonstration:
+    """Run ``problem`` of task file ``file`` in the simulator as a demonstration and store it in ``memory`` (an open
+    writable :class:`~bt_meta.memory.EpisodicMemory`). ``plugins``: a plugin host (default: built-ins, entry
+    points and the project's plugins folder). Raises :class:`DemonstrationFailed` when the run does not succeed
+    (nothing is stored); input errors are the loaders' :class:`~bt_meta.errors.UserInputError` s."""
     from bt_meta.htn import load_task_file
-    from bt_meta.memory import EpisodicMemory
     from bt_meta.memory.recorder import TraceRecorder
+    from bt_meta.plugins import create_plugin_host
     from bt_meta.testing import TreeHarness
     from bt_meta.world.sim_world import SimWorld, load_grounding, quiet_stdout
 
-    if args.max_ticks < 1:
+    if max_ticks < 1:
         raise UserInputError("--max-ticks must be at least 1")
-    task_file = load_task_file(args.file)
-    problem = task_file.problem(args.problem)  # unknown names list the known ones (exit 2)
-    grounding = load_grounding(task_file.domain.name, args.file, args.grounding)
-    grounding.problem(problem.name)
-    plugins = plugin_host_from_args(args, args.file)
-    if not args.check_expectations:
+    task_file = load_task_file(file)
+    chosen = task_file.problem(problem)  # unknown names list the known ones
+    ground = load_grounding(task_file.domain.name, file, grounding)
+    ground.problem(chosen.name)
+    if plugins is None:
+        plugins = create_plugin_host(project_file=file)
+    if not check_expectations:
         for name in MEMORY_EXPECTATIONS:
             if name in plugins.plugin_names():
                 plugins.unregister(name)
-    memory_path = resolve_memory_path(args)
     started = time.perf_counter()
     with quiet_stdout():
-        world = SimWorld(task_file.domain, problem, grounding, variant=args.variant, seed=args.seed)
+        world = SimWorld(task_file.domain, chosen, ground, variant=variant, seed=seed)
     try:
-        with EpisodicMemory.open(memory_path) as memory:
-            recorder = TraceRecorder(memory, variant=world.variant, seed=args.seed,
-                                     config={"demonstration": True, "scene": world.scene.name})
-            plugins.register(recorder, "recorder", source="bt-meta record")
+        recorder = TraceRecorder(memory, variant=world.variant, seed=seed,
+                                 config={"demonstration": True, "scene": world.scene.name})
+        plugins.register(recorder, "recorder", source="bt-meta record")
+        try:
             try:
-                harness = TreeHarness.from_file(args.file, problem.name, world=world, plugins=plugins)
+                harness = TreeHarness.from_file(file, chosen.name, world=world, plugins=plugins)
             except PlanningError as error:
-                raise DemonstrationFailed(f"{problem.name}: no plan to demonstrate ({error}); nothing stored") from None
+                raise DemonstrationFailed(f"{chosen.name}: no plan to demonstrate ({error}); nothing stored") from None
+            if check_expectations:
+                harness.run.memory = memory
             recorder.tree = harness.compiled.plan_result.tree
             status = Status.RUNNING
-            while status is Status.RUNNING and harness.run.tick_count < args.max_ticks:
+            while status is Status.RUNNING and harness.run.tick_count < max_ticks:
                 status = harness.tick()
             harness.run.finish(status)
             ticks = harness.run.tick_count
             failures = [f.to_dict() for f in harness.failures]
             harness.close()
-            seconds = time.perf_counter() - started
-            if recorder.error is not None:
-                raise recorder.error
-            if status is not Status.SUCCESS or recorder.episode_id is None:
-                raise DemonstrationFailed(_refusal(problem.name, world.variant, status, ticks, failures))
-            trace = memory.trace(recorder.episode_id)
-            return _report(args, memory, trace, ticks, seconds, recorder.seconds)
+        finally:
+            plugins.unregister("recorder")
+        seconds = time.perf_counter() - started
+        if recorder.error is not None:
+            raise recorder.error
+        if status is not Status.SUCCESS or recorder.episode_id is None:
+            raise DemonstrationFailed(_refusal(chosen.name, world.variant, status, ticks, failures))
+        return Demonstration(recorder.episode_id, memory.trace(recorder.episode_id), ticks, seconds,
+                             recorder.seconds)
     finally:
         world.close()
+
+
+def record(args: argparse.Namespace) -> int:
+    from bt_meta.htn import load_task_file
+    from bt_meta.memory import EpisodicMemory
+    from bt_meta.world.sim_world import load_grounding
+
+    if args.max_ticks < 1:
+        raise UserInputError("--max-ticks must be at least 1")
+    # Bad input is reported before the memory file is created.
+    task_file = load_task_file(args.file)
+    problem = task_file.problem(args.problem)
+    load_grounding(task_file.domain.name, args.file, args.grounding).problem(problem.name)
+    plugins = plugin_host_from_args(args, args.file)
+    with EpisodicMemory.open(resolve_memory_path(args)) as memory:
+        shown = demonstrate(args.file, args.problem, memory, variant=args.variant, seed=args.seed,
+                            max_ticks=args.max_ticks, grounding=args.grounding, plugins=plugins,
+                            check_expectations=args.check_expectations)
+        return _report(args, memory, shown.trace, shown.ticks, shown.seconds, shown.recording_seconds)
 
 
 def _refusal(problem: str, variant: str, status: Status, ticks: int, failures: list[dict[str, Any]]) -> str:
@@ -148,4 +201,4 @@ def _report(args: argparse.Namespace, memory: Any, trace: Any, ticks: int, secon
     return 0
 
 
-__all__ = ["MEMORY_EXPECTATIONS", "DemonstrationFailed", "record", "register"]
+__all__ = ["MEMORY_EXPECTATIONS", "Demonstration", "DemonstrationFailed", "demonstrate", "record", "register"]

@@ -40,6 +40,7 @@ from bt_meta.commands._common import print_json
 from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
 from bt_meta.errors import PlanningError, UserInputError
 from bt_meta.memory import ENV_VAR, add_memory_argument, resolve_memory_path
+from bt_meta.plugins import hookimpl
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -198,6 +199,7 @@ def _run_repaired(args: argparse.Namespace, task_file: Any, problem: Any, world:
     if not args.json:
         print(f"{problem.name} in scene {world.scene.name} ({world.variant}), seed {args.seed}: "
               f"running with repairs (at most {args.max_attempts} attempts)")
+        plugins.register(_Progress(), "run_progress", source="bt-meta run --repair")
     with RefinementStore.open(memory.path) as refinements:
         report = Executor(task_file.domain, problem, world, plugins, task_file=task_file, variant=world.variant,
                           refinements=refinements, limits=Limits(max_attempts=args.max_attempts,
@@ -231,6 +233,27 @@ def _run_repaired(args: argparse.Namespace, task_file: Any, problem: Any, world:
             print(f"refinement saved: {saved.get('method') or saved.get('reason') or saved}")
     plan = [" ".join(step) for step in report.plan]
     return _report(args, out, status, report.ticks, report.failures, world, plan, started, built, recorder)
+
+
+class _Progress:
+    """Prints every finished step, failure and repair decision of a repaired run as it happens."""
+
+    @hookimpl
+    def bt_meta_trace_event(self, event: dict[str, Any]) -> None:
+        kind = event.get("type")
+        if kind == "step_end":
+            call = f"{event.get('action')}({', '.join(str(a) for a in event.get('args') or ())})"
+            print(f"tick {event.get('tick', 0):>4}  step {event.get('step')} {event.get('node_id') or ''} {call}"
+                  f" {event.get('status')}")
+        elif kind == "failure":
+            failure = event.get("failure") or {}
+            print(f"           failure [{failure.get('kind')}] {failure.get('message')}")
+        elif kind == "repair":
+            attempt = event.get("attempt") or {}
+            proposal = attempt.get("proposal") or event.get("proposal") or {}
+            what = f"{proposal.get('action')} by {proposal.get('plugin')}" if proposal else ""
+            detail = attempt.get("change") or event.get("reason") or ""
+            print(f"           repair {event.get('outcome')}: {what}{': ' if what and detail else ''}{detail}")
 
 
 def _report(args: argparse.Namespace, out: dict[str, Any], status: str, ticks: int, failures: list[dict[str, Any]],

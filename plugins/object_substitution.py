@@ -368,13 +368,18 @@ class ObjectSubstitution:
 
     def __init__(self, memory: Any = None, *, matcher: str | None = None, k: int = 5, rotations: bool = False,
                  level: str = "task", max_proposals: int = 3, anchor: bool = True, candidates: int = 200) -> None:
-        matcher = matcher or os.environ.get(ENV_MATCHER) or "gridmap"
+        where = "<plugin settings>"
+        if matcher is None:
+            matcher = os.environ.get(ENV_MATCHER) or "gridmap"
+            where = f"${ENV_MATCHER}" if os.environ.get(ENV_MATCHER) else where
         if matcher not in MATCHERS:
-            raise ConfigError(f"object substitution: matcher must be one of {', '.join(MATCHERS)}, got {matcher!r}")
+            raise ConfigError(f"object substitution: matcher must be one of {', '.join(MATCHERS)}, got {matcher!r}",
+                              where)
         if level not in LEVELS:
-            raise ConfigError(f"object substitution: level must be one of {', '.join(LEVELS)}, got {level!r}")
+            raise ConfigError(f"object substitution: level must be one of {', '.join(LEVELS)}, got {level!r}",
+                              "<plugin settings>")
         if k < 1 or max_proposals < 1 or candidates < 1:
-            raise ConfigError("object substitution: k, max_proposals and candidates must be >= 1")
+            raise ConfigError("object substitution: k, max_proposals and candidates must be >= 1", "<plugin settings>")
         self.memory = memory
         self.matcher = matcher
         self.k = k
@@ -574,12 +579,12 @@ class ObjectSubstitution:
 _plugin: ObjectSubstitution | None = None
 
 
-def configure(**settings: Any) -> ObjectSubstitution:
+def configure(**settings: Any) -> ObjectSubstitution | None:
     """Replace the module-level plugin's settings (keyword arguments of :class:`ObjectSubstitution`); with no
     settings, back to the defaults (the matcher from ``BT_META_SUBSTITUTION_MATCHER``, read on first use)."""
     global _plugin
     _plugin = ObjectSubstitution(**settings) if settings else None
-    return _plugin or ObjectSubstitution()
+    return _plugin
 
 
 @hookimpl

@@ -261,7 +261,8 @@ def _run_variant(task_file: Any, variant: str, memory: Any, matcher: str, expect
         "letter_ok": report.status == "success",
         "letter_cells": [[round(u, 2), round(v, 2)] for u, v in cells if -1.5 <= u <= 4.5 and -1.5 <= v <= 3.5],
         "reported": [{"kind": r.get("kind"), "message": r.get("message")} for r in report.reported],
-        "failures": report.failures,
+        "failures": [{"step": f.get("step"), "kind": f.get("kind"), "message": f.get("message")}
+                     for f in report.failures],
     }
 
 

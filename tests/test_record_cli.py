@@ -125,3 +125,29 @@ def test_repair_run_reports_attempts_and_records_a_failed_run_when_asked(capsys,
     else:
         assert stored.episode.outcome == "failure" and stored.steps[4].failure_kind == result["failures"][0]["kind"]
         assert result["stop_reason"]
+
+
+@pytest.mark.slow
+def test_demonstrate_runs_without_the_memory_expectations_unless_asked(tmp_path, recorded_a):
+    import bt_meta_plugins.camera_perception as camera_plugin
+    import bt_meta_plugins.gridmap_expectations as gridmap_plugin
+
+    from bt_meta.commands.record import DemonstrationFailed, demonstrate
+    from bt_meta.plugins import create_plugin_host
+
+    memory_path = tmp_path / "copy.sqlite"
+    memory_path.write_bytes(recorded_a.read_bytes())
+    host = create_plugin_host(entry_points=False, plugins=[("camera_perception", camera_plugin),
+                                                            ("gridmap_expectations", gridmap_plugin)])
+    names = sorted(host.plugin_names())
+    with EpisodicMemory.open(memory_path) as memory:
+        # checked against nominal A, the bar drawn with a 1x1 is a mismatch: the demonstration is refused
+        with pytest.raises(DemonstrationFailed, match="nothing stored: unknown_entity failure at step 4"):
+            demonstrate(LETTERS, "A", memory, variant="A_two_1x1_same_colour", plugins=host,
+                        check_expectations=True)
+        assert sorted(host.plugin_names()) == names and len(memory.episodes()) == 1
+        # a demonstration teaches: by default it is not judged by what the memory expects
+        shown = demonstrate(LETTERS, "A", memory, variant="A_two_1x1_same_colour", plugins=host)
+        assert sorted(host.plugin_names()) == names
+        assert shown.episode_id == 2 and shown.trace.episode.variant == "A_two_1x1_same_colour"
+        assert shown.trace.steps[4].state.grid_maps[0].shape == "1x1" and shown.recording_seconds > 0

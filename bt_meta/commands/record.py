@@ -37,6 +37,7 @@ from bt_meta.memory import add_memory_argument, resolve_memory_path
 
 #: Expectation plugins whose expectations come from the memory a demonstration is about to teach.
 MEMORY_EXPECTATIONS = ("gridmap_expectations", "keypoint_expectations")
+RECORDER_NAME = "bt_meta_demonstration_recorder"
 
 
 class DemonstrationFailed(BtMetaError):
@@ -88,10 +89,8 @@ def demonstrate(
     points and the project's plugins folder). Raises :class:`DemonstrationFailed` when the run does not succeed
     (nothing is stored); input errors are the loaders' :class:`~bt_meta.errors.UserInputError` s."""
     from bt_meta.htn import load_task_file
-    from bt_meta.memory.recorder import TraceRecorder
     from bt_meta.plugins import create_plugin_host
-    from bt_meta.testing import TreeHarness
-    from bt_meta.world.sim_world import SimWorld, load_grounding, quiet_stdout
+    from bt_meta.world.sim_world import load_grounding
 
     if max_ticks < 1:
         raise UserInputError("--max-ticks must be at least 1")
@@ -101,17 +100,33 @@ def demonstrate(
     ground.problem(chosen.name)
     if plugins is None:
         plugins = create_plugin_host(project_file=file)
+    removed: list[tuple[str, Any, str]] = []
     if not check_expectations:
         for name in MEMORY_EXPECTATIONS:
             if name in plugins.plugin_names():
+                removed.append((name, plugins.manager.get_plugin(name), plugins.sources.get(name, "")))
                 plugins.unregister(name)
+    try:
+        return _demonstrate(file, chosen, task_file, ground, memory, variant, seed, max_ticks, plugins,
+                            check_expectations)
+    finally:  # the caller's host is as it was
+        for name, plugin, source in removed:
+            plugins.register(plugin, name, source=source)
+
+
+def _demonstrate(file: str | Path, chosen: Any, task_file: Any, ground: Any, memory: Any, variant: str | None,
+                 seed: int, max_ticks: int, plugins: Any, check_expectations: bool) -> Demonstration:
+    from bt_meta.memory.recorder import TraceRecorder
+    from bt_meta.testing import TreeHarness
+    from bt_meta.world.sim_world import SimWorld, quiet_stdout
+
     started = time.perf_counter()
     with quiet_stdout():
         world = SimWorld(task_file.domain, chosen, ground, variant=variant, seed=seed)
     try:
         recorder = TraceRecorder(memory, variant=world.variant, seed=seed,
                                  config={"demonstration": True, "scene": world.scene.name})
-        plugins.register(recorder, "recorder", source="bt-meta record")
+        plugins.register(recorder, RECORDER_NAME, source="bt-meta record")
         try:
             try:
                 harness = TreeHarness.from_file(file, chosen.name, world=world, plugins=plugins)
@@ -128,7 +143,7 @@ def demonstrate(
             failures = [f.to_dict() for f in harness.failures]
             harness.close()
         finally:
-            plugins.unregister("recorder")
+            plugins.unregister(RECORDER_NAME)
         seconds = time.perf_counter() - started
         if recorder.error is not None:
             raise recorder.error

@@ -236,6 +236,10 @@ class TraceRecorder:
         maps = self._grid_maps(world, args, event) if outcome == "success" else ()
         parent_task, parent_node = self._parent(run, node_id, action, args)
         started = record.starts.pop((index, node_id), None)
+        if index is not None:
+            # A step run again (a repair backtracked to it) undoes the steps recorded from it on.
+            while record.steps and record.steps[-1].step is not None and record.steps[-1].step >= index:
+                record.steps.pop()
         before = set(record.steps[-1].state.facts) if record.steps else set(record.facts)
         pending = _Pending(
             step=index, action=action, args=args, node_id=node_id, parent_task=parent_task, parent_node=parent_node,
@@ -243,10 +247,6 @@ class TraceRecorder:
             duration=None if started is None else time.perf_counter() - started,
             added=tuple(f for f in facts if f not in before),
         )
-        if index is not None:
-            # A step run again (a repair backtracked to it) undoes the steps recorded from it on.
-            while record.steps and record.steps[-1].step is not None and record.steps[-1].step >= index:
-                record.steps.pop()
         record.steps.append(pending)
         self.seconds += time.perf_counter() - began
 

@@ -582,7 +582,33 @@ def match_clause(steps: Sequence[Step], state: State, env: dict[str, str], exter
         return (env,)
     if count == 1:
         return _step_results(steps[0], state, env, external, axioms, derived_source)
-    return _match_many(steps, state, env, external, axioms, derived_source)
+    bound = frozenset(env)
+    plans = getattr(steps, "plans", None)
+    if plans is None:
+        ops = _plan(steps, bound)
+    else:
+        ops = plans.get(bound)
+        if ops is None:
+            ops = plans[bound] = _plan(steps, bound)
+    if ops[0] is _TESTS:  # nothing to bind: a conjunction of tests, decided without a generator
+        for op in ops[1]:
+            if op[0] == "T":
+                atom = (op[2], *[env[v] if is_var else v for is_var, v in op[3]])
+                kind = op[1]
+                if kind == POS:
+                    ok = atom in state
+                elif kind == NEG:
+                    ok = atom not in state
+                elif derived_source is not None:
+                    ok = (atom in derived_source(op[2])) != (kind == DNEG)
+                else:
+                    ok = axioms.holds(state, atom) != (kind == DNEG)
+            else:
+                ok = bool(_step_results(op[1], state, env, external, axioms, derived_source))
+            if not ok:
+                return ()
+        return (env,)
+    return _match_many(ops, state, env, external, axioms, derived_source)
 
 
 _DONE: Iterator[Any] = iter(())  # a test literal that passed: nothing more to try at its level
@@ -635,12 +661,17 @@ def _plan(steps: Sequence[Step], bound: frozenset[str]) -> tuple:
         pool_getter = getters[pool - 1] if pool else (False, "")
         ops.append(("F", kind, pred, step[2], pool, pool_getter, fixed, tuple(free), len(getters) + 1))
         have.update(name for _, name, _ in free)
+    if all(op[0] != "F" for op in ops):
+        return (_TESTS, tuple(ops))
     return tuple(ops)
 
 
-def _match_many(steps: Sequence[Step], state: State, env: dict[str, str], external: ExternalFn | None,
+_TESTS = "tests-only"  # marks the plan of a clause that binds nothing (see match_clause)
+
+
+def _match_many(ops: tuple, state: State, env: dict[str, str], external: ExternalFn | None,
                 axioms: Any, derived_source: Callable[[str], Any] | None) -> Iterator[dict[str, str]]:
-    """Iterative backtracking over the literals of a clause (no recursion).
+    """Iterative backtracking over the literals of a clause (no recursion), following its match plan ``ops``.
 
     One binding dict is updated in place: a level binds its free variables from each candidate fact and
     unbinds them when it is exhausted; only complete matches are copied. Tests (``not``, ``==``, ``!=``,
@@ -648,14 +679,6 @@ def _match_many(steps: Sequence[Step], state: State, env: dict[str, str], extern
     worked out once per clause and set of initially bound variables (:func:`_plan`).
     """
     env = dict(env)
-    bound = frozenset(env)
-    plans = getattr(steps, "plans", None)
-    if plans is None:
-        ops = _plan(steps, bound)
-    else:
-        ops = plans.get(bound)
-        if ops is None:
-            ops = plans[bound] = _plan(steps, bound)
     count = len(ops)
     last = count - 1
     iters: list[Any] = [None] * count

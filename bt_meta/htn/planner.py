@@ -20,6 +20,7 @@ Goal facts, when the problem has some, must hold at the end, else the search bac
 
 from __future__ import annotations
 
+import gc
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -131,6 +132,23 @@ class Search:
 
     # -- the search ------------------------------------------------------------------------------------------
     def run(self, state: State, items: list[tuple]) -> PlanResult:
+        """Search with the cyclic garbage collector paused.
+
+        The search allocates many small acyclic objects (agenda cells, bindings, states) while the tree it
+        keeps grows; every generation-2 collection would traverse all of it again, which made long plans
+        superlinear. Nothing here creates reference cycles that need collecting during the search, and the
+        collector's previous setting is restored afterwards.
+        """
+        enabled = gc.isenabled()
+        if enabled:
+            gc.disable()
+        try:
+            return self._run(state, items)
+        finally:
+            if enabled:
+                gc.enable()
+
+    def _run(self, state: State, items: list[tuple]) -> PlanResult:
         domain = self.domain
         primitives = domain.primitives
         tasks_decl = domain.tasks
@@ -237,7 +255,22 @@ class Search:
                 task = item[1]
                 name = task[0]
                 if name in primitives:
-                    alternatives = iter(primitives[name].fast_satisfiers(state, task[1:], external))
+                    prim = primitives[name]
+                    found = prim.fast_satisfiers(state, task[1:], external)
+                    if found.__class__ is tuple and len(found) < 2:
+                        # at most one way to apply it: no choice point (backtracking resumes the previous one)
+                        if not found:
+                            self._dead_end(len(plan), self._explain(task, state))
+                            advance = True
+                            continue
+                        env = found[0]
+                        add, delete = prim.effects(env)
+                        trail.append([task, "primitive", None, env, item[2], state, self.step_offset + len(plan)])
+                        plan.append(len(trail) - 1)
+                        state = state._apply(add, delete)
+                        agenda = rest
+                        continue
+                    alternatives = iter(found)
                 else:
                     decl = tasks_decl[name]
                     key = (task, hash(state))
@@ -277,23 +310,27 @@ class Search:
         return f"n{self.id_offset + index}"
 
     def build_nodes(self, trail: list[list]) -> list[DecompositionNode]:
-        nodes = []
-        for index, (task, kind, method, env, parent, state, step) in enumerate(trail):
-            parent_id = self.node_id(parent) if isinstance(parent, int) else parent
-            nodes.append(DecompositionNode(self.node_id(index), task, kind, method, env, parent_id, state, step))
-        return nodes
+        offset = self.id_offset
+        ids = [f"n{offset + index}" for index in range(len(trail))]
+        node = DecompositionNode
+        return [node(ids[index], task, kind, method, env, ids[parent] if parent.__class__ is int else parent, state,
+                     step)
+                for index, (task, kind, method, env, parent, state, step) in enumerate(trail)]
 
     def _success(self, trail: list[list], plan: list[int], state: State) -> PlanResult:
         nodes = self.build_nodes(trail)
         by_id = {node.id: node for node in nodes}
         roots: list[str] = []
         for node in nodes:
-            if node.parent is None:
+            parent = node.parent
+            if parent is None:
                 roots.append(node.id)
-            elif node.parent in by_id:
-                by_id[node.parent].children.append(node.id)
+            else:
+                found = by_id.get(parent)
+                if found is not None:
+                    found.children.append(node.id)
         tree = DecompositionTree(by_id, roots)
-        actions = [GroundAction(trail[i][0][0], tuple(trail[i][0][1:]), self.node_id(i)) for i in plan]
+        actions = [GroundAction(nodes[i].task[0], nodes[i].task[1:], nodes[i].id) for i in plan]
         stats = self.stats(plan_length=len(actions), tree_nodes=len(nodes))
         message = f"plan found: {len(actions)} steps, {len(nodes)} tree nodes, {stats['expansions']} expansions, " \
                   f"{stats['backtracks']} backtracks"

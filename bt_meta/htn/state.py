@@ -163,43 +163,69 @@ class State:
 
     def _apply(self, add: list[Atom], delete: list[Atom]) -> State:
         preds = self._preds
-        removed: dict[str, set[Atom]] = {}
-        added: dict[str, set[Atom]] = {}
-        add_set = set(add)
-        for atom in delete:
-            atoms_of = preds.get(atom[0])
-            if atoms_of is not None and atom in atoms_of and atom not in add_set:
-                removed.setdefault(atom[0], set()).add(atom)
-        for atom in add_set:
-            atoms_of = preds.get(atom[0])
-            if atoms_of is None or atom not in atoms_of:
-                added.setdefault(atom[0], set()).add(atom)
-        if not removed and not added:
-            return self
-        new_preds = dict(preds)
-        by_arg = self._by_arg
-        new_by_arg = dict(by_arg) if by_arg else {}
+        copies: dict[str, dict[Atom, None]] = {}  # predicate -> its successor dict (copied on first change)
+        gone_by: dict[str, list[Atom]] = {}
+        delta: list[Atom] = []
         hash_ = self._hash
         length = self._len
-        for pred in removed.keys() | added.keys():
-            gone = removed.get(pred, ())
-            new = added.get(pred, ())
+        for atom in delete:
+            pred = atom[0]
+            atoms_of = copies.get(pred)
+            if atoms_of is None:
+                atoms_of = preds.get(pred)
+                if atoms_of is None or atom not in atoms_of or atom in add:
+                    continue
+                atoms_of = copies[pred] = dict(atoms_of)
+            elif atom not in atoms_of or atom in add:
+                continue
+            del atoms_of[atom]
+            hash_ -= hash(atom)
+            length -= 1
+            gone_by.setdefault(pred, []).append(atom)
+            delta.append(atom)
+        new_by: dict[str, list[Atom]] = {}
+        for atom in add:
+            pred = atom[0]
+            atoms_of = copies.get(pred)
+            if atoms_of is None:
+                atoms_of = preds.get(pred)
+                if atoms_of is not None and atom in atoms_of:
+                    continue
+            elif atom in atoms_of:
+                continue
+            found = new_by.get(pred)
+            if found is None:
+                new_by[pred] = [atom]
+            elif atom not in found:
+                found.append(atom)
+        for pred, new in new_by.items():
             if len(new) > 1:
-                new = sorted(new)
-            updated = dict(preds.get(pred, _EMPTY))
-            for atom in gone:
-                del updated[atom]
-                hash_ -= hash(atom)
+                new.sort()
+            atoms_of = copies.get(pred)
+            if atoms_of is None:
+                atoms_of = copies[pred] = dict(preds.get(pred, _EMPTY))
             for atom in new:
-                updated[atom] = None
+                atoms_of[atom] = None
                 hash_ += hash(atom)
-            if updated:
-                new_preds[pred] = updated
+            length += len(new)
+            delta.extend(new)
+        if not delta:
+            return self
+        new_preds = dict(preds)
+        for pred, atoms_of in copies.items():
+            if atoms_of:
+                new_preds[pred] = atoms_of
             else:
                 new_preds.pop(pred, None)
-            length += len(new) - len(gone)
-            by_position = by_arg.get(pred) if by_arg else None
-            if by_position:
+        by_arg = self._by_arg
+        new_by_arg = dict(by_arg)  # never shared: with_arg adds indexes to a state's own dict
+        if by_arg:
+            for pred in copies:
+                by_position = by_arg.get(pred)
+                if not by_position:
+                    continue
+                gone = gone_by.get(pred, ())
+                new = new_by.get(pred, ())
                 new_position: dict[int, dict[str, tuple[Atom, ...]]] = {}
                 for position, index in by_position.items():
                     index = dict(index)
@@ -220,10 +246,5 @@ class State:
         successor = State._make(new_preds, length, hash_ & _MASK, new_by_arg)
         # parent and changed atoms let axiom memos be inherited (see AxiomSet.holds)
         successor._parent = self
-        delta: list[Atom] = []
-        for atoms in removed.values():
-            delta.extend(atoms)
-        for atoms in added.values():
-            delta.extend(atoms)
         successor._delta = tuple(delta)
         return successor

@@ -21,8 +21,8 @@ verified by the letter's cells instead (:func:`letter_verifier`).
 
 Offers:
 
-* :func:`register` -- adds ``bt-meta experiment substitution [--matchers gridmap,symbolic] [--seed 0]
-  [--memory PATH] [--json]``
+* :func:`register` -- adds ``bt-meta experiment substitution [--matchers gridmap,symbolic] [--variants V,..]
+  [--seed 0] [--memory PATH] [--json]``
 * :func:`run` -- the experiment, returning the table as a dict
 * :func:`record_nominal` -- record A and H into a memory
 * :func:`letter_cells` / :func:`letter_verifier` -- where the blocks are in letter cells; the check built on it
@@ -59,6 +59,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                                         "and the repaired runs")
     parser.add_argument("--matchers", default="gridmap,symbolic",
                         help="comma-separated matchers whose repairs are run (default: gridmap,symbolic)")
+    parser.add_argument("--variants", default=",".join(v for v, _ in VARIANTS),
+                        help="comma-separated variants of A (default: all three)")
     parser.add_argument("--seed", type=int, default=0, help="simulator seed of every run")
     parser.add_argument("--memory", metavar="PATH", default=None,
                         help="episodic memory to use; A and H are recorded into it unless it already has them "
@@ -73,7 +75,12 @@ def _main(args: argparse.Namespace) -> int:
     if unknown or not matchers:
         raise UserInputError(f"--matchers: expected a comma-separated subset of {', '.join(MATCHERS)}, "
                              f"got {args.matchers!r}", path="<command line>")
-    result = run(matchers=matchers, seed=args.seed, memory_path=args.memory)
+    variants = [v.strip() for v in str(args.variants).split(",") if v.strip()]
+    known = [v for v, _ in VARIANTS]
+    if not variants or any(v not in known for v in variants):
+        raise UserInputError(f"--variants: expected a comma-separated subset of {', '.join(known)}, "
+                             f"got {args.variants!r}", path="<command line>")
+    result = run(matchers=matchers, seed=args.seed, memory_path=args.memory, variants=variants)
     if args.json:
         print_json(result)
     else:
@@ -272,7 +279,6 @@ def run(*, matchers: Sequence[str] = MATCHERS, seed: int = 0, memory_path: str |
     from bt_meta.htn import load_task_file
     from bt_meta.memory import EpisodicMemory
     from bt_meta.resources import trees_dir
-    from bt_meta.world.sim import Simulation
     from bt_meta.world.sim_world import SimWorld, quiet_stdout
 
     path = trees_dir() / "letters.yaml"
@@ -281,7 +287,9 @@ def run(*, matchers: Sequence[str] = MATCHERS, seed: int = 0, memory_path: str |
     with tempfile.TemporaryDirectory(prefix="bt-meta-substitution-") as temporary:
         file = Path(memory_path) if memory_path is not None else Path(temporary) / "memory.sqlite"
         started = time.perf_counter()
-        with quiet_stdout():
+        with quiet_stdout():  # pybullet prints its build time on import
+            from bt_meta.world.sim import Simulation
+
             sim = Simulation(seed=seed, visuals="light")
         try:
             recorded: dict[str, Any] = {}
@@ -344,36 +352,40 @@ def _nominal_cells(*, memory_file: Path, world: Any) -> list[tuple[float, float]
 # -- printing -----------------------------------------------------------------------------------------------------
 
 
-def _match_text(found: dict[str, Any] | None, matches: list[dict[str, Any]]) -> str:
-    if found is not None:
-        return (f"{found['task']} step {found['step']} {found['call']} [{found['parent_task']}], "
-                f"d={found['distance']}, rank {found['rank']}")
-    if matches:
-        best = matches[0]
-        return f"no match (nearest: {best['task']} {best['call']}, d={best['distance']}: {best['reason']})"
-    return "no match"
+def _match_text(found: dict[str, Any] | None) -> str:
+    if found is None:
+        return "none"
+    letter = str(found["task"]).removeprefix("draw_")
+    return f"{letter}: {found['parent_task']} {found['call']} d={found['distance']} #{found['rank']}"
+
+
+def _run_text(run: dict[str, Any] | None) -> str:
+    if run is None:
+        return "-"
+    repairs = ", ".join(r["action"] for r in run["repairs"])
+    if run["status"] == "success":
+        how = repairs or ("no mismatch" if run["monitor"] is None else "no repair")
+    else:
+        how = repairs + (" then " if repairs else "") + ("no proposal" if "no repair proposed" in
+                                                         run["stop_reason"] else run["stop_reason"])
+    return f"{run['status'].upper()}, {how}, letter {'ok' if run['letter_ok'] else 'wrong'}"
 
 
 def _print(result: dict[str, Any]) -> None:
-    print("Table 1 (section 6.4): A's 1x2 crossbar replaced; retrieval in E_db of A and H "
-          f"(memory: {result['memory']}; recorded A: {result['recorded']['A']}, H: {result['recorded']['H']})")
-    print(f"letter A's cells: {_cells_text([tuple(c) for c in result['expected_cells']])}")
+    print("Table 1 (section 6.4): A's blue 1x2 crossbar replaced; first usable match in E_db (d = distance, "
+          "# = rank)")
+    print(f"memory: {result['memory']}; recorded A: {result['recorded']['A']}, H: {result['recorded']['H']}; "
+          f"letter A's cells: {_cells_text([tuple(c) for c in result['expected_cells']])}")
     print()
-    header = f"{'variant':<32} {'matcher':<9} {'match (first realisable, rank in the ranked list)':<78} run"
+    header = (f"{'variant':<30} {'grid-map retrieval':<40} {'symbolic retrieval':<20} "
+              f"{'run: grid-map':<34} run: symbolic")
     print(header)
     print("-" * len(header))
     for row in result["rows"]:
-        for matcher in MATCHERS:
-            retrieval = row["retrieval"]["matchers"].get(matcher) or {}
-            found = retrieval.get("found")
-            text = _match_text(found, retrieval.get("matches") or [])
-            run = row["runs"].get(matcher)
-            if run is None:
-                outcome = "-"
-            else:
-                repairs = ", ".join(r["action"] for r in run["repairs"]) or "no repair"
-                outcome = f"{run['status'].upper()} ({repairs}; letter {'ok' if run['letter_ok'] else 'wrong'})"
-            print(f"{row['description'] if matcher == MATCHERS[0] else '':<32} {matcher:<9} {text:<78} {outcome}")
+        matchers = row["retrieval"]["matchers"]
+        print(f"{row['description']:<30} {_match_text((matchers.get('gridmap') or {}).get('found')):<40} "
+              f"{_match_text((matchers.get('symbolic') or {}).get('found')):<20} "
+              f"{_run_text(row['runs'].get('gridmap')):<34} {_run_text(row['runs'].get('symbolic'))}")
     print()
     for row in result["rows"]:
         vector = row["retrieval"]["vector"] or {}

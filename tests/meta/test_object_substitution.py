@@ -273,6 +273,9 @@ def test_experiment_rejects_unknown_matchers(capsys):
     assert main(["experiment", "substitution", "--matchers", "gridmap,visual"]) == 2
     assert "--matchers: expected a comma-separated subset of gridmap, symbolic, got 'gridmap,visual'" in \
         capsys.readouterr().err
+    assert main(["experiment", "substitution", "--variants", "A_upside_down"]) == 2
+    assert "--variants: expected a comma-separated subset of A_bar_other_colour, A_two_1x1_same_colour, " \
+        "A_two_1x1_different_colours, got 'A_upside_down'" in capsys.readouterr().err
 
 
 @pytest.mark.slow

@@ -118,7 +118,8 @@ class MetaExecutor:
 
     ``refinements`` (a :class:`~bt_meta.meta.refinements.RefinementStore`) makes learned refinements of the
     problem's tasks the first methods tried, and receives the repaired plan of a successful repaired run
-    (``save_refinements=False`` to only use them). ``verifiers`` replace the default goal check.
+    (``save_refinements=False`` to only use them). ``verifiers`` replace the default goal check. ``memory`` (an
+    :class:`~bt_meta.memory.EpisodicMemory`) becomes the run's ``memory``, where plugins look for their traces.
     """
 
     def __init__(
@@ -136,6 +137,7 @@ class MetaExecutor:
         task_file: Any = None,
         variant: str | None = None,
         plan_seconds: float | None = None,
+        memory: Any = None,
     ) -> None:
         self.base_domain = domain
         self.problem = problem
@@ -149,6 +151,7 @@ class MetaExecutor:
         self.task_file = task_file
         self.variant = variant
         self.plan_seconds = plan_seconds
+        self.memory = memory
 
     # -- the loop ------------------------------------------------------------------------------------------------
 
@@ -162,14 +165,17 @@ class MetaExecutor:
         added: list[str] = []
         if self.refinements is not None:
             domain, added = self.refinements.apply(domain, self.problem)
+        planned = _declare_symbols(self.world, domain, added, self.problem)
         run = RunContext(self.world, self.plugins, domain=domain, problem=self.problem, task_file=self.task_file)
+        if self.memory is not None:
+            run.memory = self.memory  # what expectation and repair plugins read (context.run.memory)
         run.install()  # external predicates (pose tolerance of refinements) read the world through the run
         start_objects = _objects(self.world)
         run.emit("run_start", task_file=getattr(self.task_file, "path", None), problem=name,
                  state=[atom_text(a) for a in sorted(run.state)])
         external = self.plugins.external_predicate
         plan_budget = self.plan_seconds if self.plan_seconds is not None else self.limits.max_seconds
-        result = plan(domain, self.problem, external=external, max_seconds=plan_budget)
+        result = plan(domain, planned, external=external, max_seconds=plan_budget)
         if result.status != "success" or result.tree is None:
             report.status, report.message = "no_plan", f"{result.status}: {result.message}"
             report.stop_reason = "no plan for the problem"
@@ -205,6 +211,9 @@ class MetaExecutor:
             if decision.stop:
                 report.stop_reason = decision.reason
                 report.reported.append(self.reasoner.report_entry(diagnosis))
+                for limit in decision.limits:
+                    run.record_failure(limit)
+                    report.reported.append(self.reasoner.limit_entry(limit, diagnosis))
                 run.emit("repair", outcome="stopped", reason=decision.reason, diagnosis=diagnosis.to_dict(),
                          dropped=decision.dropped)
                 break
@@ -305,7 +314,7 @@ class MetaExecutor:
 
         try:
             saved = self.refinements.save_repair(self.base_domain, self.problem, report, start_objects,
-                                                 variant=self.variant)
+                                                 variant=self.variant, names=_world_names(self.world, self.problem))
         except RefinementError as error:
             log.info("meta: repaired plan not saved as a refinement: %s", error)
             return {"saved": False, "reason": str(error)}
@@ -342,6 +351,42 @@ def _objects(world: Any) -> dict[str, Any]:
         log.info("meta: the world's objects could not be observed: %s", error)
         return {}
     return dict(objects)
+
+
+def _world_names(world: Any, problem: Any) -> dict[str, str]:
+    """Task-file object symbol -> the world's name for it, where the world says they differ (``object_name``)."""
+    to_world = getattr(world, "object_name", None)
+    objects = getattr(problem, "objects", None) or {}
+    if to_world is None or not isinstance(objects, dict):
+        return {}
+    names = {}
+    for group in objects.values():
+        for symbol in group:
+            try:
+                name = str(to_world(symbol))
+            except Exception:  # a symbol the world does not ground as an object (a pose, a feature)
+                continue
+            if name != symbol:
+                names[str(symbol)] = name
+    return names
+
+
+def _declare_symbols(world: Any, domain: Any, added: list[str], problem: Any) -> Any:
+    """Durable symbols in the learned refinements (a repair's sampled pose, ``pose:x:y:z:r:p:y``) made known to
+    the world (``world.register_pose``), and ``problem`` with the type facts the world then reports: the planner
+    checks a refinement's argument types in the problem's state, the run's belief starts from the world's."""
+    register = getattr(world, "register_pose", None)
+    if register is None or not added:
+        return problem
+    symbols = sorted({str(arg) for method in domain.methods if method.name in added
+                      for subtask in method.subtasks for arg in subtask[1:] if not str(arg).startswith("?")})
+    declared = {symbol for symbol in symbols if register(symbol)}
+    if not declared:
+        return problem
+    facts = [atom for atom in world.symbolic_state() if any(str(arg) in declared for arg in atom[1:])]
+    state = problem.state.apply(add=facts)
+    return dataclasses.replace(problem, init=[*problem.init, *(f for f in facts if f not in problem.state)],
+                               state=state)
 
 
 def run_task_file(

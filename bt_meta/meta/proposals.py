@@ -111,9 +111,11 @@ class PlanState:
         return [*self.committed, *((n.task[0], tuple(n.task[1:])) for n in self.steps())]
 
     def describe(self) -> list[dict[str, Any]]:
-        """The tree's steps as JSON-able records (what repair plugins see in ``evidence["plan"]``)."""
+        """The tree's steps as JSON-able records (what repair plugins see in ``evidence["plan"]``); ``tasks`` names
+        the compound tasks above each step, outermost first (a plugin tells a verification task's steps apart)."""
         return [{"step": n.step, "action": n.task[0], "args": list(n.task[1:]), "node_id": n.id,
-                 "done": n.step is not None and n.step < self.cursor} for n in self.steps()]
+                 "done": n.step is not None and n.step < self.cursor,
+                 "tasks": [a.task[0] for a in reversed(self.tree.ancestors(n.id))]} for n in self.steps()]
 
     def remaining_tree(self) -> DecompositionTree:
         """The steps from the cursor on, with their ancestors; an ancestor part of which already ran loses its

@@ -9,10 +9,14 @@ On a monitor failure or a failed verification the reasoner
    ``bt_meta_plugins.classification_rules``), with the mismatches rebuilt from the monitor's evidence;
 4. *asks* every ``bt_meta_propose_repairs`` implementation for :class:`RepairProposal` s, contains plugin errors
    (recorded as ``internal`` failures), drops unknown kinds, proposals already tried for this failure, and any
-   ``retry`` of a collision or reachability failure, and ranks the rest by score;
+   ``retry`` of a collision or reachability failure, and ranks the rest by score. A plugin may also answer with a
+   collision or reachability :class:`Failure` instead of a proposal: the repair it knows is needed (a pose from
+   experience) is blocked by that motion limit, which it checked (IK, collision) without moving the robot. Then
+   the blind proposals (retry, replan, replan from scratch: they would re-run the same motions) are dropped;
 5. *decides*: stop when the attempt or time budget is spent, when a motion limit (collision, reachability)
-   recurs at a step already repaired once, or when nothing is proposed; otherwise hand the ranked proposals to
-   the executor, which applies the first that applies.
+   recurs at a step already repaired once, or when nothing is proposed -- with the limits plugins reported
+   (:attr:`Decision.limits`), which the run report lists with their evidence; otherwise hand the ranked
+   proposals to the executor, which applies the first that applies.
 
 Every decision is logged (``bt_meta.meta``) and sent as a ``"repair"`` trace event.
 
@@ -37,13 +41,16 @@ from typing import Any
 from bt_meta.bt.expectations import Comparison, Expectation, StepContext
 from bt_meta.bt.failures import Failure, FailureKind, RepairProposal, parse_kind
 from bt_meta.errors import BtMetaError
-from bt_meta.meta.proposals import PROPOSAL_KINDS, RETRY, PlanState, proposal_key
+from bt_meta.meta.proposals import PROPOSAL_KINDS, REPLAN, REPLAN_SCRATCH, RETRY, PlanState, proposal_key
 from bt_meta.meta.taxonomy import MOTION_LIMITS, motion_evidence
 from bt_meta.plugins import hookimpl
 
 __all__ = ["Attempt", "Decision", "Diagnosis", "Limits", "MetaReasoner", "ReasonerPlugin"]
 
 log = logging.getLogger("bt_meta.meta")
+
+BLIND = frozenset({RETRY, REPLAN, REPLAN_SCRATCH})
+"""Proposals that re-run the plan's own motions: useless against a motion limit a plugin found."""
 
 
 @dataclass
@@ -85,6 +92,9 @@ class Decision:
     stop: bool = False
     reason: str = ""
     dropped: list[dict[str, Any]] = field(default_factory=list)
+    limits: list[Failure] = field(default_factory=list)
+    """Collision or reachability failures plugins found blocking the repair they would propose (never applied:
+    reported with their evidence)."""
 
 
 @dataclass
@@ -185,17 +195,29 @@ class MetaReasoner:
     def propose(self, diagnosis: Diagnosis, run: Any, plan_state: PlanState,
                 tried: set[str]) -> tuple[list[RepairProposal], list[dict[str, Any]]]:
         """Every plugin's proposals, filtered and ranked (best first); also what was dropped and why."""
+        proposals, dropped, _ = self.propose_with_limits(diagnosis, run, plan_state, tried)
+        return proposals, dropped
+
+    def propose_with_limits(self, diagnosis: Diagnosis, run: Any, plan_state: PlanState, tried: set[str]
+                            ) -> tuple[list[RepairProposal], list[dict[str, Any]], list[Failure]]:
+        """:meth:`propose`, plus the motion limits plugins reported instead of a proposal (see the module
+        docstring); with a limit, blind proposals (retry, replan, replan from scratch) are dropped."""
         context = self.context_of(diagnosis.failure, run, diagnosis.step, diagnosis.node_id, plan_state)
         result = self.plugins.call("bt_meta_propose_repairs", failure=diagnosis.failure, context=context)
         if result.errors and run is not None:
             run.contain(result, context)
         ranked: list[tuple[float, int, RepairProposal]] = []
         dropped: list[dict[str, Any]] = []
+        limits: list[Failure] = []
         order = 0
         for plugin, value in result.results:
             items = value if isinstance(value, (list, tuple)) else [value]
             for item in items:
                 reason = None
+                if isinstance(item, Failure) and item.kind in MOTION_LIMITS:
+                    item.evidence.setdefault("plugin", plugin)
+                    limits.append(item)
+                    continue
                 if not isinstance(item, RepairProposal):
                     reason = f"not a RepairProposal: {type(item).__name__}"
                 else:
@@ -218,7 +240,15 @@ class MetaReasoner:
                 dropped.append({"plugin": plugin, "proposal": repr(item) if not isinstance(item, RepairProposal)
                                 else item.to_dict(), "reason": reason})
         ranked.sort(key=lambda entry: (entry[0], entry[1]))
-        return [entry[2] for entry in ranked], dropped
+        proposals = [entry[2] for entry in ranked]
+        if limits:
+            blind = [p for p in proposals if p.action in BLIND]
+            proposals = [p for p in proposals if p.action not in BLIND]
+            why = ", ".join(f"{f.kind.value} ({f.evidence.get('plugin')})" for f in limits)
+            dropped.extend({"plugin": p.plugin, "proposal": p.to_dict(),
+                            "reason": f"the repair experience asks for is blocked by a motion limit: {why}; "
+                                      f"a {p.action} would run the same motions again"} for p in blind)
+        return proposals, dropped, limits
 
     @staticmethod
     def _key(proposal: RepairProposal, diagnosis: Diagnosis) -> str:
@@ -242,7 +272,14 @@ class MetaReasoner:
                 a.kind == diagnosis.kind.value and a.step == diagnosis.step for a in history):
             return self._stop(diagnosis, f"{diagnosis.kind.value} again at step {diagnosis.step} after a repair: "
                                          "a motion limit is reported, never looped on")
-        proposals, dropped = self.propose(diagnosis, run, plan_state, tried)
+        proposals, dropped, limits = self.propose_with_limits(diagnosis, run, plan_state, tried)
+        if not proposals and limits:
+            first = limits[0]
+            decision = self._stop(diagnosis, f"{first.kind.value} blocks the repair of {diagnosis.kind.value} at step "
+                                             f"{diagnosis.step} ({first.message}): reported with its evidence, not "
+                                             "looped on")
+            decision.dropped, decision.limits = dropped, limits
+            return decision
         if not proposals:
             if diagnosis.kind in MOTION_LIMITS:
                 reason = (f"{diagnosis.kind.value} at step {diagnosis.step}: reported with its evidence, not "
@@ -260,6 +297,14 @@ class MetaReasoner:
     def _stop(diagnosis: Diagnosis, reason: str) -> Decision:
         log.info("meta: stop after %s: %s", diagnosis.failure.summary(), reason)
         return Decision([], stop=True, reason=reason)
+
+    @staticmethod
+    def limit_entry(limit: Failure, diagnosis: Diagnosis) -> dict[str, Any]:
+        """What a run report lists for a motion limit a plugin found blocking the repair of ``diagnosis``."""
+        return {"kind": limit.kind.value, "step": limit.step if limit.step is not None else diagnosis.step,
+                "node_id": limit.node_id, "action": limit.action, "args": list(limit.args), "message": limit.message,
+                "evidence": motion_evidence(limit.evidence), "plugin": limit.evidence.get("plugin"),
+                "blocks_repair_of": {"kind": diagnosis.kind.value, "step": diagnosis.step}}
 
     @staticmethod
     def report_entry(diagnosis: Diagnosis) -> dict[str, Any]:

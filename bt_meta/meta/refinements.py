@@ -228,9 +228,12 @@ class RefinementStore:
         return refinement
 
     def save_repair(self, domain: Any, problem: Any, report: Any, start_objects: dict[str, Any],
-                    variant: str | None = None) -> Refinement:
+                    variant: str | None = None, names: dict[str, str] | None = None) -> Refinement:
         """Turn a successful repaired run (``report``, a :class:`~bt_meta.meta.executor.RunReport`) into a
-        refinement of the problem's task and store it; the objects' starting poses become its precondition."""
+        refinement of the problem's task and store it; the objects' starting poses become its precondition.
+
+        ``names`` maps task-file symbols to the world's object names where they differ (``active_part`` ->
+        ``active``): the precondition names the world's objects, as ``pose_within`` looks them up."""
         tasks = list(getattr(problem, "tasks", None) or [])
         if len(tasks) != 1:
             raise RefinementError(f"the problem has {len(tasks)} root tasks; a refinement refines exactly one")
@@ -241,7 +244,8 @@ class RefinementStore:
             raise RefinementError("the repairs did not change the plan (retries only): nothing new to keep")
         subtasks = [atom_text(tuple(step)) for step in report.plan]
         mentioned = {str(a) for a in task[1:]} | {str(a) for step in report.plan for a in step[1:]}
-        poses = {name: pose for name in sorted(mentioned)
+        names = names or {}
+        poses = {name: pose for name in sorted({names.get(m, m) for m in mentioned})
                  if name in start_objects and (pose := pose_of(start_objects[name])) is not None}
         digest = hashlib.sha1(json.dumps([subtasks, poses], sort_keys=True).encode()).hexdigest()[:8]
         method = f"refined_{task[0]}_{digest}"

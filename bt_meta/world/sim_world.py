@@ -16,6 +16,9 @@ Offers:
 * :class:`Grounding` / :func:`load_grounding` -- the grounding file
 * :class:`PrimitiveSkill` -- a skill run for a primitive: applies the primitive's effects on success
 * :func:`quiet_stdout` -- silences what pybullet prints on the C level (keeps ``--json`` output clean)
+* :func:`pose_symbol` / :func:`parse_pose_symbol` -- durable pose symbols (``pose:x:y:z:roll:pitch:yaw``, metres and
+  radians) that a repair creates and a learned refinement stores; the world grounds them without a grounding-file
+  entry (:meth:`SimWorld.register_pose` also gives them their type fact ``pose(symbol)``)
 * :func:`bt_meta_make_world` -- hook implementation for ``--world sim`` (register this module as a plugin)
 """
 
@@ -44,9 +47,39 @@ from bt_meta.world.objects import Box, Cylinder, ObjectModel, pose_to_matrix, rp
 from bt_meta.world.skills import SKILLS
 from bt_meta.world.skills.base import SimSkill, SkillAbort
 
-__all__ = ["Grounding", "PrimitiveSkill", "SimWorld", "load_grounding", "quiet_stdout"]
+__all__ = ["POSE_SYMBOL_PREFIX", "Grounding", "PrimitiveSkill", "SimWorld", "load_grounding", "parse_pose_symbol",
+           "pose_symbol", "quiet_stdout"]
 
 _PART = "~"  # collision geometry names: "<object>" for the first part, "<object>~<k>" for the others
+
+POSE_SYMBOL_PREFIX = "pose:"
+
+
+def pose_symbol(pose: Sequence[float], digits: int = 4) -> str:
+    """A durable symbol for a gripper pose (x, y, z in metres, roll, pitch, yaw in radians): it names the pose
+    itself, so a plan that stores it (a learned refinement) is grounded again by any later world."""
+    values = [float(v) for v in pose]
+    if len(values) != 6 or not all(math.isfinite(v) for v in values):
+        raise BtMetaError(f"a pose symbol needs 6 finite numbers, got {list(pose)}")
+    texts = []
+    for value in values:
+        text = f"{round(value, digits):.{digits}f}".rstrip("0").rstrip(".")
+        texts.append("0" if text in ("-0", "") else text)
+    return POSE_SYMBOL_PREFIX + ":".join(texts)
+
+
+def parse_pose_symbol(symbol: str) -> list[float] | None:
+    """The 6 numbers of a :func:`pose_symbol`, or ``None`` when ``symbol`` is not one."""
+    if not symbol.startswith(POSE_SYMBOL_PREFIX):
+        return None
+    parts = symbol[len(POSE_SYMBOL_PREFIX):].split(":")
+    if len(parts) != 6:
+        return None
+    try:
+        values = [float(p) for p in parts]
+    except ValueError:
+        return None
+    return values if all(math.isfinite(v) for v in values) else None
 
 
 @contextlib.contextmanager
@@ -449,8 +482,19 @@ class SimWorld:
                 top = max(top, self.object_top(other))
         return top
 
+    def register_pose(self, symbol: str) -> bool:
+        """Make a durable pose symbol (:func:`pose_symbol`) known: its type fact ``pose(symbol)`` joins the symbolic
+        state (typed primitives check it). False, and nothing changes, for any other symbol."""
+        if parse_pose_symbol(symbol) is None:
+            return False
+        if ("pose", symbol) not in self._state:
+            self.apply_symbolic([("pose", symbol)], [])
+        return True
+
     def pose_spec(self, symbol: str) -> dict[str, Any]:
         spec = self.grounding.poses.get(symbol)
+        if spec is None and (values := parse_pose_symbol(symbol)) is not None:
+            return {"pose": [*values[:3], *(math.degrees(v) for v in values[3:])]}
         if spec is None:
             known = ", ".join(self.grounding.poses) or "none"
             raise SkillAbort(FailureKind.INTERNAL, f"no pose symbol {symbol!r} in {self.grounding.path}; "

@@ -1,0 +1,559 @@
+"""Pose backtracking (paper, section 7.4): repair an attachment that failed its verification from past successes.
+
+On a ``verification`` (or keypoint ``unexpected_configuration``) failure the plugin
+
+1. takes the last N successful traces of the problem's root task (``EpisodicMemory.last_traces``) and, step by
+   step, the mean R_p / R_n of the active and reference objects (:mod:`bt_meta.perception.keypoints`); it compares
+   them with the same relation in the current execution (object states it snapshots after every step through
+   ``bt_meta_observe``) and finds the first deviating step;
+2. collects the *pose-setting* primitives from there on: ``MoveTo`` steps during which the active object moved
+   (it was in hand), outside the verification task (a step under a task named ``verify...``);
+3. backtracks to the last of them; on a later failure (``evidence["repair_history"]`` shows where it went) one
+   further back, until the first pose that differs from the traces -- every pose-setting step from ``to_step`` on
+   gets a new pose;
+4. samples (seeded) a known-good pose of the active object for each such step from the traces, relative to the
+   reference object (its attachment point and normal where they were in a success, the rotation about the normal
+   the trace's first, then others), turns it into a gripper pose through the current object-gripper relation
+   (``gripper = object @ inverse(grasp)``), checks IK and collision of the chain of moves from the current
+   configuration (the world's collision-aware IK and its collision checker, joint-space path included);
+5. proposes ``backtrack {"to_step": k, "args": {step: [pose symbol]}}`` with a durable pose symbol the world grounds
+   (``pose:x:y:z:roll:pitch:yaw``, registered with ``world.register_pose``), scored by how well the traces agree;
+   when no sampled pose at any remaining depth is feasible it answers with a ``collision`` or ``reachability``
+   :class:`~bt_meta.bt.failures.Failure` carrying the evidence (the colliding pair, the unreachable target): the
+   reasoner reports it and never loops on it.
+
+Offers:
+
+* :class:`PoseBacktracking` -- the plugin as an object (memory, N, seed, tolerances, candidates per depth)
+* :func:`step_relations` -- per-step R_p / R_n, current against the traces' means, and the first deviating step
+* :func:`good_object_poses` -- seeded candidate poses of the active object from the traces (relative to the
+  reference, then placed on the reference as it is now)
+* :func:`gripper_pose_for` -- the gripper pose that holds an object at a pose, through the grasp transform
+* :func:`configure` and the module-level hooks (``bt_meta_observe``, ``bt_meta_propose_repairs``): the entry point
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from bt_meta.bt.failures import Failure, FailureKind, RepairProposal
+from bt_meta.perception.keypoints import KeypointError, expected_relation, judge, keypoints_of, relation
+from bt_meta.perception.recall import memory_for, root_task
+from bt_meta.plugins import hookimpl
+from bt_meta.world.objects import matrix_to_pose, pose_to_matrix
+
+__all__ = ["PoseBacktracking", "StepRelation", "configure", "good_object_poses", "gripper_pose_for",
+           "step_relations"]
+
+log = logging.getLogger("bt_meta.meta.pose_backtracking")
+
+STRATEGY = "pose_backtracking"
+KINDS = (FailureKind.VERIFICATION, FailureKind.UNEXPECTED_CONFIGURATION)
+MOVED_POSITION = 0.005
+"""Metres: an object that moved more than this (or turned more than :data:`MOVED_ANGLE`) during a step had its
+pose set by it."""
+MOVED_ANGLE = 0.05
+
+
+# -- geometry ---------------------------------------------------------------------------------------------------
+
+
+def _matrix(pose: Sequence[float]) -> np.ndarray:
+    return pose_to_matrix([float(v) for v in pose])
+
+
+def _state_pose(state: Any) -> np.ndarray:
+    pose = state.get("pose") if isinstance(state, Mapping) else getattr(state, "pose", None)
+    if pose is None or len(pose) != 6:
+        raise KeypointError(f"object state {state!r} has no 6-number pose")
+    return _matrix(pose)
+
+
+def _axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rodrigues: the rotation by ``angle`` about the unit ``axis``."""
+    x, y, z = axis / np.linalg.norm(axis)
+    k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
+
+
+def gripper_pose_for(object_pose: np.ndarray, grasp: np.ndarray) -> np.ndarray:
+    """The gripper pose (4x4, base frame) that holds an object at ``object_pose`` when the object sits at ``grasp``
+    in the gripper frame (the object-gripper relation): ``object = gripper @ grasp``."""
+    return np.asarray(object_pose, dtype=float) @ np.linalg.inv(np.asarray(grasp, dtype=float))
+
+
+def local_keypoints(state: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(AP, AN) of an object state in its own frame: intrinsic, the same in every trace of that object."""
+    transform = _state_pose(state)
+    ap, an = keypoints_of(state)
+    rotation = transform[:3, :3]
+    return rotation.T @ (ap - transform[:3, 3]), rotation.T @ an
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A known-good pose of the active object for one step: from trace ``trace`` turned by ``turn`` about AN."""
+
+    step: int
+    trace: int
+    turn: float
+    object_pose: np.ndarray
+    ap: np.ndarray
+    an: np.ndarray
+
+
+def good_object_poses(
+    traces: Sequence[Any],
+    step: int,
+    active: str,
+    reference: str,
+    *,
+    reference_now: Any,
+    active_now: Any,
+    turns: Sequence[float],
+    order: Sequence[int],
+) -> list[Candidate]:
+    """Poses of the active object for ``step`` that succeeded before: for each trace in ``order`` (indices into
+    ``traces``) and each ``turn`` (radians about the attachment normal; 0 keeps the trace's own orientation), the
+    pose whose attachment point and normal relative to the reference are the trace's, placed on the reference as it
+    is now (``reference_now``). ``active_now`` gives the active object's intrinsic AP/AN."""
+    ap_local, an_local = local_keypoints(active_now)
+    ref_now = _state_pose(reference_now)
+    out = []
+    for j in order:
+        try:
+            state = traces[j].steps[step].state
+            ref_then, act_then = state.object(reference), state.object(active)
+        except (IndexError, KeyError):
+            continue
+        relative = np.linalg.inv(_state_pose(ref_then)) @ _state_pose(act_then)
+        ap_then, _ = keypoints_of(act_then)
+        ap_rel = np.linalg.inv(_state_pose(ref_then)) @ np.append(ap_then, 1.0)
+        target_ap = (ref_now @ ap_rel)[:3]
+        base_rotation = ref_now[:3, :3] @ relative[:3, :3]
+        target_an = base_rotation @ an_local
+        for turn in turns:
+            rotation = _axis_rotation(target_an, turn) @ base_rotation
+            pose = np.eye(4)
+            pose[:3, :3] = rotation
+            pose[:3, 3] = target_ap - rotation @ ap_local
+            out.append(Candidate(step, j, float(turn), pose, target_ap, target_an))
+    return out
+
+
+# -- comparing the current execution with the traces ------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class StepRelation:
+    """R_p / R_n after one step: now, and the traces' mean; ``deviates`` when outside the tolerances."""
+
+    step: int
+    action: str
+    r_p: float
+    r_n: float
+    expected_p: float
+    expected_n: float
+    traces: int
+    deviates: bool
+    spread_p: float = 0.0
+    spread_n: float = 0.0
+    """Standard deviations of R_p and R_n over the traces: how much the traces agree at this step."""
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"step": self.step, "action": self.action, "R_p": round(self.r_p, 5), "R_n": round(self.r_n, 4),
+                "expected_R_p": round(self.expected_p, 5), "expected_R_n": round(self.expected_n, 4),
+                "traces": self.traces, "deviates": self.deviates, "spread_R_p": round(self.spread_p, 5),
+                "spread_R_n": round(self.spread_n, 4)}
+
+
+def step_relations(
+    current: Mapping[int, Mapping[str, Any]],
+    traces: Sequence[Any],
+    active: str,
+    reference: str,
+    actions: Mapping[int, str],
+    *,
+    position_tolerance: float | None = 0.01,
+    angle_tolerance: float | None = math.radians(15.0),
+) -> list[StepRelation]:
+    """For every step of ``current`` (step -> object states) whose action (``actions``) the traces ran at the same
+    index: the current R_p / R_n, the traces' means, and whether they deviate (:func:`judge`)."""
+    rows = []
+    for step in sorted(current):
+        objects = current[step]
+        if active not in objects or reference not in objects:
+            continue
+        pairs = []
+        for trace in traces:
+            if step < len(trace.steps) and trace.steps[step].action == actions.get(step):
+                state = trace.steps[step].state
+                try:
+                    pairs.append((state.object(active), state.object(reference)))
+                except KeyError:
+                    continue
+        if not pairs:
+            continue
+        expected = expected_relation(pairs)
+        observed = relation(objects[active], objects[reference])
+        verdict = judge(observed, expected, position_tolerance=position_tolerance, angle_tolerance=angle_tolerance)
+        rows.append(StepRelation(step, actions.get(step, ""), observed.r_p, observed.r_n, expected.r_p, expected.r_n,
+                                 expected.n, not verdict.matched, expected.r_p_std, expected.r_n_std))
+    return rows
+
+
+def _moved(before: Any, after: Any) -> bool:
+    a, b = _state_pose(before), _state_pose(after)
+    turned = math.acos(max(-1.0, min(1.0, (float(np.trace(a[:3, :3].T @ b[:3, :3])) - 1.0) / 2.0)))
+    return float(np.linalg.norm(a[:3, 3] - b[:3, 3])) > MOVED_POSITION or turned > MOVED_ANGLE
+
+
+def _moved_in_trace(trace: Any, step: int, active: str) -> bool:
+    if not 0 < step < len(trace.steps):
+        return False
+    try:
+        return _moved(trace.steps[step - 1].state.object(active), trace.steps[step].state.object(active))
+    except (KeyError, KeypointError):
+        return False
+
+
+# -- the plugin -------------------------------------------------------------------------------------------------
+
+
+class PoseBacktracking:
+    """The repair plugin (see the module docstring).
+
+    ``memory``: an :class:`~bt_meta.memory.EpisodicMemory` (default: the run's, else ``BT_META_MEMORY``, else the
+    default file); ``n`` traces; ``seed`` for the sampling; ``turns`` rotations about the attachment normal tried
+    per trace (radians; the trace's own orientation first); ``pose_actions`` the primitives that set a pose;
+    ``max_candidates`` chains checked per backtracking depth.
+    """
+
+    def __init__(self, memory: Any = None, *, n: int = 3, seed: int = 0, position_tolerance: float | None = 0.01,
+                 angle_tolerance: float | None = math.radians(15.0), turns: Sequence[float] | None = None,
+                 pose_actions: Iterable[str] = ("MoveTo",), max_candidates: int = 24) -> None:
+        if n < 1:
+            raise ValueError(f"n must be >= 1, got {n}")
+        if max_candidates < 1:
+            raise ValueError(f"max_candidates must be >= 1, got {max_candidates}")
+        self.memory = memory
+        self.n = n
+        self.seed = seed
+        self.position_tolerance = position_tolerance
+        self.angle_tolerance = angle_tolerance
+        self.turns = list(turns) if turns is not None else [k * math.pi / 4.0 for k in range(8)]
+        self.pose_actions = frozenset(pose_actions)
+        self.max_candidates = max_candidates
+        self._run: Any = None
+        self._current: dict[int, dict[str, Any]] = {}
+
+    # -- the current trace ---------------------------------------------------------------------------------------
+
+    @hookimpl
+    def bt_meta_observe(self, world: Any, context: Any) -> dict[str, Any] | None:
+        """Snapshot the object states after each step of the run (the current trace T_curr); observes nothing."""
+        observe = getattr(world, "observe", None)
+        step = getattr(context, "step", None)
+        if observe is None or step is None:
+            return None
+        run = getattr(context, "run", None)
+        if run is not self._run:
+            self._run, self._current = run, {}
+        objects = observe().get("objects") or {}
+        self._current[int(step)] = {name: dict(state) for name, state in objects.items()}
+        return None
+
+    # -- proposing -----------------------------------------------------------------------------------------------
+
+    @hookimpl
+    def bt_meta_propose_repairs(self, failure: Failure, context: Any) -> list[Any] | None:
+        if failure.kind not in KINDS or context is None:
+            return None
+        world = getattr(context, "world", None)
+        memory = memory_for(context, self.memory)
+        task = root_task(context)
+        if world is None or memory is None or task is None:
+            return None
+        traces = memory.last_traces(task, self.n)
+        if not traces:
+            log.info("pose backtracking: no successful trace of %s in memory", task)
+            return None
+        active, reference = self._pair(context, world)
+        if active is None or reference is None:
+            return None
+        plan = list(failure.evidence.get("plan") or [])
+        failed = failure.step if failure.step is not None else len(plan) - 1
+        actions = {int(s["step"]): str(s["action"]) for s in plan}
+        current = {s: objs for s, objs in self._current.items() if s <= failed} if self._run is context.run else {}
+        rows = step_relations(current, traces, active, reference, actions,
+                              position_tolerance=self.position_tolerance, angle_tolerance=self.angle_tolerance)
+        deviating = [r.step for r in rows if r.deviates]
+        evidence: dict[str, Any] = {"strategy": STRATEGY, "active": active, "reference": reference,
+                                    "traces": [t.episode.id for t in traces], "relations": [r.as_dict() for r in rows]}
+        if not deviating:
+            log.info("pose backtracking: the current trace agrees with the traces at every step; nothing to do")
+            return None
+        first = deviating[0]
+        evidence["first_deviating_step"] = first
+        window = self._window(plan, current, traces, active, first)
+        evidence["pose_steps"] = window
+        done = [int(a["proposal"]["changes"]["to_step"]) for a in failure.evidence.get("repair_history") or []
+                if (a.get("proposal") or {}).get("evidence", {}).get("strategy") == STRATEGY]
+        targets = [s for s in window if s <= failed and (not done or s < min(done))]
+        if not targets:
+            log.info("pose backtracking: backtracked to the first pose that differs from the traces already")
+            return None
+        now = world.observe()
+        held_by = next((arm for arm, name in (now.get("held") or {}).items() if name == active), None)
+        if held_by is None:
+            log.info("pose backtracking: %s is not in hand; the pose-setting moves cannot be redone", active)
+            return None
+        objects = now["objects"]
+        grasp = np.linalg.inv(_matrix(now["gripper"][held_by])) @ _state_pose(objects[active])
+        rng = np.random.default_rng(self.seed + len(done))
+        limits: list[dict[str, Any]] = []
+        for to_step in reversed(targets):  # the last pose-setting step first, then one further back
+            steps = [s for s in window if s >= to_step]
+            after = self._next_move(world, held_by, plan, steps[-1])
+            chain = self._feasible_chain(world, held_by, steps, traces, active, reference, objects, grasp, rng, limits,
+                                         after)
+            if chain is None:
+                continue
+            symbols = {}
+            for step, pose, _ in chain:
+                symbol = self._symbol(world, pose)
+                if symbol is None:
+                    return None
+                symbols[str(step)] = [symbol]
+            agreement = self._agreement(rows, steps)
+            evidence.update(to_step=steps[0], rewritten=steps, candidates=[where for _, _, where in chain],
+                            infeasible_before=len(limits), agreement=round(agreement, 4))
+            return [RepairProposal(
+                "backtrack", 0.35 + 0.6 * agreement,
+                f"back to step {steps[0]}: {len(steps)} pose(s) of {active} from {len(traces)} successful trace(s), "
+                f"turned into gripper poses through the current grasp",
+                changes={"to_step": steps[0], "args": symbols}, evidence=evidence)]
+        return [self._limit(limits, window, evidence)]
+
+    # -- helpers -------------------------------------------------------------------------------------------------
+
+    def _pair(self, context: Any, world: Any) -> tuple[str | None, str | None]:
+        tasks = getattr(getattr(context.run, "problem", None), "tasks", None) or []
+        if not tasks or len(tasks[0]) < 3:
+            return None, None
+        to_world = getattr(world, "object_name", None)
+        names = []
+        for symbol in (str(tasks[0][1]), str(tasks[0][2])):
+            try:
+                names.append(str(to_world(symbol)) if to_world is not None else symbol)
+            except Exception:  # a symbol the world does not know as an object: keep it
+                names.append(symbol)
+        return names[0], names[1]
+
+    def _window(self, plan: list[dict[str, Any]], current: Mapping[int, Mapping[str, Any]], traces: Sequence[Any],
+                active: str, first: int) -> list[int]:
+        """Pose-setting steps of the attachment (not of its verification) from the first deviating step on: the
+        active object moved during them in this run, or -- for steps not run yet -- in the first trace."""
+        out = []
+        for record in plan:
+            step = int(record["step"])
+            if step < first or record["action"] not in self.pose_actions:
+                continue
+            if any(str(t).lower().startswith("verify") for t in record.get("tasks") or []):
+                continue
+            before, after = current.get(step - 1), current.get(step)
+            if before is not None and after is not None and active in before and active in after:
+                moved = _moved(before[active], after[active])
+            else:
+                moved = _moved_in_trace(traces[0], step, active)
+            if moved:
+                out.append(step)
+        return out
+
+    def _feasible_chain(self, world: Any, arm: str, steps: list[int], traces: Sequence[Any], active: str,
+                        reference: str, objects: Mapping[str, Any], grasp: np.ndarray, rng: np.random.Generator,
+                        limits: list[dict[str, Any]], after: tuple[int, np.ndarray] | None = None
+                        ) -> list[tuple[int, np.ndarray, dict[str, Any]]] | None:
+        """The first sampled candidate (trace, turn) whose gripper poses for ``steps`` are all reachable without
+        collision in a row from the current configuration, and from whose last pose the plan's next move
+        (``after``: step and gripper pose, the retreat once the part is let go) is reachable without the arm hitting
+        itself; failures are appended to ``limits``."""
+        order = [int(j) for j in rng.permutation(len(traces))]
+        turns = [self.turns[0], *(self.turns[int(k) + 1] for k in rng.permutation(len(self.turns) - 1))]
+        per_step = {step: good_object_poses(traces, step, active, reference, reference_now=objects[reference],
+                                            active_now=objects[active], turns=turns, order=order) for step in steps}
+        count = min(self.max_candidates, *(len(c) for c in per_step.values()))
+        for index in range(count):
+            chain = []
+            q = _current_q(world)
+            for step in steps:
+                candidate = per_step[step][index]
+                target = gripper_pose_for(candidate.object_pose, grasp)
+                rounded = _parse_symbol_pose(target)
+                where = {"step": step, "trace": candidate.trace, "turn_deg": round(math.degrees(candidate.turn), 1),
+                         "target": [round(v, 4) for v in matrix_to_pose(rounded)]}
+                problem, q_next = _check_motion(world, arm, rounded, q, seed=int(getattr(world, "seed", self.seed)))
+                if problem is not None:
+                    limits.append({**where, **problem})
+                    break
+                chain.append((step, rounded, where))
+                q = q_next
+            else:
+                if after is None:
+                    return chain
+                step, pose = after
+                where = {"step": step, "after_candidate": chain[-1][2], "target": [round(v, 4)
+                                                                                 for v in matrix_to_pose(pose)]}
+                problem, _ = _check_motion(world, arm, pose, q, seed=int(getattr(world, "seed", self.seed)),
+                                           released=active)
+                if problem is None:
+                    return chain
+                limits.append({**where, **problem})
+        return None
+
+    def _next_move(self, world: Any, arm: str, plan: list[dict[str, Any]], last: int
+                   ) -> tuple[int, np.ndarray] | None:
+        """The first pose-setting step after ``last`` in the plan and its gripper pose as the world grounds it now
+        (``world.ground_pose``), or ``None``."""
+        ground = getattr(world, "ground_pose", None)
+        for record in plan:
+            if int(record["step"]) <= last or record["action"] not in self.pose_actions:
+                continue
+            if ground is None or len(record["args"]) != 1:
+                return None
+            try:
+                return int(record["step"]), np.asarray(ground(str(record["args"][0]), arm), dtype=float)
+            except Exception:  # a pose the world cannot ground now: not checked
+                return None
+        return None
+
+    def _symbol(self, world: Any, pose: np.ndarray) -> str | None:
+        from bt_meta.world.sim_world import pose_symbol
+
+        symbol = pose_symbol(matrix_to_pose(pose))
+        register = getattr(world, "register_pose", None)
+        if register is None or not register(symbol):
+            log.info("pose backtracking: the world cannot ground the pose symbol %s", symbol)
+            return None
+        return symbol
+
+    def _agreement(self, rows: list[StepRelation], steps: list[int]) -> float:
+        """How consistent the traces are (0..1) about the steps whose poses they supply: 1 when every trace had
+        the same relation there (the sampled pose is as good as any of them)."""
+        position = self.position_tolerance or 0.01
+        angle = self.angle_tolerance or math.radians(15.0)
+        spread = [row.spread_p / position + row.spread_n / angle for row in rows if row.step in steps]
+        if not spread:
+            return 0.5
+        return math.exp(-float(np.mean(spread)))
+
+    def _limit(self, limits: list[dict[str, Any]], window: list[int], evidence: dict[str, Any]) -> Failure:
+        """The motion limit that blocks every sampled pose: collision when any candidate collided (the paper's
+        gripper covering the attachment point), reachability otherwise."""
+        collided = [item for item in limits if item.get("kind") == FailureKind.COLLISION.value]
+        kind = FailureKind.COLLISION if collided else FailureKind.REACHABILITY
+        worst = (collided or limits or [{}])[0]
+        pairs = sorted({tuple(item["objects"]) for item in collided if item.get("objects")})
+        detail = dict(worst)
+        detail.update(evidence)
+        detail.update(candidates_checked=len(limits), pose_steps=window, colliding_objects=[list(p) for p in pairs])
+        if kind is FailureKind.COLLISION:
+            message = (f"every known-good pose of {evidence['active']} sampled from the traces collides once held "
+                       f"as it is now ({len(limits)} candidate(s); e.g. {' / '.join(worst.get('pair') or [])})")
+        else:
+            message = (f"no known-good pose of {evidence['active']} sampled from the traces is reachable as it is "
+                       f"held now ({len(limits)} candidate(s))")
+        return Failure(kind=kind, message=message, step=worst.get("step"), action="MoveTo", evidence=detail)
+
+
+def _current_q(world: Any) -> np.ndarray | None:
+    current = getattr(world, "current_q", None)
+    return None if current is None else current()
+
+
+def _parse_symbol_pose(pose: np.ndarray) -> np.ndarray:
+    """``pose`` as the world will ground its symbol (rounded as :func:`pose_symbol` rounds)."""
+    from bt_meta.world.sim_world import parse_pose_symbol, pose_symbol
+
+    values = parse_pose_symbol(pose_symbol(matrix_to_pose(pose)))
+    assert values is not None
+    return pose_to_matrix(values)
+
+
+def _check_motion(world: Any, arm: str, target: np.ndarray, q_start: np.ndarray | None, *, seed: int,
+                  released: str | None = None) -> tuple[dict[str, Any] | None, np.ndarray | None]:
+    """IK (collision-aware) for ``target`` from ``q_start`` and a collision check of the joint-space path, as the
+    MoveTo skill will run it (same solver, same seed: the world's). ``released`` names the held part when the move
+    comes after it was let go: the path's contacts of that part (which the checker still carries with the hand)
+    do not count. Returns (problem evidence with ``kind``, None) or (None, the goal configuration);
+    a world without IK is not checked."""
+    ik = getattr(world, "ik", None)
+    if ik is None or q_start is None:
+        return None, q_start
+    import pinocchio as pin
+
+    sync = getattr(world, "sync_collision", None)
+    if sync is not None:
+        sync()
+    result = ik.solve(arm, pin.SE3(target[:3, :3], target[:3, 3]), q_start, seed=seed)
+    if not result.success:
+        evidence = {key: value for key, value in dict(result.evidence).items() if _jsonable(value)}
+        evidence["kind"] = result.kind or FailureKind.REACHABILITY.value
+        evidence["ik"] = result.message
+        if "pair" in evidence and hasattr(world, "contact_object"):
+            evidence["objects"] = [world.contact_object(name) for name in evidence["pair"]]
+        return evidence, None
+    assert result.q is not None
+    collision = getattr(world, "collision", None)
+    indices = world.kin.arm_indices(arm)
+    start, goal = q_start[indices], result.q[indices]
+    max_step = float(getattr(world, "joint_speed", 1.5)) * float(getattr(world, "tick_seconds", 0.05))
+    count = max(1, math.ceil(float(np.max(np.abs(goal - start))) / max_step))
+    for k in range(1, count):
+        q = q_start.copy()
+        q[indices] = start + (goal - start) * (k / count)
+        if collision is None:
+            contact = None
+        elif released is None:
+            contact = collision.check(q, arm=arm)
+        else:
+            owner = getattr(world, "contact_object", lambda name: name)
+            contact = next((c for c in collision.all_contacts(q)
+                            if released not in (owner(c.pair[0]), owner(c.pair[1]))), None)
+        if contact is not None:
+            pair = [str(n) for n in contact.pair]
+            return {"kind": FailureKind.COLLISION.value, "pair": pair,
+                    "collision_kind": contact.kind,
+                    "objects": [world.contact_object(n) for n in pair] if hasattr(world, "contact_object") else pair,
+                    "waypoint": k, "waypoints": count, "ik": "path collides"}, None
+    return None, result.q
+
+
+def _jsonable(value: Any) -> bool:
+    return isinstance(value, (str, int, float, bool, type(None), list, tuple, dict))
+
+
+_plugin = PoseBacktracking()
+
+
+def configure(**settings: Any) -> PoseBacktracking:
+    """Replace the module-level plugin's settings (keyword arguments of :class:`PoseBacktracking`)."""
+    global _plugin
+    _plugin = PoseBacktracking(**settings)
+    return _plugin
+
+
+@hookimpl
+def bt_meta_observe(world: Any, context: Any) -> dict[str, Any] | None:
+    return _plugin.bt_meta_observe(world, context)
+
+
+@hookimpl
+def bt_meta_propose_repairs(failure: Failure, context: Any) -> list[Any] | None:
+    return _plugin.bt_meta_propose_repairs(failure, context)

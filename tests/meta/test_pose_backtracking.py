@@ -1,0 +1,167 @@
+"""Pose backtracking end to end in the simulator (paper, section 7): three nominal MagneticAttach demonstrations are
+recorded; a variant pose of the active part fails the staging verification; the plugin backtracks to the move that
+set the part's pose, samples a known-good attachment pose from the traces, turns it into a gripper pose through the
+current grasp, checks IK and collision and repairs the run; the repair is kept as a refinement that the next run of
+the variant uses with no repair at all. Variants whose good poses the arm cannot take are reported with their
+motion limit and evidence, never looped on."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+from bt_meta_plugins import classification_rules, pose_backtracking, refinement_predicates, retry_repair
+
+from bt_meta.meta import Limits, MetaExecutor, MetaReasoner, PlanState, RefinementStore
+from bt_meta.plugins import create_plugin_host
+from bt_meta.resources import trees_dir
+
+pytestmark = pytest.mark.slow
+
+TASK_FILE = trees_dir() / "magnetic_attach.yaml"
+
+
+def host(plugin: Any) -> Any:
+    return create_plugin_host(entry_points=False, plugins=[
+        ("classification_rules", classification_rules), ("retry_repair", retry_repair),
+        ("refinement_predicates", refinement_predicates), ("pose_backtracking", plugin)])
+
+
+@pytest.fixture(scope="module")
+def demonstrations(tmp_path_factory):
+    """A memory file with three nominal demonstrations (seeds 0, 1, 2), recorded by ``bt-meta record``'s code."""
+    from bt_meta.commands.record import demonstrate
+    from bt_meta.memory import EpisodicMemory
+
+    path = tmp_path_factory.mktemp("pose_backtracking") / "demonstrations.sqlite"
+    with EpisodicMemory.open(path) as memory:
+        for seed in range(3):
+            demonstrate(TASK_FILE, "nominal", memory, seed=seed,
+                        plugins=create_plugin_host(entry_points=False, plugins=[]))
+    return path
+
+
+@pytest.fixture
+def memory_file(demonstrations, tmp_path):
+    """A private copy of the demonstrations (refinements are written into it)."""
+    from bt_meta.memory import EpisodicMemory
+
+    copy = tmp_path / "memory.sqlite"
+    with EpisodicMemory.open(demonstrations, readonly=True) as source, EpisodicMemory.open(copy) as target:
+        for trace in source.traces():
+            target.write(trace)
+    return copy
+
+
+def run_variant(memory_file, variant: str, *, attempts: int = 4):
+    from bt_meta.htn import load_task_file
+    from bt_meta.memory import EpisodicMemory
+    from bt_meta.world.sim_world import SimWorld, load_grounding, quiet_stdout
+
+    task_file = load_task_file(TASK_FILE)
+    problem = task_file.problem("nominal")
+    with quiet_stdout():
+        world = SimWorld(task_file.domain, problem, load_grounding(task_file.domain.name, TASK_FILE), variant=variant,
+                         seed=0)
+    try:
+        with EpisodicMemory.open(memory_file, readonly=True) as memory, RefinementStore.open(memory_file) as store:
+            plugin = pose_backtracking.PoseBacktracking(memory, n=3, seed=0)
+            report = MetaExecutor(task_file.domain, problem, world, host(plugin), task_file=task_file,
+                                  limits=Limits(max_attempts=attempts, max_seconds=60), refinements=store,
+                                  variant=variant, memory=memory).run()
+        return report, list(world.sim.attachments())
+    finally:
+        world.close()
+
+
+def test_part_on_its_side_is_repaired_by_backtracking_and_the_refinement_is_used_next_time(memory_file):
+    report, joined = run_variant(memory_file, "active_on_side")
+    assert report.ok, report.stop_reason
+    assert joined == [("active", "reference")]
+    assert len(report.attempts) == 1
+    attempt = report.attempts[0]
+    assert (attempt.kind, attempt.step, attempt.outcome) == ("verification", 12, "repaired")
+    proposal = attempt.proposal
+    assert proposal["action"] == "backtrack" and proposal["plugin"] == "pose_backtracking"
+    # the last move that set the part's pose (MoveTo(joint), step 5) gets a sampled known-good pose
+    assert proposal["changes"]["to_step"] == 5 and list(proposal["changes"]["args"]) == ["5"]
+    symbol = proposal["changes"]["args"]["5"][0]
+    assert symbol.startswith("pose:")
+    evidence = proposal["evidence"]
+    assert evidence["first_deviating_step"] == 0 and evidence["pose_steps"] == [3, 4, 5]
+    relations = {row["step"]: row for row in evidence["relations"]}
+    assert relations[0]["deviates"] and abs(relations[0]["R_n"] - 1.5708) < 0.05  # on its side: 90 degrees
+    assert abs(relations[0]["expected_R_n"] - 3.1416) < 0.05  # the demonstrations: normals opposed
+    assert len(evidence["traces"]) == 3
+    assert report.plan[5] == ["MoveTo", symbol] and report.initial_plan[5] == ["MoveTo", "joint"]
+    saved = report.refinement_saved
+    assert saved is not None and saved["variant"] == "active_on_side"
+    assert "pose_within(active, 0.58" in saved["precondition"]  # the world's names: what pose_within looks up
+    assert "pose_within(reference, 0.62" in saved["precondition"]
+    assert f"MoveTo({symbol})" in saved["subtasks"]
+
+    again, joined = run_variant(memory_file, "active_on_side")
+    assert again.ok and again.attempts == [] and joined == [("active", "reference")]
+    assert again.refinements_used == [saved["method"]]
+    assert again.initial_plan == report.plan
+
+    nominal, joined = run_variant(memory_file, "nominal")  # the part upright: the refinement's poses do not hold
+    assert nominal.ok and nominal.attempts == [] and nominal.refinements_used == []
+    assert joined == [("active", "reference")]
+
+
+def test_each_further_attempt_backtracks_one_pose_further(memory_file):
+    """After a backtrack to step 5 that did not help, the next proposal goes back to step 4 and redoes 4 and 5."""
+    from bt_meta.htn import load_task_file
+    from bt_meta.memory import EpisodicMemory
+    from bt_meta.meta import Attempt
+    from bt_meta.testing import TreeHarness
+    from bt_meta.world.sim_world import SimWorld, load_grounding, quiet_stdout
+
+    task_file = load_task_file(TASK_FILE)
+    problem = task_file.problem("nominal")
+    with quiet_stdout():
+        world = SimWorld(task_file.domain, problem, load_grounding(task_file.domain.name, TASK_FILE),
+                         variant="active_on_side", seed=0)
+    try:
+        with EpisodicMemory.open(memory_file, readonly=True) as memory:
+            plugin = pose_backtracking.PoseBacktracking(memory, n=3, seed=0)
+            plugins = host(plugin)
+            harness = TreeHarness.from_file(TASK_FILE, "nominal", world=world, plugins=plugins)
+            assert harness.tick_until("done", max_ticks=2000).value == "FAILURE"
+            failures = harness.run.failures
+            assert [f.kind.value for f in failures] == ["verification"]
+            reasoner = MetaReasoner(plugins)
+            plan_state = PlanState(harness.compiled.plan_result.tree, cursor=12)
+            earlier = Attempt(1, {}, "verification", {"action": "backtrack", "changes": {"to_step": 5, "args": {}},
+                                                      "evidence": {"strategy": "pose_backtracking"}}, "", 12, 0.0)
+            diagnosis = reasoner.diagnose(failures, plan_state, harness.run, [earlier])
+            context = reasoner.context_of(diagnosis.failure, harness.run, diagnosis.step, diagnosis.node_id,
+                                          plan_state)
+            proposals = plugin.bt_meta_propose_repairs(diagnosis.failure, context)
+            assert len(proposals) == 1
+            assert proposals[0].changes["to_step"] == 4 and sorted(proposals[0].changes["args"]) == ["4", "5"]
+            assert ("pose", proposals[0].changes["args"]["4"][0]) in world.symbolic_state()  # grounded by the world
+            deeper = Attempt(2, {}, "verification", {"action": "backtrack", "changes": {"to_step": 3, "args": {}},
+                                                     "evidence": {"strategy": "pose_backtracking"}}, "", 12, 0.0)
+            diagnosis = reasoner.diagnose(failures, plan_state, harness.run, [earlier, deeper])
+            assert plugin.bt_meta_propose_repairs(diagnosis.failure, context) is None  # the first deviating pose
+    finally:
+        world.close()
+
+
+@pytest.mark.parametrize(("variant", "kind", "shown"), [
+    ("active_upside_down", "reachability", "target"),  # the good pose needs the hand under the part
+    ("active_on_side_turned", "collision", "pair"),    # the hand cannot leave the joined part without hitting it
+])
+def test_blocked_good_poses_are_reported_with_their_motion_limit_not_looped_on(memory_file, variant, kind, shown):
+    report, joined = run_variant(memory_file, variant)
+    assert report.status == "failed" and joined == []
+    assert report.attempts == []  # nothing was executed in vain
+    assert f"{kind} blocks the repair of verification at step 12" in report.stop_reason
+    assert "not looped on" in report.stop_reason
+    limit = next(entry for entry in report.reported if entry["kind"] == kind)
+    assert limit["plugin"] == "pose_backtracking" and limit["action"] == "MoveTo"
+    assert shown in limit["evidence"]
+    assert limit["blocks_repair_of"] == {"kind": "verification", "step": 12}
+    assert report.refinement_saved is None

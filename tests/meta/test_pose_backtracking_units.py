@@ -1,0 +1,164 @@
+"""Pose backtracking without the simulator: the object-gripper transform, sampling good poses from traces, the
+step-by-step R_p/R_n comparison, durable pose symbols, and how the reasoner reports a motion limit a plugin found."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+from bt_meta_plugins import pose_backtracking as pb
+
+from bt_meta.bt.failures import Failure, FailureKind
+from bt_meta.errors import BtMetaError
+from bt_meta.memory import Episode, ObjectState, State, Step, Trace
+from bt_meta.meta import MetaExecutor
+from bt_meta.plugins import hookimpl
+from bt_meta.world.fake import FakeWorld, Fault
+from bt_meta.world.objects import matrix_to_pose, pose_to_matrix
+from bt_meta.world.sim_world import parse_pose_symbol, pose_symbol
+
+from .conftest import make_host
+
+# An active part whose magnet (AP) is 3 cm below its centre, normal -z; the reference's on its top, normal +z.
+ACTIVE_AP, ACTIVE_AN = np.array([0.0, 0.0, -0.03]), np.array([0.0, 0.0, -1.0])
+REF_AP, REF_AN = np.array([0.0, 0.0, 0.02]), np.array([0.0, 0.0, 1.0])
+
+
+def state_of(name: str, pose: list[float], ap_local: np.ndarray, an_local: np.ndarray) -> ObjectState:
+    t = pose_to_matrix(pose)
+    return ObjectState(name, tuple(pose), tuple(t[:3, :3] @ ap_local + t[:3, 3]), tuple(an_local))
+
+
+def observed(name: str, pose: list[float], ap_local: np.ndarray, an_local: np.ndarray) -> dict[str, Any]:
+    """An object as ``world.observe()`` reports it: AP and AN in the base frame."""
+    t = pose_to_matrix(pose)
+    return {"name": name, "pose": list(pose), "ap": list(t[:3, :3] @ ap_local + t[:3, 3]),
+            "an": list(t[:3, :3] @ an_local)}
+
+
+def joined_trace(reference_pose: list[float], yaw: float, seed: int) -> Trace:
+    """Three steps: the active part far away, above the reference, joined on it (AP on AP, normals opposed)."""
+    x, y, z = reference_pose[:3]
+    joined = [x, y, z + 0.05, 0.0, 0.0, yaw]  # 0.02 + 0.03: the magnets meet
+    poses = [[x + 0.3, y, z, 0.0, 0.0, yaw], [x, y, z + 0.15, 0.0, 0.0, yaw], joined]
+    steps = tuple(Step(i, "MoveTo", (f"p{i}",), state=State(objects=(
+        state_of("reference", reference_pose, REF_AP, REF_AN), state_of("active", pose, ACTIVE_AP, ACTIVE_AN))))
+        for i, pose in enumerate(poses))
+    return Trace(Episode("Attach", "attach.yaml", "nominal", started=float(seed), outcome="success", seed=seed), steps)
+
+
+def test_gripper_pose_for_inverts_the_grasp():
+    gripper = pose_to_matrix([0.6, -0.2, 0.1, math.pi, 0.1, -0.4])
+    grasp = pose_to_matrix([0.0, 0.01, 0.04, math.pi / 2, 0.0, 0.3])  # object in the gripper frame
+    held = gripper @ grasp
+    assert np.allclose(pb.gripper_pose_for(held, grasp), gripper)
+    # a wanted object pose gives the gripper pose that, with the same grasp, puts the object there
+    wanted = pose_to_matrix([0.62, -0.1, -0.13, 0.0, 0.0, 1.0])
+    assert np.allclose(pb.gripper_pose_for(wanted, grasp) @ grasp, wanted)
+
+
+def test_local_keypoints_are_intrinsic():
+    for pose in ([0.5, 0.1, 0.0, 0.0, 0.0, 0.0], [0.2, -0.3, 0.4, math.pi / 2, 0.2, -1.0]):
+        ap, an = pb.local_keypoints(observed("active", pose, ACTIVE_AP, ACTIVE_AN))
+        assert np.allclose(ap, ACTIVE_AP) and np.allclose(an, ACTIVE_AN)
+
+
+def test_good_poses_put_the_attachment_point_and_normal_where_the_traces_had_them_relative_to_the_reference():
+    traces = [joined_trace([0.62, -0.10, -0.18, 0.0, 0.0, 0.0], yaw=0.2, seed=s) for s in range(3)]
+    # now the reference stands elsewhere and turned; the active part lies on its side
+    reference_now = [0.55, 0.05, -0.18, 0.0, 0.0, math.pi / 2]
+    active_now = observed("active", [0.3, -0.4, -0.17, math.pi / 2, 0.0, 0.0], ACTIVE_AP, ACTIVE_AN)
+    turns = [0.0, math.pi / 2, math.pi]
+    candidates = pb.good_object_poses(traces, 2, "active", "reference", turns=turns, order=[2, 0, 1],
+                                      reference_now=observed("reference", reference_now, REF_AP, REF_AN),
+                                      active_now=active_now)
+    assert [(c.trace, c.turn) for c in candidates] == [(j, t) for j in (2, 0, 1) for t in turns]
+    ref = pose_to_matrix(reference_now)
+    expected_ap = ref[:3, :3] @ REF_AP + ref[:3, 3]  # joined: the active's magnet on the reference's
+    for candidate in candidates:
+        pose = candidate.object_pose
+        assert np.allclose(pose[:3, :3] @ ACTIVE_AP + pose[:3, 3], expected_ap, atol=1e-9)
+        assert np.allclose(pose[:3, :3] @ ACTIVE_AN, -(ref[:3, :3] @ REF_AN), atol=1e-9)  # normals opposed
+        assert np.allclose(candidate.ap, expected_ap) and np.allclose(candidate.an, [0.0, 0.0, -1.0])
+    # turn 0 keeps the trace's own orientation relative to the reference (yaw 0.2 on top of the reference's)
+    assert np.isclose(matrix_to_pose(candidates[0].object_pose)[5], math.pi / 2 + 0.2)
+    # a quarter turn about the attachment normal (pointing down: a right-hand turn about -z lowers the yaw)
+    assert np.isclose(matrix_to_pose(candidates[1].object_pose)[5], 0.2)
+    # a trace without the step or the objects gives nothing
+    assert pb.good_object_poses(traces, 7, "active", "reference", turns=turns, order=[0],
+                                reference_now=observed("reference", reference_now, REF_AP, REF_AN),
+                                active_now=active_now) == []
+
+
+def test_step_relations_find_the_first_deviating_step():
+    traces = [joined_trace([0.62, -0.10, -0.18, 0.0, 0.0, 0.0], yaw=0.0, seed=s) for s in range(3)]
+    reference = observed("reference", [0.62, -0.10, -0.18, 0.0, 0.0, 0.0], REF_AP, REF_AN)
+
+    def now(pose):
+        return {"reference": reference, "active": observed("active", pose, ACTIVE_AP, ACTIVE_AN)}
+
+    actions = {0: "MoveTo", 1: "MoveTo", 2: "MoveTo"}
+    nominal = {0: now([0.92, -0.10, -0.18, 0, 0, 0]), 1: now([0.62, -0.10, -0.03, 0, 0, 0]),
+               2: now([0.62, -0.10, -0.13, 0, 0, 0])}
+    rows = pb.step_relations(nominal, traces, "active", "reference", actions)
+    assert [r.deviates for r in rows] == [False, False, False]
+    assert rows[2].r_p == pytest.approx(0.0, abs=1e-9) and rows[2].expected_n == pytest.approx(math.pi)
+    on_side = dict(nominal)
+    on_side[1] = now([0.62, -0.10, -0.03, math.pi / 2, 0, 0])
+    on_side[2] = now([0.62, -0.10, -0.13, math.pi / 2, 0, 0])
+    rows = pb.step_relations(on_side, traces, "active", "reference", actions)
+    assert [r.deviates for r in rows] == [False, True, True]
+    assert math.degrees(rows[1].r_n) == pytest.approx(90.0)
+    assert rows[1].as_dict()["expected_R_n"] == pytest.approx(math.pi, abs=1e-4)
+    # a step the traces ran with another action is not compared
+    rows = pb.step_relations(on_side, traces, "active", "reference", {0: "MoveTo", 1: "Grasp", 2: "MoveTo"})
+    assert [r.step for r in rows] == [0, 2]
+
+
+def test_pose_symbols_round_trip_and_refuse_bad_input():
+    symbol = pose_symbol([0.61, -0.2, 0.8, 0.0, -0.0, 1.5707963])
+    assert symbol == "pose:0.61:-0.2:0.8:0:0:1.5708"
+    assert parse_pose_symbol(symbol) == [0.61, -0.2, 0.8, 0.0, 0.0, 1.5708]
+    for other in ("joint", "pose:1:2:3", "pose:a:0:0:0:0:0", "pose:1:2:3:4:5:nan"):
+        assert parse_pose_symbol(other) is None
+    with pytest.raises(BtMetaError, match="6 finite numbers"):
+        pose_symbol([0.0, 1.0, math.inf, 0.0, 0.0, 0.0])
+
+
+def test_plugin_settings_are_checked():
+    with pytest.raises(ValueError, match="n must be >= 1"):
+        pb.PoseBacktracking(n=0)
+    with pytest.raises(ValueError, match="max_candidates"):
+        pb.PoseBacktracking(max_candidates=0)
+
+
+class BlockedByExperience:
+    """Knows the repair the failure needs and that the arm cannot make it: answers with the motion limit."""
+
+    @hookimpl
+    def bt_meta_propose_repairs(self, failure: Any, context: Any) -> list[Any]:
+        if failure.kind is not FailureKind.VERIFICATION:
+            return []
+        return [Failure(FailureKind.COLLISION, "the good pose puts the gripper inside b1", step=1, action="put",
+                        evidence={"pair": ["right_gripper", "b1"], "target": [0.6, -0.1, -0.1, 0, 0, 0]})]
+
+
+def test_a_motion_limit_found_by_a_plugin_stops_the_repair_and_is_reported_with_its_evidence(blocks):
+    problem = blocks.problem("one")
+    fault = Fault("put", mode="partial", args=("b0", "0", "0"), occurrence=1,
+                  drop=(("at", "b0", "0", "0"), ("held", "b0")))
+    world = FakeWorld(blocks.domain, problem, faults=[fault])
+    report = MetaExecutor(blocks.domain, problem, world,
+                          make_host(("blocked", BlockedByExperience()), perception=False)).run()
+    # without the limit the retry baseline's replan repairs this failure (test_executor); a limit drops blind repairs
+    assert report.status == "failed" and report.attempts == []
+    assert "collision blocks the repair of verification at step 1" in report.stop_reason
+    assert "not looped on" in report.stop_reason
+    kinds = [entry["kind"] for entry in report.reported]
+    assert kinds == ["verification", "collision"]
+    limit = report.reported[1]
+    assert limit["evidence"] == {"pair": ["right_gripper", "b1"], "target": [0.6, -0.1, -0.1, 0, 0, 0]}
+    assert limit["plugin"] == "blocked" and limit["blocks_repair_of"] == {"kind": "verification", "step": 1}
+    assert [f["kind"] for f in report.failures] == ["verification", "collision"]

@@ -151,3 +151,24 @@ def test_demonstrate_runs_without_the_memory_expectations_unless_asked(tmp_path,
         assert sorted(host.plugin_names()) == names
         assert shown.episode_id == 2 and shown.trace.episode.variant == "A_two_1x1_same_colour"
         assert shown.trace.steps[4].state.grid_maps[0].shape == "1x1" and shown.recording_seconds > 0
+
+
+def test_repair_progress_lines(capsys):
+    from bt_meta.commands.run import _Progress
+
+    progress = _Progress()
+    progress.bt_meta_trace_event({"type": "step_end", "tick": 225, "step": 4, "node_id": "n8", "action": "place",
+                                  "args": ["b5", "1.5", "1"], "status": "FAILURE"})
+    progress.bt_meta_trace_event({"type": "failure", "tick": 225, "failure": {"kind": "unknown_entity",
+                                                                              "message": "b5: 4 cells differ"}})
+    progress.bt_meta_trace_event({"type": "repair", "tick": 225, "outcome": "applied",
+                                  "attempt": {"change": "retry step 4",
+                                              "proposal": {"action": "retry", "plugin": "retry_repair"}}})
+    progress.bt_meta_trace_event({"type": "repair", "tick": 225, "outcome": "stopped", "reason": "budget spent"})
+    progress.bt_meta_trace_event({"type": "tick", "tick": 226, "status": "RUNNING"})
+    assert capsys.readouterr().out.splitlines() == [
+        "tick  225  step 4 n8 place(b5, 1.5, 1) FAILURE",
+        "           failure [unknown_entity] b5: 4 cells differ",
+        "           repair applied: retry by retry_repair: retry step 4",
+        "           repair stopped: budget spent",
+    ]

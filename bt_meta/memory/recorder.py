@@ -14,13 +14,18 @@ What is stored matches what the expectation plugins look up (:mod:`bt_meta.perce
 task is the problem's root task, step ``i`` is plan step ``i`` of a nominal run, arguments are strings, grid-maps
 carry the object name; keypoint expectations read the object states. A step executed again after a repair
 backtracked replaces the steps it undid, and a successful run keeps only the steps of its final execution (a
-failed step's state is no expectation); the repairs and failures are in the episode's ``config``.
+failed step's state is no expectation); the repairs and failures are in the episode's ``config``. E_db: one row
+per successful step, keyed by its action and exact arguments, pointing to its parent task, with the facts the
+step added and a reference to each of its grid-maps (the store bubbles a task's expectation up from its last
+primitive: :meth:`~bt_meta.memory.EpisodicMemory.expectation_of`). A driver that puts the step's observations in
+the ``step_end`` event (``event["observations"]["object_gridmaps"]``) saves the recorder its own camera frame.
 
 Offers:
 
 * :class:`TraceRecorder` -- the plugin (register it with a :class:`~bt_meta.plugins.PluginHost`); after the run:
-  :attr:`~TraceRecorder.trace`, :attr:`~TraceRecorder.episode_id`, :attr:`~TraceRecorder.skipped`
-* :class:`RecorderError` -- a run that cannot become a trace (no run, no steps, nothing to name its task)
+  :attr:`~TraceRecorder.trace`, :attr:`~TraceRecorder.episode_id`, :attr:`~TraceRecorder.skipped`,
+  :attr:`~TraceRecorder.error`, :attr:`~TraceRecorder.seconds`
+* :class:`RecorderError` -- a run that cannot become a trace (no installed run, no root task, no task file)
 * :func:`object_states_of` -- a world's object states as memory :class:`~bt_meta.memory.ObjectState`
 * :func:`root_task_name` -- the episode key of a problem (its root task)
 """

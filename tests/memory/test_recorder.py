@@ -309,3 +309,36 @@ def test_recorded_magnetic_attach_then_the_part_on_its_side_raises_a_keypoint_mi
     status, failures = sim_run(MAGNETIC, "nominal", plugins=plugins())
     assert status is Status.SUCCESS and failures == []
 
+
+
+def test_grid_maps_sent_with_the_step_end_event_are_used_for_the_named_blocks(memory):
+    """A driver that sends the step's observations spares the recorder its own camera frame."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from bt_meta.memory import GridMap
+
+    def no_camera(*_):
+        raise AssertionError("the recorder looked with its own camera")
+
+    sim = SimpleNamespace(object_names=lambda: ["bar", "b0"], object_states=dict)
+    world = SimpleNamespace(sim=sim, object_name=lambda symbol: {"b5": "bar", "b0": "b0"}[symbol], variant="v1")
+    task_file = load_task_file(LETTERS)
+    recorder = TraceRecorder(memory, camera=SimpleNamespace(look=no_camera, object_grid_maps=no_camera))
+    problem = task_file.problem("A")
+    run = RunContext(world, None, domain=task_file.domain, problem=problem, task_file=task_file, state=problem.state)
+    run.install()
+    grid = GridMap(np.eye(6, dtype=np.uint8), colour="blue", shape="1x2", centroid=(0.6, 0.0))
+    emit = recorder.bt_meta_trace_event
+    emit({"type": "run_start", "tick": 0, "task_file": str(LETTERS), "problem": "A", "state": []})
+    emit({"type": "step_end", "tick": 1, "action": "place", "args": ["b5", "1.5", "1"], "node_id": "n8", "step": 0,
+          "status": "SUCCESS", "state": [], "failure": None,
+          "observations": {"object_gridmaps": {"bar": grid, "b0": grid}}})
+    emit({"type": "run_end", "tick": 1, "status": "SUCCESS", "ticks": 1})
+    trace = memory.trace(recorder.episode_id)
+    (stored,) = trace.steps[0].state.grid_maps  # b5's map only: "1.5" and "1" name no object
+    assert stored.object_name == "bar" and stored.shape == "1x2" and np.array_equal(stored.occupancy, np.eye(6))
+    assert trace.episode.variant == "v1" and trace.steps[0].parent_task == "draw_A_bar"
+    (row,) = trace.expectations
+    assert row.grid_map_index == 0 and row.parent_task == "draw_A_bar"

@@ -23,6 +23,7 @@ MAX_DEPTH = 200  # nested top-down proofs before falling back to the bottom-up e
 INHERIT_DEPTH = 16  # how far up the parent chain a state looks for a memo to inherit
 
 _IN_PROGRESS = object()
+_OWNED = object()  # memo key: the unit tables this memo may change in place (see AxiomSet._inherit)
 _NO_ENTRIES: dict[Any, Any] = {}
 
 
@@ -277,7 +278,19 @@ class AxiomSet:
                 volatile = state._derived[self._volatile_key] = {}
             volatile[key] = entry
             return
-        memo[key] = entry
+        if key[0].__class__ is str:  # a derived atom
+            memo[key] = entry
+        else:  # a unit (token, seed, pattern): kept in its table memo[(token, pattern)], copied before writing
+            table_key = (key[0], key[2])
+            table = memo.get(table_key)
+            owned = memo[_OWNED]
+            if table is None:
+                table = memo[table_key] = {}
+                owned.add(table_key)
+            elif table_key not in owned:
+                table = memo[table_key] = dict(table)
+                owned.add(table_key)
+            table[key[1]] = entry
         readers = self._readers
         for fact_key in recorder.keys:
             found = readers.get(fact_key)
@@ -294,15 +307,20 @@ class AxiomSet:
                 found.add(key)
 
     def _inherit(self, state: State) -> dict[Any, Any]:
-        """The memo of ``state``: the nearest ancestor's entries that the changes since then leave valid."""
+        """The memo of ``state``: the nearest ancestor's entries that the changes since then leave valid.
+
+        Units live in tables shared with the ancestor until one side changes them: a memo only writes into the
+        tables listed under its ``_OWNED`` key and copies any other table first (the ancestor gives up
+        ownership of everything it shares here).
+        """
         if not self.incremental:
-            return {}
+            return {_OWNED: set()}
         changed: set[tuple[str, str | None]] = set()
         cursor = state
         for _ in range(INHERIT_DEPTH):
             parent = cursor._parent
             if parent is None:
-                return {}
+                return {_OWNED: set()}
             for atom in cursor._delta:
                 changed.add((atom[0], None))
                 if len(atom) > 1:
@@ -312,19 +330,30 @@ class AxiomSet:
                 break
             cursor = parent
         else:
-            return {}
+            return {_OWNED: set()}
         memo = dict(parent_memo)
+        parent_memo[_OWNED] = set()
+        owned: set[Any] = set()
+        memo[_OWNED] = owned
         readers = self._readers
         dependents = self._dependents
         todo: list[Any] = []
-        for fact_key in changed:
-            for key in readers.get(fact_key, ()):
-                if memo.pop(key, None) is not None:
-                    todo.append(key)
-        while todo:
-            for key in dependents.get(todo.pop(), ()):
-                if memo.pop(key, None) is not None:
-                    todo.append(key)
+        pending = [key for fact_key in changed for key in readers.get(fact_key, ())]
+        while pending:
+            for key in pending:
+                if key[0].__class__ is str:
+                    if memo.pop(key, None) is not None:
+                        todo.append(key)
+                    continue
+                table_key = (key[0], key[2])
+                table = memo.get(table_key)
+                if table is not None and key[1] in table:
+                    if table_key not in owned:
+                        table = memo[table_key] = dict(table)
+                        owned.add(table_key)
+                    del table[key[1]]
+            pending = [key for atom in todo for key in dependents.get(atom, ())]
+            todo = []
         return memo
 
     def _prove(self, state: Any, atom: Atom) -> bool:
@@ -422,16 +451,21 @@ class AxiomSet:
             pool = state.with_arg(pred, bound[0], vals[bound[0]]) if bound else state.atoms_of(pred)
             fixed = [(i, vals[i]) for i in bound[1:]]
         volatile_memo = cache.get(self._volatile_key, _NO_ENTRIES)
+        table_key = (token, pattern)
+        table = memo.get(table_key)
+        if table is not None and not volatile_memo:  # skip the seeds known to give nothing, at C speed
+            get = table.get
+            pool = [seed for seed in pool if (known := get(seed)) is None or known[0]]
         for seed in pool:
             if len(seed) != length:
                 continue
             if fixed and any(seed[i] != v for i, v in fixed):
                 continue
-            key = (token, seed, pattern)
-            unit = memo.get(key)
+            unit = table.get(seed) if table is not None else None
             if unit is None:
-                unit = volatile_memo.get(key)
+                unit = volatile_memo.get((token, seed, pattern))
             if unit is None:
+                key = (token, seed, pattern)
                 seed_env = dict(head_env)
                 consistent = True
                 for i, name in free:
@@ -448,6 +482,7 @@ class AxiomSet:
                               for body_env in match_clause(rest, recorder, seed_env, None, self)),)
                 self._store(state, memo, key, unit, recorder)
                 volatile_memo = cache.get(self._volatile_key, _NO_ENTRIES)
+                table = memo.get(table_key)
             yield from unit[0]
 
     def derived_atoms(self, state: State) -> list[Atom]:

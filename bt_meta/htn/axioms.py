@@ -24,6 +24,7 @@ INHERIT_DEPTH = 16  # how far up the parent chain a state looks for a memo to in
 
 _IN_PROGRESS = object()
 _OWNED = object()  # memo key: the unit tables this memo may change in place (see AxiomSet._inherit)
+_EPOCH = object()  # memo key: the epoch whose reader indexes cover the memo's entries (see AxiomSet.begin)
 _NO_ENTRIES: dict[Any, Any] = {}
 
 
@@ -185,6 +186,7 @@ class AxiomSet:
         # an invalidation may drop more than needed, never less).
         self._readers: dict[tuple[str, str | None], set[Any]] = {}
         self._dependents: dict[Any, set[Any]] = {}
+        self._epoch = 0
         # Clauses of non-recursive derived predicates that start with a fact pattern: evaluated per seed.
         self._units: dict[int, tuple] = {}
         for axiom in self.axioms:
@@ -202,6 +204,16 @@ class AxiomSet:
                     if step[0] == DPOS and step[1] in component:
                         rest = Clause(s for k, s in enumerate(clause) if k != j)
                         self._recursive.setdefault(step[1], []).append((axiom, j, step, rest))
+
+    def begin(self) -> None:
+        """Start a new epoch (the planner calls this once per search): empty reader indexes.
+
+        The indexes only grow within an epoch, so without this every search would pay for the entries of all
+        earlier ones. A memo of an earlier epoch stays valid for its own state but is not inherited from.
+        """
+        self._epoch += 1
+        self._readers = {}
+        self._dependents = {}
 
     def extension(self, state: State, pred: str) -> DerivedIndex:
         if isinstance(state, _Recorder):
@@ -313,14 +325,15 @@ class AxiomSet:
         tables listed under its ``_OWNED`` key and copies any other table first (the ancestor gives up
         ownership of everything it shares here).
         """
+        fresh = {_OWNED: set(), _EPOCH: self._epoch}
         if not self.incremental:
-            return {_OWNED: set()}
+            return fresh
         changed: set[tuple[str, str | None]] = set()
         cursor = state
         for _ in range(INHERIT_DEPTH):
             parent = cursor._parent
             if parent is None:
-                return {_OWNED: set()}
+                return fresh
             for atom in cursor._delta:
                 changed.add((atom[0], None))
                 if len(atom) > 1:
@@ -330,7 +343,9 @@ class AxiomSet:
                 break
             cursor = parent
         else:
-            return {_OWNED: set()}
+            return fresh
+        if parent_memo.get(_EPOCH) != self._epoch:
+            return fresh
         memo = dict(parent_memo)
         parent_memo[_OWNED] = set()
         owned: set[Any] = set()

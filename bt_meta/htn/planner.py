@@ -139,6 +139,9 @@ class Search:
         superlinear. Nothing here creates reference cycles that need collecting during the search, and the
         collector's previous setting is restored afterwards.
         """
+        axiom_set = self.domain.axiom_set
+        if axiom_set is not None:
+            axiom_set.begin()
         enabled = gc.isenabled()
         if enabled:
             gc.disable()

@@ -187,11 +187,9 @@ def _run_repaired(args: argparse.Namespace, task_file: Any, problem: Any, world:
     from bt_meta.meta.refinements import RefinementStore
 
     class Executor(MetaExecutor):
-        """Hands every segment's run the memory (expectation plugins read ``run.memory``) and the recorder the
-        segment's decomposition tree (parent tasks of repaired steps)."""
+        """Hands the recorder every segment's decomposition tree (the parent tasks of repaired steps)."""
 
         def _segment(self, run: Any, plan_state: Any, *rest: Any) -> Any:  # type: ignore[override]
-            run.memory = memory
             if recorder is not None:
                 recorder.tree = plan_state.tree
             return super()._segment(run, plan_state, *rest)
@@ -202,7 +200,7 @@ def _run_repaired(args: argparse.Namespace, task_file: Any, problem: Any, world:
         plugins.register(_Progress(), "run_progress", source="bt-meta run --repair")
     with RefinementStore.open(memory.path) as refinements:
         report = Executor(task_file.domain, problem, world, plugins, task_file=task_file, variant=world.variant,
-                          refinements=refinements, limits=Limits(max_attempts=args.max_attempts,
+                          memory=memory, refinements=refinements, limits=Limits(max_attempts=args.max_attempts,
                                                                  max_ticks=args.max_ticks)).run()
     status = "SUCCESS" if report.ok else "FAILURE"
     out.update({

@@ -138,6 +138,13 @@ class Method:
     ordered: bool = True
     line: int | None = None
     column: int | None = None
+    # the head's variable names when they are all distinct variables (the planner binds them with one zip)
+    head_names: tuple[str, ...] | None = field(default=None, init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        names = tuple(a.name for a in self.task_args if isinstance(a, Var))
+        if len(names) == len(self.task_args) and len(set(names)) == len(names):
+            self.head_names = names
 
     def task_text(self) -> str:
         return template_text(self.task_name, self.task_args)

@@ -102,10 +102,15 @@ class Search:
     # -- alternatives ----------------------------------------------------------------------------------------
     def _method_alternatives(self, task: tuple[str, ...], state: State, exclude: Any) -> Iterator[tuple]:
         external = self.external
+        args = task[1:]
         for method in self.domain.methods_by_task.get(task[0], ()):
-            env = _unify_head(method, task)
-            if env is None:
-                continue
+            names = method.head_names
+            if names is not None and len(names) == len(args):
+                env = dict(zip(names, args, strict=True))
+            else:
+                env = _unify_head(method, task)
+                if env is None:
+                    continue
             for satisfier in method.precondition.satisfiers_of(state, env, external):
                 if exclude is not None and (method.name, frozenset(satisfier.items())) == exclude:
                     continue

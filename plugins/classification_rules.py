@@ -11,11 +11,14 @@ Rules, in order:
    ``ik_failed``, ``ik: "failed"``), or the message says no IK / unreachable / out of workspace / singular.
 4. **verification** -- a verifier produced it (``verifier`` in the evidence), or the failing step belongs to a
    task whose name starts with ``verify`` (``localisation.ancestors``, filled in by the meta-reasoner).
-5. **unknown_entity** -- the evidence lists ``unknown_entities``, or an expected atom names an object the world no
-   longer reports while the world reports objects the problem does not know (section 6.4's missing 1x2 block).
+5. **unknown_entity** -- the evidence lists ``unknown_entities``, a mismatch's expectation plugin suggests it (the
+   grid-map plugin does when the block seen has another shape than the one expected), or an expected atom names an
+   object the world no longer reports while the world reports objects the problem does not know (section 6.4's
+   missing 1x2 block).
 6. **physical** -- an expected atom about the gripper (``held``, ``holding``, ``grasped``, ``in_hand``,
    ``gripper``) did not come true, or the message says the object was dropped, lost or slipped.
-7. **unexpected_configuration** -- any other expectation mismatch (known entities, unseen configuration).
+7. **unexpected_configuration** -- any other expectation mismatch (known entities, unseen configuration), unless
+   the mismatch's plugin suggested another kind of the taxonomy, which is then kept.
 
 Offers:
 
@@ -71,6 +74,20 @@ def _known_objects(context: Any, observed: set[str]) -> tuple[set[str], set[str]
     return known, observable
 
 
+def _suggested_kinds(mismatches: list[Any]) -> list[FailureKind]:
+    """The kinds expectation plugins suggested for their mismatches, in order, ignoring names outside the taxonomy."""
+    kinds = []
+    for mismatch in mismatches:
+        suggested = (getattr(mismatch, "evidence", None) or {}).get("suggested_kind")
+        if suggested is None:
+            suggested = getattr(getattr(mismatch, "expectation", None), "failure_kind", None)
+        try:
+            kinds.append(FailureKind(suggested))
+        except ValueError:
+            continue
+    return kinds
+
+
 def classify(failure: Any, mismatches: list[Any], context: Any) -> FailureKind | None:
     kind = failure.kind
     if kind in (FailureKind.INTERNAL, FailureKind.PRECONDITION):
@@ -85,8 +102,9 @@ def classify(failure: Any, mismatches: list[Any], context: Any) -> FailureKind |
     ancestors = (evidence.get("localisation") or {}).get("ancestors") or []
     if evidence.get("verifier") or any(str(a.get("task", [""])[0]).lower().startswith("verify") for a in ancestors):
         return FailureKind.VERIFICATION
+    suggested = _suggested_kinds(mismatches)
     if any((getattr(m, "evidence", None) or {}).get("unknown_entities") for m in mismatches) \
-            or evidence.get("unknown_entities"):
+            or evidence.get("unknown_entities") or FailureKind.UNKNOWN_ENTITY in suggested:
         return FailureKind.UNKNOWN_ENTITY
     atoms = _atoms(mismatches)
     observed = _observed_objects(context) if atoms else None
@@ -101,7 +119,7 @@ def classify(failure: Any, mismatches: list[Any], context: Any) -> FailureKind |
     if any(_GRIPPER_PREDICATES.match(pred) for pred, _ in atoms) or _PHYSICAL_MESSAGE.search(failure.message or ""):
         return FailureKind.PHYSICAL
     if mismatches:
-        return FailureKind.UNEXPECTED_CONFIGURATION
+        return suggested[0] if suggested else FailureKind.UNEXPECTED_CONFIGURATION
     return None
 
 

@@ -36,6 +36,8 @@ from __future__ import annotations
 
 import logging
 import math
+import time
+from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -231,25 +233,31 @@ class PoseBacktracking:
 
     ``memory``: an :class:`~bt_meta.memory.EpisodicMemory` (default: the run's, else ``BT_META_MEMORY``, else the
     default file); ``n`` traces; ``seed`` for the sampling; ``turns`` rotations about the attachment normal tried
-    per trace (radians; the trace's own orientation first); ``pose_actions`` the primitives that set a pose;
-    ``max_candidates`` chains checked per backtracking depth.
+    per trace (radians; the trace's own orientation first; default every 22.5 degrees); ``pose_actions`` the
+    primitives that set a pose; ``max_candidates`` chains checked per backtracking depth (candidates are ordered
+    trace by trace, so the first ones are the turns of one trace); ``max_check_seconds`` bounds the IK and
+    collision checks of one proposal round (the limits found so far are then reported).
     """
 
     def __init__(self, memory: Any = None, *, n: int = 3, seed: int = 0, position_tolerance: float | None = 0.01,
                  angle_tolerance: float | None = math.radians(15.0), turns: Sequence[float] | None = None,
-                 pose_actions: Iterable[str] = ("MoveTo",), max_candidates: int = 24) -> None:
+                 pose_actions: Iterable[str] = ("MoveTo",), max_candidates: int = 48,
+                 max_check_seconds: float = 20.0) -> None:
         if n < 1:
             raise ValueError(f"n must be >= 1, got {n}")
         if max_candidates < 1:
             raise ValueError(f"max_candidates must be >= 1, got {max_candidates}")
+        if max_check_seconds <= 0:
+            raise ValueError(f"max_check_seconds must be > 0, got {max_check_seconds}")
         self.memory = memory
         self.n = n
         self.seed = seed
         self.position_tolerance = position_tolerance
         self.angle_tolerance = angle_tolerance
-        self.turns = list(turns) if turns is not None else [k * math.pi / 4.0 for k in range(8)]
+        self.turns = list(turns) if turns is not None else [k * math.pi / 8.0 for k in range(16)]
         self.pose_actions = frozenset(pose_actions)
         self.max_candidates = max_candidates
+        self.max_check_seconds = max_check_seconds
         self._run: Any = None
         self._current: dict[int, dict[str, Any]] = {}
 
@@ -318,11 +326,12 @@ class PoseBacktracking:
         grasp = np.linalg.inv(_matrix(now["gripper"][held_by])) @ _state_pose(objects[active])
         rng = np.random.default_rng(self.seed + len(done))
         limits: list[dict[str, Any]] = []
+        deadline = time.perf_counter() + self.max_check_seconds
         for to_step in reversed(targets):  # the last pose-setting step first, then one further back
             steps = [s for s in window if s >= to_step]
             after = self._next_move(world, held_by, plan, steps[-1])
             chain = self._feasible_chain(world, held_by, steps, traces, active, reference, objects, grasp, rng, limits,
-                                         after)
+                                         after, deadline)
             if chain is None:
                 continue
             symbols = {}
@@ -378,8 +387,8 @@ class PoseBacktracking:
 
     def _feasible_chain(self, world: Any, arm: str, steps: list[int], traces: Sequence[Any], active: str,
                         reference: str, objects: Mapping[str, Any], grasp: np.ndarray, rng: np.random.Generator,
-                        limits: list[dict[str, Any]], after: tuple[int, np.ndarray] | None = None
-                        ) -> list[tuple[int, np.ndarray, dict[str, Any]]] | None:
+                        limits: list[dict[str, Any]], after: tuple[int, np.ndarray] | None = None,
+                        deadline: float = math.inf) -> list[tuple[int, np.ndarray, dict[str, Any]]] | None:
         """The first sampled candidate (trace, turn) whose gripper poses for ``steps`` are all reachable without
         collision in a row from the current configuration, and from whose last pose the plan's next move
         (``after``: step and gripper pose, the retreat once the part is let go) is reachable without the arm hitting
@@ -390,6 +399,9 @@ class PoseBacktracking:
                                             active_now=objects[active], turns=turns, order=order) for step in steps}
         count = min(self.max_candidates, *(len(c) for c in per_step.values()))
         for index in range(count):
+            if time.perf_counter() > deadline:
+                limits.append({"step": steps[0], "kind": None, "search_stopped": f"{self.max_check_seconds} s spent"})
+                return None
             chain = []
             q = _current_q(world)
             for step in steps:
@@ -456,19 +468,25 @@ class PoseBacktracking:
     def _limit(self, limits: list[dict[str, Any]], window: list[int], evidence: dict[str, Any]) -> Failure:
         """The motion limit that blocks every sampled pose: collision when any candidate collided (the paper's
         gripper covering the attachment point), reachability otherwise."""
-        collided = [item for item in limits if item.get("kind") == FailureKind.COLLISION.value]
+        checked = [item for item in limits if item.get("kind") is not None]
+        collided = [item for item in checked if item.get("kind") == FailureKind.COLLISION.value]
         kind = FailureKind.COLLISION if collided else FailureKind.REACHABILITY
-        worst = (collided or limits or [{}])[0]
-        pairs = sorted({tuple(item["objects"]) for item in collided if item.get("objects")})
+        counts = Counter(tuple(item["pair"]) for item in collided if item.get("pair"))
+        common = counts.most_common(1)[0][0] if counts else None
+        worst = next((item for item in collided if tuple(item.get("pair") or ()) == common), None) \
+            or (checked or [{}])[0]
         detail = dict(worst)
         detail.update(evidence)
-        detail.update(candidates_checked=len(limits), pose_steps=window, colliding_objects=[list(p) for p in pairs])
+        detail.update(candidates_checked=len(checked), pose_steps=window,
+                      contacts=[{"pair": list(pair), "candidates": n} for pair, n in counts.most_common()])
+        if len(checked) < len(limits):
+            detail["search_stopped"] = f"after {self.max_check_seconds} s"
         if kind is FailureKind.COLLISION:
             message = (f"every known-good pose of {evidence['active']} sampled from the traces collides once held "
-                       f"as it is now ({len(limits)} candidate(s); e.g. {' / '.join(worst.get('pair') or [])})")
+                       f"as it is now ({len(checked)} candidate(s); most often {' / '.join(worst.get('pair') or [])})")
         else:
             message = (f"no known-good pose of {evidence['active']} sampled from the traces is reachable as it is "
-                       f"held now ({len(limits)} candidate(s))")
+                       f"held now ({len(checked)} candidate(s))")
         return Failure(kind=kind, message=message, step=worst.get("step"), action="MoveTo", evidence=detail)
 
 

@@ -53,7 +53,20 @@ def memory_file(demonstrations, tmp_path):
     return copy
 
 
-def run_variant(memory_file, variant: str, *, attempts: int = 4):
+def fence_in_the_reference(world: Any, half: float = 0.075, height: float = 0.12) -> None:
+    """Four static posts around the reference part: a top-down approach still fits, a hand beside the part does not."""
+    from bt_meta.world.objects import AttachmentFeature, Box, ObjectModel
+
+    x, y = world.sim.object_transform("reference")[:2, 3]
+    for k, (dx, dy, sx, sy) in enumerate([(half, 0, 0.02, 0.18), (-half, 0, 0.02, 0.18), (0, half, 0.18, 0.02),
+                                          (0, -half, 0.18, 0.02)]):
+        model = ObjectModel(type="post", colour="red", parts=(Box((sx, sy, height)),), mass=0.0,
+                            features=(AttachmentFeature("top", (0, 0, height / 2), (0, 0, 1)),), primary="top")
+        world.sim.spawn(f"post{k}", model, [x + dx, y + dy, 0.0, 0.0, 0.0, 0.0], on_table=True)
+    world.sync_collision()
+
+
+def run_variant(memory_file, variant: str, *, attempts: int = 4, prepare: Any = None, **settings: Any):
     from bt_meta.htn import load_task_file
     from bt_meta.memory import EpisodicMemory
     from bt_meta.world.sim_world import SimWorld, load_grounding, quiet_stdout
@@ -64,8 +77,10 @@ def run_variant(memory_file, variant: str, *, attempts: int = 4):
         world = SimWorld(task_file.domain, problem, load_grounding(task_file.domain.name, TASK_FILE), variant=variant,
                          seed=0)
     try:
+        if prepare is not None:
+            prepare(world)
         with EpisodicMemory.open(memory_file, readonly=True) as memory, RefinementStore.open(memory_file) as store:
-            plugin = pose_backtracking.PoseBacktracking(memory, n=3, seed=0)
+            plugin = pose_backtracking.PoseBacktracking(memory, n=3, seed=0, **settings)
             report = MetaExecutor(task_file.domain, problem, world, host(plugin), task_file=task_file,
                                   limits=Limits(max_attempts=attempts, max_seconds=60), refinements=store,
                                   variant=variant, memory=memory).run()
@@ -74,8 +89,9 @@ def run_variant(memory_file, variant: str, *, attempts: int = 4):
         world.close()
 
 
-def test_part_on_its_side_is_repaired_by_backtracking_and_the_refinement_is_used_next_time(memory_file):
-    report, joined = run_variant(memory_file, "active_on_side")
+@pytest.mark.parametrize("variant", ["active_on_side", "active_on_side_turned"])
+def test_part_on_its_side_is_repaired_by_backtracking_and_the_refinement_is_used_next_time(memory_file, variant):
+    report, joined = run_variant(memory_file, variant)
     assert report.ok, report.stop_reason
     assert joined == [("active", "reference")]
     assert len(report.attempts) == 1
@@ -90,24 +106,25 @@ def test_part_on_its_side_is_repaired_by_backtracking_and_the_refinement_is_used
     evidence = proposal["evidence"]
     assert evidence["first_deviating_step"] == 0 and evidence["pose_steps"] == [3, 4, 5]
     relations = {row["step"]: row for row in evidence["relations"]}
-    assert relations[0]["deviates"] and abs(relations[0]["R_n"] - 1.5708) < 0.05  # on its side: 90 degrees
+    assert relations[0]["deviates"] and abs(relations[0]["R_n"] - 1.5708) < 0.05  # on a side: 90 degrees
     assert abs(relations[0]["expected_R_n"] - 3.1416) < 0.05  # the demonstrations: normals opposed
     assert len(evidence["traces"]) == 3
     assert report.plan[5] == ["MoveTo", symbol] and report.initial_plan[5] == ["MoveTo", "joint"]
     saved = report.refinement_saved
-    assert saved is not None and saved["variant"] == "active_on_side"
-    assert "pose_within(active, 0.58" in saved["precondition"]  # the world's names: what pose_within looks up
+    assert saved is not None and saved["variant"] == variant
+    assert "pose_within(active, " in saved["precondition"]  # the world's names: what pose_within looks up
     assert "pose_within(reference, 0.62" in saved["precondition"]
     assert f"MoveTo({symbol})" in saved["subtasks"]
 
-    again, joined = run_variant(memory_file, "active_on_side")
+    again, joined = run_variant(memory_file, variant)
     assert again.ok and again.attempts == [] and joined == [("active", "reference")]
     assert again.refinements_used == [saved["method"]]
     assert again.initial_plan == report.plan
 
-    nominal, joined = run_variant(memory_file, "nominal")  # the part upright: the refinement's poses do not hold
-    assert nominal.ok and nominal.attempts == [] and nominal.refinements_used == []
-    assert joined == [("active", "reference")]
+    if variant == "active_on_side":
+        nominal, joined = run_variant(memory_file, "nominal")  # the part upright: the refinement's poses do not hold
+        assert nominal.ok and nominal.attempts == [] and nominal.refinements_used == []
+        assert joined == [("active", "reference")]
 
 
 def test_each_further_attempt_backtracks_one_pose_further(memory_file):
@@ -150,12 +167,15 @@ def test_each_further_attempt_backtracks_one_pose_further(memory_file):
         world.close()
 
 
-@pytest.mark.parametrize(("variant", "kind", "shown"), [
-    ("active_upside_down", "reachability", "target"),  # the good pose needs the hand under the part
-    ("active_on_side_turned", "collision", "pair"),    # the hand cannot leave the joined part without hitting it
+@pytest.mark.parametrize(("variant", "fenced", "kind", "shown"), [
+    ("active_upside_down", False, "reachability", "target"),  # the grasp covers the magnet: the hand would be under
+    ("active_on_side", True, "collision", "pair"),  # the hand beside the part would go through the posts
 ])
-def test_blocked_good_poses_are_reported_with_their_motion_limit_not_looped_on(memory_file, variant, kind, shown):
-    report, joined = run_variant(memory_file, variant)
+def test_blocked_good_poses_are_reported_with_their_motion_limit_not_looped_on(memory_file, variant, fenced, kind,
+                                                                                shown):
+    settings = {"turns": [0.0, 1.5708, 3.1416, -1.5708], "max_candidates": 4} if fenced else {}
+    report, joined = run_variant(memory_file, variant, prepare=fence_in_the_reference if fenced else None,
+                                 **settings)
     assert report.status == "failed" and joined == []
     assert report.attempts == []  # nothing was executed in vain
     assert f"{kind} blocks the repair of verification at step 12" in report.stop_reason
@@ -163,5 +183,8 @@ def test_blocked_good_poses_are_reported_with_their_motion_limit_not_looped_on(m
     limit = next(entry for entry in report.reported if entry["kind"] == kind)
     assert limit["plugin"] == "pose_backtracking" and limit["action"] == "MoveTo"
     assert shown in limit["evidence"]
+    if fenced:
+        contacts = limit["evidence"]["contacts"]  # every colliding pair met, with how many candidates met it
+        assert any(name.startswith("post") for entry in contacts for name in entry["pair"])
     assert limit["blocks_repair_of"] == {"kind": "verification", "step": 12}
     assert report.refinement_saved is None

@@ -57,8 +57,12 @@ class RunContext:
         problem: Any = None,
         state: State | None = None,
         task_file: Any = None,
+        memory: Any = None,
     ) -> None:
         self.world = world
+        # The episodic memory the run reads expectations from (expectation plugins look here before
+        # BT_META_MEMORY and the default file); None when the run has none.
+        self.memory = memory
         self.plugins = plugins
         self.domain = domain
         self.problem = problem

@@ -260,6 +260,8 @@ class PoseBacktracking:
         self.max_check_seconds = max_check_seconds
         self._run: Any = None
         self._current: dict[int, dict[str, Any]] = {}
+        self._q: dict[int, np.ndarray] = {}
+        """The robot's configuration after each step of the run (where a replay of a repaired plan passes)."""
 
     # -- the current trace ---------------------------------------------------------------------------------------
 
@@ -272,9 +274,12 @@ class PoseBacktracking:
             return None
         run = getattr(context, "run", None)
         if run is not self._run:
-            self._run, self._current = run, {}
+            self._run, self._current, self._q = run, {}, {}
         objects = observe().get("objects") or {}
         self._current[int(step)] = {name: dict(state) for name, state in objects.items()}
+        current_q = getattr(world, "current_q", None)
+        if current_q is not None:
+            self._q[int(step)] = np.array(current_q(), dtype=float)
         return None
 
     # -- proposing -----------------------------------------------------------------------------------------------
@@ -327,28 +332,44 @@ class PoseBacktracking:
         rng = np.random.default_rng(self.seed + len(done))
         limits: list[dict[str, Any]] = []
         deadline = time.perf_counter() + self.max_check_seconds
+        fallback = None
         for to_step in reversed(targets):  # the last pose-setting step first, then one further back
             steps = [s for s in window if s >= to_step]
             after = self._next_move(world, held_by, plan, steps[-1])
-            chain = self._feasible_chain(world, held_by, steps, traces, active, reference, objects, grasp, rng, limits,
-                                         after, deadline)
+            replay = self._q.get(to_step - 1) if self._run is context.run else None
+            chain, replayable = self._feasible_chain(world, held_by, steps, traces, active, reference, objects, grasp,
+                                                     rng, limits, after, deadline, starts=[replay])
+            if chain is not None and not replayable:
+                fallback = fallback or (steps, chain)
+                continue
             if chain is None:
                 continue
-            symbols = {}
-            for step, pose, _ in chain:
-                symbol = self._symbol(world, pose)
-                if symbol is None:
-                    return None
-                symbols[str(step)] = [symbol]
-            agreement = self._agreement(rows, steps)
-            evidence.update(to_step=steps[0], rewritten=steps, candidates=[where for _, _, where in chain],
-                            infeasible_before=len(limits), agreement=round(agreement, 4))
-            return [RepairProposal(
-                "backtrack", 0.35 + 0.6 * agreement,
-                f"back to step {steps[0]}: {len(steps)} pose(s) of {active} from {len(traces)} successful trace(s), "
-                f"turned into gripper poses through the current grasp",
-                changes={"to_step": steps[0], "args": symbols}, evidence=evidence)]
+            return self._proposal(world, steps, chain, rows, limits, evidence, active, traces, True)
+        if fallback is not None:
+            return self._proposal(world, *fallback, rows, limits, evidence, active, traces, False)
         return [self._limit(limits, window, evidence)]
+
+    def _proposal(self, world: Any, steps: list[int], chain: list[tuple[int, np.ndarray, dict[str, Any]]],
+                  rows: list[StepRelation], limits: list[dict[str, Any]], evidence: dict[str, Any], active: str,
+                  traces: Sequence[Any], replayable: bool) -> list[RepairProposal] | None:
+        """The ``backtrack`` proposal for a feasible chain (its pose symbols registered with the world)."""
+        symbols = {}
+        for step, pose, _ in chain:
+            symbol = self._symbol(world, pose)
+            if symbol is None:
+                return None
+            symbols[str(step)] = [symbol]
+        agreement = self._agreement(rows, steps)
+        evidence.update(to_step=steps[0], rewritten=steps, candidates=[where for _, _, where in chain],
+                        infeasible_before=len(limits), agreement=round(agreement, 4), replayable=replayable)
+        if not replayable:
+            evidence["keep"] = False  # works from where this run stands, not in a replay from the start
+            evidence["not_kept_because"] = next((item for item in limits if item.get("from")), {})
+        return [RepairProposal(
+            "backtrack", (0.35 + 0.6 * agreement) * (1.0 if replayable else 0.9),
+            f"back to step {steps[0]}: {len(steps)} pose(s) of {active} from {len(traces)} successful trace(s), "
+            f"turned into gripper poses through the current grasp",
+            changes={"to_step": steps[0], "args": symbols}, evidence=evidence)]
 
     # -- helpers -------------------------------------------------------------------------------------------------
 
@@ -388,46 +409,62 @@ class PoseBacktracking:
     def _feasible_chain(self, world: Any, arm: str, steps: list[int], traces: Sequence[Any], active: str,
                         reference: str, objects: Mapping[str, Any], grasp: np.ndarray, rng: np.random.Generator,
                         limits: list[dict[str, Any]], after: tuple[int, np.ndarray] | None = None,
-                        deadline: float = math.inf) -> list[tuple[int, np.ndarray, dict[str, Any]]] | None:
+                        deadline: float = math.inf, starts: Sequence[np.ndarray | None] = ()
+                        ) -> tuple[list[tuple[int, np.ndarray, dict[str, Any]]] | None, bool]:
         """The first sampled candidate (trace, turn) whose gripper poses for ``steps`` are all reachable without
-        collision in a row from the current configuration, and from whose last pose the plan's next move
-        (``after``: step and gripper pose, the retreat once the part is let go) is reachable without the arm hitting
-        itself; failures are appended to ``limits``."""
+        collision in a row from the current configuration and from each of ``starts`` (where a later run that
+        replays the repaired plan begins the first of them), and from whose last pose the plan's next move
+        (``after``: step and gripper pose, the retreat once the part is let go) is free too: ``(chain, True)``.
+        Else the first that works from the current configuration only: ``(chain, False)``; else ``(None, False)``.
+        Failures are appended to ``limits``."""
         order = [int(j) for j in rng.permutation(len(traces))]
         turns = [self.turns[0], *(self.turns[int(k) + 1] for k in rng.permutation(len(self.turns) - 1))]
         per_step = {step: good_object_poses(traces, step, active, reference, reference_now=objects[reference],
                                             active_now=objects[active], turns=turns, order=order) for step in steps}
         count = min(self.max_candidates, *(len(c) for c in per_step.values()))
+        origins = [_current_q(world), *(q for q in starts if q is not None)]
+        fallback = None
         for index in range(count):
             if time.perf_counter() > deadline:
                 limits.append({"step": steps[0], "kind": None, "search_stopped": f"{self.max_check_seconds} s spent"})
-                return None
+                break
             chain = []
-            q = _current_q(world)
             for step in steps:
                 candidate = per_step[step][index]
-                target = gripper_pose_for(candidate.object_pose, grasp)
-                rounded = _parse_symbol_pose(target)
-                where = {"step": step, "trace": candidate.trace, "turn_deg": round(math.degrees(candidate.turn), 1),
-                         "target": [round(v, 4) for v in matrix_to_pose(rounded)]}
-                problem, q_next = _check_motion(world, arm, rounded, q, seed=int(getattr(world, "seed", self.seed)))
+                pose = _parse_symbol_pose(gripper_pose_for(candidate.object_pose, grasp))
+                chain.append((step, pose, {"step": step, "trace": candidate.trace,
+                                           "turn_deg": round(math.degrees(candidate.turn), 1),
+                                           "target": [round(v, 4) for v in matrix_to_pose(pose)]}))
+            problem = None
+            for number, origin in enumerate(origins):
+                problem = self._check_chain(world, arm, chain, origin, after, active)
                 if problem is not None:
-                    limits.append({**where, **problem})
+                    if number:
+                        problem["from"] = "the configuration a replay of the repaired plan starts from"
+                        fallback = fallback or chain
+                    limits.append(problem)
                     break
-                chain.append((step, rounded, where))
-                q = q_next
-            else:
-                if after is None:
-                    return chain
-                step, pose = after
-                where = {"step": step, "after_candidate": chain[-1][2], "target": [round(v, 4)
-                                                                                 for v in matrix_to_pose(pose)]}
-                problem, _ = _check_motion(world, arm, pose, q, seed=int(getattr(world, "seed", self.seed)),
-                                           released=active)
-                if problem is None:
-                    return chain
-                limits.append({**where, **problem})
-        return None
+            if problem is None:
+                return chain, True
+        return fallback, False
+
+    def _check_chain(self, world: Any, arm: str, chain: list[tuple[int, np.ndarray, dict[str, Any]]],
+                     q: np.ndarray | None, after: tuple[int, np.ndarray] | None, active: str) -> dict[str, Any] | None:
+        """The first problem (evidence with ``kind``) of running ``chain`` from configuration ``q``, then ``after``
+        with the part let go; ``None`` when it is free."""
+        seed = int(getattr(world, "seed", self.seed))
+        for _, pose, where in chain:
+            problem, q = _check_motion(world, arm, pose, q, seed=seed)
+            if problem is not None:
+                return {**where, **problem}
+        if after is None:
+            return None
+        step, pose = after
+        problem, _ = _check_motion(world, arm, pose, q, seed=seed, released=active)
+        if problem is None:
+            return None
+        return {"step": step, "after_candidate": chain[-1][2], "target": [round(v, 4) for v in matrix_to_pose(pose)],
+                **problem}
 
     def _next_move(self, world: Any, arm: str, plan: list[dict[str, Any]], last: int
                    ) -> tuple[int, np.ndarray] | None:

@@ -227,7 +227,12 @@ class MetaExecutor:
             plan_state = applied
         report.plan = [[a, *args] for a, args in plan_state.full_plan()]
         if report.status == "success" and report.attempts and self.refinements is not None and self.save_refinements:
-            report.refinement_saved = self._save_refinement(domain, report, start_objects)
+            unkept = [a.number for a in report.attempts if (a.proposal.get("evidence") or {}).get("keep") is False]
+            if unkept:  # a repair that worked from where this run stood, not from the initial state
+                report.refinement_saved = {"saved": False, "reason": f"attempt(s) {unkept}: the proposing plugin says "
+                                                                     "the repaired plan does not replay from the start"}
+            else:
+                report.refinement_saved = self._save_refinement(domain, report, start_objects)
         return self._finish(report, run, started)
 
     def _segment(self, run: RunContext, plan_state: PlanState, registry: Any, domain: Any, report: RunReport,

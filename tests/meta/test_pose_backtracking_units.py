@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from bt_meta_plugins import pose_backtracking as pb
 
-from bt_meta.bt.failures import Failure, FailureKind
+from bt_meta.bt.failures import Failure, FailureKind, RepairProposal
 from bt_meta.errors import BtMetaError
 from bt_meta.memory import Episode, ObjectState, State, Step, Trace
 from bt_meta.meta import MetaExecutor
@@ -162,3 +162,28 @@ def test_a_motion_limit_found_by_a_plugin_stops_the_repair_and_is_reported_with_
     assert limit["evidence"] == {"pair": ["right_gripper", "b1"], "target": [0.6, -0.1, -0.1, 0, 0, 0]}
     assert limit["plugin"] == "blocked" and limit["blocks_repair_of"] == {"kind": "verification", "step": 1}
     assert [f["kind"] for f in report.failures] == ["verification", "collision"]
+
+
+class ReplanButDoNotKeep:
+    """A repair that works from where the run stands but would not replay from the initial state."""
+
+    @hookimpl
+    def bt_meta_propose_repairs(self, failure: Any, context: Any) -> list[Any]:
+        return [RepairProposal("replan", 0.9, "replan here", changes={}, evidence={"keep": False})]
+
+
+def test_a_repair_its_plugin_says_does_not_replay_is_not_kept_as_a_refinement(blocks, tmp_path):
+    from bt_meta.meta import RefinementStore
+
+    problem = blocks.problem("one")
+    fault = Fault("put", mode="partial", args=("b0", "0", "0"), occurrence=1,
+                  drop=(("at", "b0", "0", "0"), ("held", "b0")))
+    world = FakeWorld(blocks.domain, problem, faults=[fault])
+    with RefinementStore.open(tmp_path / "memory.sqlite") as store:
+        plugins = make_host(("here", ReplanButDoNotKeep()), perception=False)
+        report = MetaExecutor(blocks.domain, problem, world, plugins, refinements=store).run()
+        assert report.ok and [a.proposal["plugin"] for a in report.attempts] == ["here"]
+        assert report.refinement_saved == {
+            "saved": False, "reason": "attempt(s) [1]: the proposing plugin says the repaired plan does not replay "
+                                      "from the start"}
+        assert store.list() == []

@@ -1,17 +1,23 @@
 """Plugin configurations of a monitored, repaired run: which expectation and repair plugins are registered.
 
-A configuration is only a choice of plugins -- the executor, the monitors and the reasoner are the same:
+A configuration is only a choice of plugins -- the executor, the monitors, the reasoner and the verifications (the
+problem's goal, the staging move of MagneticAttach) are the same:
 
-* ``dual`` -- symbolic and low-level expectations (grid-maps, keypoints R_p / R_n), every repair plugin
-* ``symbolic`` -- symbolic expectations only (no grid-map or keypoint plugin), every repair plugin
-* ``low_level`` -- grid-map and keypoint expectations only (no symbolic expectation plugin), every repair plugin
-* ``retry`` -- every expectation, but the only repair plugin is the retry / replan baseline
+* ``dual`` -- symbolic expectations and grid-map monitors; object substitution by grid-map retrieval; pose
+  backtracking, which compares R_p / R_n with the remembered traces (section 7.4: the staging verification
+  detects the failure, the keypoint relations localise and repair it); the retry baseline
+* ``symbolic`` -- symbolic expectations only; object substitution by symbolic matching; no pose backtracking
+  (it needs the keypoint relations); the retry baseline
+* ``low_level`` -- grid-map monitors only (no symbolic expectation plugin); the repairs of ``dual``
+* ``retry`` -- the expectations of ``dual``; the retry / replan baseline as the only repair plugin
+* ``dual_kp_monitor`` -- ``dual`` plus keypoint monitors (R_p / R_n checked after the last primitive of every task):
+  failures are caught earlier, before the attach, where pose backtracking has less to work with
 
 Offers:
 
 * :data:`CONFIGURATIONS` -- name -> one-line description
 * :func:`plugin_host` -- a :class:`~bt_meta.plugins.PluginHost` for a task file in a configuration, its memory-backed
-  expectation plugins bound to the given episodic memory
+  plugins bound to the given episodic memory
 * :data:`EXPERIENCE_REPAIRS` -- the experience-based repair plugins (registered when installed)
 """
 
@@ -24,19 +30,25 @@ from typing import Any
 
 from bt_meta.errors import BtMetaError
 
-__all__ = ["CONFIGURATIONS", "EXPERIENCE_REPAIRS", "ConfigurationError", "available_repairs", "plugin_host"]
+__all__ = ["CONFIGURATIONS", "EXPERIENCE_REPAIRS", "MAIN_CONFIGURATIONS", "ConfigurationError", "available_repairs",
+           "plugin_host"]
 
 CONFIGURATIONS = {
-    "dual": "symbolic + low-level expectations, all repair plugins",
-    "symbolic": "symbolic expectations only, all repair plugins",
-    "low_level": "grid-map and keypoint expectations only, all repair plugins",
-    "retry": "all expectations, retry / replan baseline only",
+    "dual": "symbolic expectations + grid-map monitors; substitution by grid-maps, pose backtracking by "
+            "R_p/R_n",
+    "symbolic": "symbolic expectations only; substitution by symbolic matching, no pose backtracking",
+    "low_level": "grid-map monitors only; substitution by grid-maps, pose backtracking by R_p/R_n",
+    "retry": "expectations as dual; the retry / replan baseline is the only repair",
+    "dual_kp_monitor": "dual plus keypoint (R_p/R_n) monitors at the end of every task",
 }
+
+#: The four configurations of the paper's comparison (the ablation's default).
+MAIN_CONFIGURATIONS = ("dual", "symbolic", "low_level", "retry")
 
 #: Experience-based repair plugins of the paper (module names under ``bt_meta_plugins``).
 EXPERIENCE_REPAIRS = ("object_substitution", "pose_backtracking")
 
-_LOW_LEVEL = ("gridmap_expectations", "keypoint_expectations")
+_MEMORY_EXPECTATIONS = ("gridmap_expectations", "keypoint_expectations")
 _SYMBOLIC = ("symbolic_expectations",)
 
 
@@ -56,35 +68,48 @@ def available_repairs() -> list[str]:
     return found
 
 
-def plugin_host(task_file: str | Path, memory: Any, *, configuration: str = "dual",
+def _repair_plugin(name: str, memory: Any, configuration: str, seed: int) -> Any:
+    """The repair plugin ``name`` bound to the run's memory (and seed); the symbolic configuration's object
+    substitution matches symbolically (the paper's symbol-only baseline), the others by grid-maps."""
+    module = importlib.import_module(f"bt_meta_plugins.{name}")
+    if name == "object_substitution" and hasattr(module, "ObjectSubstitution"):
+        matcher = "symbolic" if configuration == "symbolic" else "gridmap"
+        return module.ObjectSubstitution(memory, matcher=matcher)
+    if name == "pose_backtracking" and hasattr(module, "PoseBacktracking"):
+        return module.PoseBacktracking(memory, seed=seed)
+    return module
+
+
+def plugin_host(task_file: str | Path, memory: Any, *, configuration: str = "dual", seed: int = 0,
                 extra: Iterable[tuple[str, Any]] = ()) -> Any:
     """The plugins of ``configuration`` for a run of ``task_file``: entry points and the project plugins folder,
-    the grid-map and keypoint expectations bound to ``memory``, the installed experience-based repairs, then
-    ``extra`` ``(name, plugin)`` pairs (the demo's capture and recorder)."""
+    with the memory-backed expectation and repair plugins replaced by instances bound to ``memory`` (the repairs'
+    random draws to ``seed``) as the configuration chooses them, then ``extra`` ``(name, plugin)`` pairs."""
     from bt_meta.plugins import create_plugin_host
 
     if configuration not in CONFIGURATIONS:
         raise ConfigurationError(f"unknown configuration {configuration!r}; known: {', '.join(CONFIGURATIONS)}")
     host = create_plugin_host(project_file=task_file)
-    names = set(host.plugin_names())
-    for name in EXPERIENCE_REPAIRS:  # not every install registers them as entry points yet
-        if name not in names and name in available_repairs():
-            host.register(importlib.import_module(f"bt_meta_plugins.{name}"), name, source="bt-meta demo")
-    for name in _LOW_LEVEL:
+    for name in (*EXPERIENCE_REPAIRS, *_MEMORY_EXPECTATIONS):  # entry points replaced by memory-bound instances
         if name in host.plugin_names():
             host.unregister(name)
+    repairs = [] if configuration == "retry" else available_repairs()
+    if configuration == "symbolic":
+        repairs = [name for name in repairs if name != "pose_backtracking"]
+    for name in repairs:
+        host.register(_repair_plugin(name, memory, configuration, seed), name, source="bt-meta demo (memory-bound)")
     if configuration != "symbolic":
         from bt_meta_plugins.gridmap_expectations import GridMapExpectations
-        from bt_meta_plugins.keypoint_expectations import KeypointExpectations
 
         host.register(GridMapExpectations(memory), "gridmap_expectations", source="bt-meta demo (memory-bound)")
-        host.register(KeypointExpectations(memory), "keypoint_expectations", source="bt-meta demo (memory-bound)")
+    if configuration == "dual_kp_monitor":
+        from bt_meta_plugins.keypoint_expectations import KeypointExpectations
+
+        # checked after the last primitive of each task (the task's bubbled-up expectation)
+        host.register(KeypointExpectations(memory, check="task_end"), "keypoint_expectations",
+                      source="bt-meta demo (memory-bound)")
     if configuration == "low_level":
         for name in _SYMBOLIC:
-            if name in host.plugin_names():
-                host.unregister(name)
-    if configuration == "retry":
-        for name in EXPERIENCE_REPAIRS:
             if name in host.plugin_names():
                 host.unregister(name)
     for name, plugin in extra:

@@ -81,10 +81,17 @@ def _status_pill(status: str) -> str:
     return f'<span class="pill {css}">{_e(status)}</span>'
 
 
+def _truth(run: dict[str, Any]) -> str:
+    if run.get("achieved") is None:
+        return f"<span class=small>{_e(run.get('truth') or 'unknown')}</span>"
+    pill = '<span class="pill ok">yes</span>' if run["achieved"] else '<span class="pill bad">no</span>'
+    return f"{pill} <span class=small>{_e(run.get('truth'))}</span>"
+
+
 def _summary_table(summary: dict[str, Any]) -> str:
     head = ("<tr><th>pass</th><th>family</th><th>problem / variant</th><th>status</th><th>attempts</th>"
             "<th>failure kinds seen</th><th>repairs applied</th><th>refinement used</th><th>refinement learned</th>"
-            "<th>not repaired because</th><th>ticks</th><th>time (s)</th></tr>")
+            "<th>not repaired because</th><th>task done (simulator)</th><th>ticks</th><th>time (s)</th></tr>")
     rows = []
     for run in summary["runs"]:
         repairs = "<br>".join(f"#{r['number']} {_e(r['action'])} ({_e(r['plugin'])}) → {_e(r['outcome'])}"
@@ -96,7 +103,7 @@ def _summary_table(summary: dict[str, Any]) -> str:
             f'<td>{run["attempts"]}</td><td>{_e(kinds)}</td><td>{repairs}</td>'
             f'<td>{_e(", ".join(run["refinements_used"]) or "-")}</td><td>{_e(run["refinement_saved"] or "-")}</td>'
             f'<td>{_e(run["stop_reason"] or run["error"] or "") if run["status"] != "success" else ""}</td>'
-            f'<td>{run["ticks"]}</td><td>{run["seconds"]}</td></tr>')
+            f'<td>{_truth(run)}</td><td>{run["ticks"]}</td><td>{run["seconds"]}</td></tr>')
     return f"<table>{head}{''.join(rows)}</table>"
 
 
@@ -262,7 +269,10 @@ def _run_section(outcome: Any) -> str:
     if data["refinement_saved"]:
         head += f"Learned the refinement {_e(data['refinement_saved'])}. "
     if data["status"] != "success":
-        head += f"<b>Not repaired</b>: {_e(data['stop_reason'] or data['error'])}"
+        head += f"<b>Not repaired</b>: {_e(data['stop_reason'] or data['error'])}. "
+    if data["achieved"] is not None:
+        head += f"Ground truth (simulator): task {'done' if data['achieved'] else '<b>not done</b>'} -- " \
+                f"{_e(data['truth'])}."
     head += "</p>"
     if outcome.error:
         return head + f"<pre>{_e(outcome.error)}</pre>"
@@ -306,7 +316,9 @@ def render_report(result: Any) -> str:
              f"{_e(', '.join(summary['repair_plugins']))}. Demo {'completed' if summary['completed'] else 'INCOMPLETE'}"
              f" in {summary['seconds']} s.</p><p>First pass: {totals['first_pass_success']}/{totals['variants']} "
              f"variants succeeded ({totals['first_pass_repaired']} after repairs, {totals['first_pass_attempts']} "
-             f"attempts in all). Second pass: {totals['second_pass_success']}/{len(second)} succeeded, "
+             f"attempts in all; the simulator confirms the task done in {totals['first_pass_achieved']}; "
+             f"{totals['false_successes']} run(s) of both passes ended success without the task done). "
+             f"Second pass: {totals['second_pass_success']}/{len(second)} succeeded, "
              f"{totals['second_pass_zero_attempts']} with zero attempts, {totals['second_pass_using_refinements']} "
              "planned with a learned refinement.</p>")
     if summary["crashed"]:

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import time
 import traceback
@@ -92,6 +93,9 @@ class VariantOutcome:
     trees: list[dict[str, Any]] = field(default_factory=list)
     error: str | None = None
     seconds: float = 0.0
+    achieved: bool | None = None
+    """Ground truth from the simulator (:mod:`bt_meta.demo.truth`): is the task really done?"""
+    truth: str = ""
 
     @property
     def status(self) -> str:
@@ -121,10 +125,20 @@ class VariantOutcome:
                          for r in report.get("reported") or []],
             "stop_reason": report.get("stop_reason", ""),
             "refinements_used": list(report.get("refinements_used") or []),
-            "refinement_saved": None if not refinement else refinement.get("method", refinement),
+            "refinement_saved": _saved(refinement),
             "initial_plan": report.get("initial_plan", []), "plan": report.get("plan", []),
             "ticks": report.get("ticks", 0), "seconds": round(self.seconds, 3), "error": self.error,
+            "achieved": self.achieved, "truth": self.truth,
         }
+
+
+def _saved(refinement: dict[str, Any] | None) -> str | None:
+    """The learned refinement's method name, or why the repaired plan was not kept."""
+    if not refinement:
+        return None
+    if refinement.get("saved") is False:
+        return f"not kept: {refinement.get('reason')}"
+    return str(refinement.get("method"))
 
 
 @dataclass
@@ -163,6 +177,8 @@ class DemoResult:
                 "first_pass_success": sum(r.status == "success" for r in first),
                 "first_pass_repaired": sum(r.to_dict()["repaired"] for r in first),
                 "first_pass_attempts": sum(len(r.attempts) for r in first),
+                "first_pass_achieved": sum(bool(r.achieved) for r in first),
+                "false_successes": sum(r.status == "success" and r.achieved is False for r in self.runs),
                 "second_pass_success": sum(r.status == "success" for r in second),
                 "second_pass_zero_attempts": sum(r.status == "success" and not r.attempts for r in second),
                 "second_pass_using_refinements": sum(bool(r.report.get("refinements_used")) for r in second),
@@ -175,6 +191,12 @@ class DemoResult:
 # -- recording ------------------------------------------------------------------------------------------------------
 
 
+#: Seeded start-pose noise of every object (m, rad): demonstrations and runs vary as an instructor's would (the
+#: shipped scenes have no jitter of their own).
+JITTER_POSITION = 0.003
+JITTER_YAW = math.radians(2.0)
+
+
 def _world(task_path: Path, problem: str, variant: str | None, seed: int) -> tuple[Any, Any, Any]:
     from bt_meta.htn import load_task_file
     from bt_meta.world.sim_world import SimWorld, load_grounding, quiet_stdout
@@ -184,7 +206,28 @@ def _world(task_path: Path, problem: str, variant: str | None, seed: int) -> tup
     with quiet_stdout():
         world = SimWorld(task_file.domain, chosen, load_grounding(task_file.domain.name, task_path),
                          variant=variant, seed=seed)
+    try:
+        jitter(world, seed)
+    except BaseException:
+        world.close()
+        raise
     return task_file, chosen, world
+
+
+def jitter(world: Any, seed: int, position: float = JITTER_POSITION, yaw: float = JITTER_YAW) -> None:
+    """Move every object by seeded noise (x, y within ``position``, yaw within ``yaw``; about the base z axis)."""
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    sim = world.sim
+    for name in sorted(sim.object_names()):
+        pose = list(sim.object_pose(name))
+        dx, dy = rng.uniform(-position, position, 2)
+        pose[0], pose[1] = pose[0] + float(dx), pose[1] + float(dy)
+        pose[5] += float(rng.uniform(-yaw, yaw))
+        sim.move_object(name, pose)
+    sim.settle(60)
+    world.sync_collision()
 
 
 def _already_recorded(memory: Any, demo: Demonstration, task: str) -> int | None:
@@ -274,16 +317,20 @@ def run_variant(
     try:
         capture = RunCapture(progress, world, label=run.label, echo=not progress.quiet)
         outcome.capture = capture
-        host = plugin_host(task_path, memory, configuration=configuration, extra=[("demo_capture", capture)])
+        host = plugin_host(task_path, memory, configuration=configuration, seed=run.seed,
+                           extra=[("demo_capture", capture)])
         if pictures:
             outcome.before_png, _ = top_view_png(world)
         executor = CapturingExecutor(
             task_file.domain, problem, world, host, capture=capture,
             limits=Limits(max_attempts=max_attempts, max_seconds=max_seconds), refinements=refinements,
-            save_refinements=save_refinements, task_file=task_file, variant=run.variant)
+            save_refinements=save_refinements, task_file=task_file, variant=run.variant, memory=memory)
         report = executor.run()
         progress.done()
         outcome.report = report.to_dict()
+        from bt_meta.demo.truth import achieved
+
+        outcome.achieved, outcome.truth = achieved(run.family, world, memory, problem)
         if pictures:
             outcome.after_png, after_view = top_view_png(world)
             outcome.gridmaps = _gridmap_pictures(capture, after_view)
@@ -406,9 +453,14 @@ def _print_outcome(progress: Progress, outcome: VariantOutcome) -> None:
         text += f"; used refinement {', '.join(used)}"
     if saved.get("method"):
         text += f"; learned refinement {saved['method']}"
+    elif saved.get("saved") is False:
+        text += f"; repaired plan not kept as a refinement: {saved.get('reason')}"
     if report.get("status") != "success":
         text += f"; not repaired: {report.get('stop_reason')}"
     progress.line(text)
+    if outcome.achieved is not None:
+        verdict = "done" if outcome.achieved else "NOT done"
+        progress.line(f"     task {verdict} in the simulator: {outcome.truth}")
 
 
 def run_demo(

@@ -14,8 +14,11 @@ On a ``verification`` (or keypoint ``unexpected_configuration``) failure the plu
 4. samples (seeded) a known-good pose of the active object for each such step from the traces, relative to the
    reference object (its attachment point and normal where they were in a success, the rotation about the normal
    the trace's first, then others), turns it into a gripper pose through the current object-gripper relation
-   (``gripper = object @ inverse(grasp)``), checks IK and collision of the chain of moves from the current
-   configuration (the world's collision-aware IK and its collision checker, joint-space path included);
+   (``gripper = object @ inverse(grasp)``), checks IK and collision of the chain of moves -- and of the plan's
+   next move once the part is let go -- from the current configuration and from the one a later replay of the
+   repaired plan starts in (the world's collision-aware IK and its collision checker, joint-space paths included,
+   the same solver and seed as the MoveTo skill); a chain that only works from where the run stands is still
+   proposed, marked ``keep: False`` so the executor does not save it as a refinement;
 5. proposes ``backtrack {"to_step": k, "args": {step: [pose symbol]}}`` with a durable pose symbol the world grounds
    (``pose:x:y:z:roll:pitch:yaw``, registered with ``world.register_pose``), scored by how well the traces agree;
    when no sampled pose at any remaining depth is feasible it answers with a ``collision`` or ``reachability``

@@ -158,6 +158,10 @@ def test_each_further_attempt_backtracks_one_pose_further(memory_file):
             proposals = plugin.bt_meta_propose_repairs(diagnosis.failure, context)
             assert len(proposals) == 1
             assert proposals[0].changes["to_step"] == 4 and sorted(proposals[0].changes["args"]) == ["4", "5"]
+            # the sampling is seeded: a plugin with the same seed (and the same current trace) proposes the same poses
+            twin = pose_backtracking.PoseBacktracking(memory, n=3, seed=0)
+            twin._run, twin._current, twin._q = plugin._run, plugin._current, plugin._q
+            assert twin.bt_meta_propose_repairs(diagnosis.failure, context)[0].changes == proposals[0].changes
             assert ("pose", proposals[0].changes["args"]["4"][0]) in world.symbolic_state()  # grounded by the world
             deeper = Attempt(2, {}, "verification", {"action": "backtrack", "changes": {"to_step": 3, "args": {}},
                                                      "evidence": {"strategy": "pose_backtracking"}}, "", 12, 0.0)
@@ -188,3 +192,39 @@ def test_blocked_good_poses_are_reported_with_their_motion_limit_not_looped_on(m
         assert any(name.startswith("post") for entry in contacts for name in entry["pair"])
     assert limit["blocks_repair_of"] == {"kind": "verification", "step": 12}
     assert report.refinement_saved is None
+
+
+def test_a_keypoint_mismatch_mid_plan_is_repaired_but_not_kept_when_the_repair_would_not_replay(memory_file):
+    """Monitoring R_p/R_n at the end of each task (section 7.5.3) flags the part on its side after PickPart
+    (step 3); the plugin redoes steps 3-5 from where the arm stands. Replayed from the start, turning the part right
+    above the table would hit it, so the repair is applied but not kept as a refinement."""
+    from bt_meta_plugins import ground_truth_perception, keypoint_expectations
+
+    from bt_meta.htn import load_task_file
+    from bt_meta.memory import EpisodicMemory
+    from bt_meta.world.sim_world import SimWorld, load_grounding, quiet_stdout
+
+    task_file = load_task_file(TASK_FILE)
+    problem = task_file.problem("nominal")
+    with quiet_stdout():
+        world = SimWorld(task_file.domain, problem, load_grounding(task_file.domain.name, TASK_FILE),
+                         variant="active_on_side", seed=0)
+    try:
+        with EpisodicMemory.open(memory_file, readonly=True) as memory, RefinementStore.open(memory_file) as store:
+            plugins = create_plugin_host(entry_points=False, plugins=[
+                ("classification_rules", classification_rules), ("retry_repair", retry_repair),
+                ("refinement_predicates", refinement_predicates), ("ground_truth_perception", ground_truth_perception),
+                ("keypoint_expectations", keypoint_expectations.KeypointExpectations(memory, check="task_end")),
+                ("pose_backtracking", pose_backtracking.PoseBacktracking(memory, n=3, seed=0))])
+            report = MetaExecutor(task_file.domain, problem, world, plugins, task_file=task_file, refinements=store,
+                                  variant="active_on_side", memory=memory).run()
+            assert report.ok, report.stop_reason
+            assert [(a.kind, a.step, a.proposal["changes"]["to_step"]) for a in report.attempts] == [
+                ("unexpected_configuration", 3, 3)]
+            evidence = report.attempts[0].proposal["evidence"]
+            assert evidence["replayable"] is False and evidence["keep"] is False
+            assert evidence["not_kept_because"]["from"].startswith("the configuration a replay")
+            assert report.refinement_saved["saved"] is False and store.list() == []
+            assert world.sim.attachments() == [("active", "reference")]
+    finally:
+        world.close()

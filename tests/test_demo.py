@@ -16,7 +16,7 @@ import pytest
 from bt_meta.cli import main
 from bt_meta.demo.report import grid_svg
 from bt_meta.demo.scenario import demonstrations, variants
-from bt_meta.demo.svg import TreeNode, line_plot_svg, tree_from_behaviour, tree_svg
+from bt_meta.demo.svg import TreeNode, _nice_ticks, line_plot_svg, tree_from_behaviour, tree_svg
 
 #: Families whose learned refinement does not plan on the next run yet: the letters refinement places b6, which
 #: problem A's initial state does not know (object substitution anchors it only while repairing).
@@ -64,6 +64,7 @@ def test_line_plot_and_grid_pictures_are_well_formed():
     ElementTree.fromstring(svg)
     assert "polyline" in svg and "failure" in svg and "polygon" in svg
     assert "no data" in line_plot_svg({}, title="empty", x_label="x", y_label="y")
+    assert _nice_ticks(0.0, 189.0)[-1] >= 189.0 and _nice_ticks(0.0, 189.0)[0] == 0.0  # the axis covers the data
     grid = grid_svg("..bb\nr..b", title="remembered")
     ElementTree.fromstring(grid)
     assert grid.count("<rect") == 8

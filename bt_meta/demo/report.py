@@ -60,7 +60,8 @@ def grid_svg(grid: str | None, *, cell: int = 14, title: str = "") -> str:
         return '<div class="small">(no map)</div>'
     rows = grid.splitlines()
     cols = max(len(r) for r in rows)
-    width, height = cols * cell + 2, len(rows) * cell + 2 + (14 if title else 0)
+    width = max(cols * cell + 2, int(len(title) * 6.2) + 4)
+    height = len(rows) * cell + 2 + (14 if title else 0)
     top = 14 if title else 0
     out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" font-size="11" '
            f'font-family="sans-serif">']

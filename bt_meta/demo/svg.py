@@ -116,7 +116,8 @@ def tree_svg(root: TreeNode, *, title: str = "") -> str:
 
     walk(root, 0, None)
     indent, row_h, box_h, char_w = 22, 22, 17, 6.6
-    width = max(int(d * indent + 30 + len(_label(n)) * char_w) for d, n, _ in rows) + 20
+    width = max(max(int(d * indent + 30 + len(_label(n)) * char_w) for d, n, _ in rows) + 20,
+                len(STATUS_COLOURS) * 90 + 10, int(len(title) * 7.5) + 10)
     top = 24 if title else 6
     height = top + row_h * len(rows) + 26
     out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
@@ -159,12 +160,9 @@ def _nice_ticks(low: float, high: float, count: int = 5) -> list[float]:
     raw = (high - low) / max(count, 1)
     magnitude = 10 ** math.floor(math.log10(raw))
     step = min((m * magnitude for m in (1, 2, 2.5, 5, 10) if m * magnitude >= raw), default=raw)
-    first = math.floor(low / step) * step
-    ticks, value = [], first
-    while value <= high + step * 1e-9:
-        ticks.append(round(value, 10))
-        value += step
-    return ticks
+    first = math.floor(low / step + 1e-9) * step
+    last = math.ceil(high / step - 1e-9) * step
+    return [round(first + i * step, 10) for i in range(round((last - first) / step) + 1)]
 
 
 def line_plot_svg(
@@ -174,7 +172,7 @@ def line_plot_svg(
     x_label: str,
     y_label: str,
     width: int = 460,
-    height: int = 240,
+    height: int = 270,
     bands: Mapping[str, Sequence[tuple[float, float, float]]] | None = None,
     markers: Sequence[tuple[float, str]] = (),
 ) -> str:
@@ -191,7 +189,8 @@ def line_plot_svg(
     x_ticks = _nice_ticks(min(xs), max(xs), 6)
     y_ticks = _nice_ticks(min(0.0, min(ys)), max(ys) * 1.05 if max(ys) > 0 else 1.0, 5)
     x0, x1, y0, y1 = x_ticks[0], x_ticks[-1], y_ticks[0], y_ticks[-1]
-    left, right, top, bottom = 52, 12, 26, 40
+    left, right, top = 52, 12, 26
+    bottom = 40 + 14 * len(series)  # axis labels, then one legend line per series
     pw, ph = width - left - right, height - top - bottom
 
     def sx(x: float) -> float:
@@ -209,7 +208,7 @@ def line_plot_svg(
                    f'<text x="{left - 4}" y="{sy(t) + 4:.1f}" text-anchor="end">{t:g}</text>')
     for t in x_ticks:
         out.append(f'<text x="{sx(t):.1f}" y="{top + ph + 14}" text-anchor="middle">{t:g}</text>')
-    out.append(f'<text x="{left + pw / 2}" y="{height - 6}" text-anchor="middle">{_esc(x_label)}</text>')
+    out.append(f'<text x="{left + pw / 2}" y="{top + ph + 30}" text-anchor="middle">{_esc(x_label)}</text>')
     out.append(f'<text x="12" y="{top + ph / 2}" text-anchor="middle" '
                f'transform="rotate(-90 12 {top + ph / 2})">{_esc(y_label)}</text>')
     for x, label in markers:
@@ -240,7 +239,8 @@ def line_plot_svg(
             if y is not None:
                 out.append(f'<circle cx="{sx(x):.1f}" cy="{sy(y):.1f}" r="2.6" fill="{colour}"><title>'
                            f'{_esc(name)} step {x:g}: {y:.4g}</title></circle>')
-        out.append(f'<rect x="{left + 8}" y="{top + 8 + index * 14}" width="10" height="3" fill="{colour}"/>'
-                   f'<text x="{left + 22}" y="{top + 13 + index * 14}">{_esc(name)}</text>')
+        legend_y = top + ph + 44 + index * 14
+        out.append(f'<rect x="{left}" y="{legend_y - 4}" width="14" height="3" fill="{colour}"/>'
+                   f'<text x="{left + 20}" y="{legend_y}">{_esc(name)}</text>')
     out.append("</svg>")
     return "".join(out)

@@ -356,6 +356,17 @@ class _Library:
         return out
 
 
+def _done_targets(plan: Sequence[Mapping[str, Any]]) -> set[tuple[str, ...]]:
+    """Each executed step as its action and its arguments after the first (the entity it moved, as in
+    ``place(block, x, y)``): for ``place``, the cells an executed step already filled."""
+    targets = set()
+    for step in plan:
+        if step.get("done"):
+            args = [str(a) for a in step["args"]]
+            targets.add((str(step["action"]), *args[1:]))
+    return targets
+
+
 def _call(action: str, args: Sequence[Any]) -> str:
     return f"{action}({', '.join(str(a) for a in args)})"
 
@@ -485,6 +496,7 @@ class ObjectSubstitution:
         current = [(p["action"], [str(a) for a in p["args"]]) for p in plan[start:start + len(tail)]]
         end = start + len(tail) if [a for a, _ in current] == [a for a, _ in tail] else start + 1
         missing = {e.name for e in retrieval.vector.missing}
+        done_targets = _done_targets(plan)
         out: list[RepairProposal] = []
         for match in retrieval.matches:
             if not match.realisable or len(out) >= self.max_proposals:
@@ -495,6 +507,11 @@ class ObjectSubstitution:
                         "query": {"step": start, "call": retrieval.query_call, "episode": retrieval.query_episode,
                                   "decomposition": query.describe()}}
             calls = [[action, *(match.binding.get(a, a) for a in args)] for action, args in match.decomposition.calls]
+            entities = set(match.binding.values())
+            if any((c[0], *(a for a in c[1:] if a not in entities)) in done_targets for c in calls):
+                # The matched decomposition would put a block where an executed step already put one (e.g. A's
+                # own legs matched when H was never recorded): it cannot be the form the missing entity drew.
+                continue
             one_for_one = (len(calls) == end - start == 1 and calls[0][0] == plan[start]["action"]
                            and len(match.binding) == 1)
             if one_for_one:

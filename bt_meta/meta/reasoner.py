@@ -33,6 +33,7 @@ Offers:
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from dataclasses import asdict, dataclass, field
@@ -146,7 +147,9 @@ class MetaReasoner:
         ancestors = [] if node_id is None else [
             {"id": a.id, "task": list(a.task), "method": a.method} for a in tree.ancestors(node_id)]
         primary.evidence["localisation"] = {"step": step, "node_id": node_id, "ancestors": ancestors}
-        primary.evidence["plan"] = plan_state.describe()
+        # The segment started at the cursor and ran up to the failing step: the steps before it are done.
+        executed = plan_state if step < plan_state.cursor else dataclasses.replace(plan_state, cursor=step)
+        primary.evidence["plan"] = executed.describe()
         primary.evidence["repair_history"] = [a.to_dict() for a in history or []]
         if related:
             primary.evidence.setdefault("related", [f.summary() for f in related])

@@ -300,4 +300,4 @@ def test_simulator_two_1x1_same_colour_repaired_by_gridmap_substitution_not_by_s
     assert seen == expected  # every block where the letter wants it, nothing else in the letter's area
     symbolic_run = row["runs"]["symbolic"]
     assert symbolic_run["status"] == "failed" and symbolic_run["repairs"] == []
-    assert symbolic_run["stop_reason"] == "no repair proposed for unexpected_configuration at step 4"
+    assert symbolic_run["stop_reason"] == "no repair proposed for unknown_entity at step 4"

@@ -3,11 +3,11 @@
 On the memory ``DIR/memory.sqlite`` (new when absent, reused when present) it records the demonstrations, runs the
 variants on the simulator with monitors and the meta-reasoner, runs each variant again to show the learned
 refinements used with zero repair attempts, and writes ``DIR/report.html`` and ``DIR/summary.json``
-(:mod:`bt_meta.demo`). Headless; a few minutes on 2 cores (``--quick``: fewer seeds and one variant per family).
+(the bt_meta.demo package). Headless; a few minutes on 2 cores (``--quick``: fewer seeds and one variant per family).
 
-Exit status: **0** when the demo completed -- every demonstration is in memory and every variant run ran to an
+Exit status: 0 when the demo completed -- every demonstration is in memory and every variant run ran to an
 outcome, repaired or not (a variant that is not repaired is reported in the summary and the report, not hidden);
-**1** when a step of the demo itself failed (a demonstration could not be recorded, a run crashed); **2** bad
+1 when a step of the demo itself failed (a demonstration could not be recorded, a run crashed); 2 bad
 input (e.g. ``--out`` names a file).
 """
 
@@ -30,7 +30,8 @@ class DemoInputError(UserInputError):
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "demo", help="record demonstrations, repair the variants, reuse the repairs; writes DIR/report.html",
-        description=__doc__.split("\n\n")[1])
+        description=__doc__.split("\n\n", 1)[1].replace("``", ""),
+        formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="demo-output", metavar="DIR",
                         help="output folder: memory.sqlite, report.html, summary.json (default demo-output)")
     parser.add_argument("--seed", type=int, default=0, help="seed of every random draw (default 0)")

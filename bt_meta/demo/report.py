@@ -314,7 +314,8 @@ def render_report(result: Any) -> str:
     second = [r for r in result.runs if r.pass_number == 2]
     intro = (f"<p>Memory <code>{_e(summary['memory'])}</code> ({'new' if summary['fresh_memory'] else 'reused'}), "
              f"seed {summary['seed']}{', quick' if summary['quick'] else ''}; repair plugins installed: "
-             f"{_e(', '.join(summary['repair_plugins']))}. Demo {'completed' if summary['completed'] else 'INCOMPLETE'}"
+             f"{_e(', '.join(summary['repair_plugins']))}; configuration {_e(summary['configuration']['name'])}: "
+             f"{_e(summary['configuration']['plugins'])}. Demo {'completed' if summary['completed'] else 'INCOMPLETE'}"
              f" in {summary['seconds']} s.</p><p>First pass: {totals['first_pass_success']}/{totals['variants']} "
              f"variants succeeded ({totals['first_pass_repaired']} after repairs, {totals['first_pass_attempts']} "
              f"attempts in all; the simulator confirms the task done in {totals['first_pass_achieved']}; "

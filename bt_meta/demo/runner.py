@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from bt_meta.demo.capture import CapturingExecutor, Progress, RunCapture, top_view_png
-from bt_meta.demo.configurations import available_repairs, plugin_host
+from bt_meta.demo.configurations import CONFIGURATIONS, available_repairs, plugin_host
 from bt_meta.demo.scenario import FAMILIES, Demonstration, VariantRun, demonstrations, variants
 from bt_meta.errors import BtMetaError
 
@@ -44,6 +44,9 @@ __all__ = ["DemoResult", "RecordOutcome", "VariantOutcome", "memory_environment"
            "run_demo", "run_variant"]
 
 MEMORY_FILE = "memory.sqlite"
+
+#: The plugin configuration the demo runs (``bt-meta experiment ablation`` compares it with the others).
+DEMO_CONFIGURATION = "dual"
 
 
 @contextlib.contextmanager
@@ -170,6 +173,7 @@ class DemoResult:
             "out": str(self.out), "memory": str(self.memory_path), "seed": self.seed, "quick": self.quick,
             "fresh_memory": self.fresh_memory, "completed": self.completed, "seconds": round(self.seconds, 3),
             "repair_plugins": self.repair_plugins,
+            "configuration": {"name": DEMO_CONFIGURATION, "plugins": CONFIGURATIONS[DEMO_CONFIGURATION]},
             "demonstrations": [r.to_dict() for r in self.records],
             "runs": [r.to_dict() for r in self.runs],
             "totals": {
@@ -510,7 +514,8 @@ def run_demo(
             for number, run in enumerate(runs, 1):
                 progress.line(f"\n  ({number}/{len(runs)}) {FAMILIES[run.family].task_file} problem {run.problem}, "
                               f"variant {run.variant}, seed {run.seed}")
-                outcome = run_variant(run, memory, refinements, progress, pass_number=pass_number)
+                outcome = run_variant(run, memory, refinements, progress, pass_number=pass_number,
+                                      configuration=DEMO_CONFIGURATION)
                 if outcome.error:
                     result.crashed.append(f"{run.label} pass {pass_number}: {outcome.error.splitlines()[0]}")
                 result.runs.append(outcome)

@@ -13,7 +13,7 @@ Offers:
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from bt_meta.htn.conditions import DNEG, DPOS, POS, Clause, Condition, Step, Term, Var, candidates, ground, match_clause
@@ -74,6 +74,13 @@ class Axiom:
     source: str
     line: int | None = None
     column: int | None = None
+    # the head's variable names when they are all distinct variables (a ground atom binds them with one zip)
+    head_names: tuple[str, ...] | None = field(default=None, init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        names = tuple(a.name for a in self.head_args if isinstance(a, Var))
+        if len(names) == len(self.head_args) and len(set(names)) == len(names):
+            self.head_names = names
 
 
 class DerivedIndex:
@@ -231,11 +238,11 @@ class AxiomSet:
         """Truth of one ground derived atom, top-down with a per-state memo inherited from the parent state.
 
         Each proof records which facts it read (as (predicate, first argument) keys) and which derived atoms it
-        used, in indexes shared by all states; a successor state copies its parent's memo and drops what its
-        changed facts reach through those indexes, so a move of one block re-proves only what depends on that
-        block. Deep or cyclic derivations (an atom needed to prove itself, or more than ``MAX_DEPTH`` nested
-        atoms) fall back to the bottom-up extension of the predicate, which is exact and needs no Python
-        recursion beyond the number of strata.
+        used, in indexes shared by the states of one search (reset by :meth:`begin`); a successor state copies
+        its parent's memo and drops what its changed facts reach through those indexes, so a move of one block
+        re-proves only what depends on that block. Deep or cyclic derivations (an atom needed to prove itself,
+        or more than ``MAX_DEPTH`` nested atoms) fall back to the bottom-up extension of the predicate, which is
+        exact and needs no Python recursion beyond the number of strata.
         """
         recorder_in = None
         if isinstance(state, _Recorder):
@@ -373,9 +380,13 @@ class AxiomSet:
 
     def _prove(self, state: Any, atom: Atom) -> bool:
         for axiom in self.rules[atom[0]]:
-            env = _unify(axiom.head_args, atom, {})
-            if env is None:
-                continue
+            names = axiom.head_names
+            if names is not None and len(names) == len(atom) - 1:
+                env: dict[str, str] | None = dict(zip(names, atom[1:], strict=False))
+            else:
+                env = _unify(axiom.head_args, atom, {})
+                if env is None:
+                    continue
             for clause in axiom.condition.clauses:
                 for _ in match_clause(clause, state, env, None, self):
                     return True

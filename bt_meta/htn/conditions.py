@@ -593,7 +593,7 @@ def match_clause(steps: Sequence[Step], state: State, env: dict[str, str], exter
     if ops[0] is _TESTS:  # nothing to bind: a conjunction of tests, decided without a generator
         for op in ops[1]:
             if op[0] == "T":
-                atom = (op[2], *[env[v] if is_var else v for is_var, v in op[3]])
+                atom = op[4](env)
                 kind = op[1]
                 if kind == POS:
                     ok = atom in state
@@ -632,7 +632,7 @@ def _plan(steps: Sequence[Step], bound: frozenset[str]) -> tuple:
         kind = step[0]
         if kind in (NEG, DNEG):  # variables are bound (checked at load time): a ground test
             getters_neg = tuple((True, a.name) if isinstance(a, Var) else (False, a) for a in step[2])
-            ops.append(("T", kind, step[1], getters_neg))
+            ops.append(("T", kind, step[1], getters_neg, _atom_builder(step[1], getters_neg)))
             continue
         if kind not in (POS, DPOS):
             ops.append(("X", step))
@@ -652,7 +652,7 @@ def _plan(steps: Sequence[Step], bound: frozenset[str]) -> tuple:
             else:
                 getters.append((False, arg))
         if not free:
-            ops.append(("T", kind, pred, tuple(getters)))
+            ops.append(("T", kind, pred, tuple(getters), _atom_builder(pred, tuple(getters))))
             continue
         free_positions = {position for position, _, _ in free}
         bound_positions = [p for p in range(1, len(getters) + 1) if p not in free_positions]
@@ -664,6 +664,24 @@ def _plan(steps: Sequence[Step], bound: frozenset[str]) -> tuple:
     if all(op[0] != "F" for op in ops):
         return (_TESTS, tuple(ops))
     return tuple(ops)
+
+
+def _atom_builder(pred: str, getters: tuple[tuple[bool, str], ...]) -> Callable[[dict[str, str]], Atom]:
+    """A function from a binding to the ground atom of a test literal, specialised for the usual arities."""
+    if not any(is_var for is_var, _ in getters):
+        atom = (pred, *[v for _, v in getters])
+        return lambda env: atom
+    if len(getters) == 1:
+        name = getters[0][1]
+        return lambda env: (pred, env[name])
+    if len(getters) == 2:
+        (first_var, first), (second_var, second) = getters
+        if first_var and second_var:
+            return lambda env: (pred, env[first], env[second])
+        if first_var:
+            return lambda env: (pred, env[first], second)
+        return lambda env: (pred, first, env[second])
+    return lambda env: (pred, *[env[v] if is_var else v for is_var, v in getters])
 
 
 _TESTS = "tests-only"  # marks the plan of a clause that binds nothing (see match_clause)
@@ -689,7 +707,7 @@ def _match_many(ops: tuple, state: State, env: dict[str, str], external: Externa
         if it is None:  # open the level
             tag = op[0]
             if tag == "T":
-                atom = (op[2], *[env[v] if is_var else v for is_var, v in op[3]])
+                atom = op[4](env)
                 kind = op[1]
                 if kind in (POS, NEG):
                     ok = atom in state

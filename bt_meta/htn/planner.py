@@ -215,7 +215,7 @@ class Search:
                             method, env = alternative
                             index = len(trail)
                             trail.append([task, "compound", method.name, env, item[2], state, None])
-                            key = (task, hash(state))
+                            key = (task, state._hash)
                             active.setdefault(key, []).append(state)
                             undo.append((True, key))
                             agenda = ((CLOSE, key, state), rest)
@@ -281,7 +281,7 @@ class Search:
                     alternatives = iter(found)
                 else:
                     decl = tasks_decl[name]
-                    key = (task, hash(state))
+                    key = (task, state._hash)
                     seen = active.get(key)
                     if seen is not None and any(s == state for s in seen):
                         self.loops += 1

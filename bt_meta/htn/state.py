@@ -17,6 +17,7 @@ Atom = tuple[str, ...]
 
 _MASK = (1 << 64) - 1
 _EMPTY: dict[Atom, None] = {}
+INDEX_DEPTH = 8  # how far up the parent chain with_arg looks for an index to update instead of rebuilding
 
 
 def atom_text(atom: Iterable[str]) -> str:
@@ -92,22 +93,65 @@ class State:
     def with_arg(self, pred: str, position: int, value: str) -> tuple[Atom, ...]:
         """Atoms of ``pred`` whose argument ``position`` (1-based, as in the tuple) is ``value``.
 
-        The index of a (predicate, position) is built the first time it is asked for in a state and updated
-        incrementally by :meth:`apply`, so successors inherit it.
+        The index of a (predicate, position) is made the first time it is asked for in a state: from the nearest
+        ancestor that has it, updated with the changes since (:meth:`_index_from_ancestor`), else from scratch.
+        Successors share the indexes of the predicates an action leaves alone; the others are only rebuilt when
+        asked for, so a state that is only tested for membership never pays for them.
         """
         by_position = self._by_arg.get(pred)
         index = by_position.get(position) if by_position is not None else None
         if index is None:
-            built: dict[str, list[Atom]] = {}
-            for atom in self._preds.get(pred, _EMPTY):
-                if len(atom) > position:
-                    built.setdefault(atom[position], []).append(atom)
-            index = {k: tuple(v) for k, v in built.items()}
+            index = self._index_from_ancestor(pred, position)
+            if index is None:
+                built: dict[str, list[Atom]] = {}
+                for atom in self._preds.get(pred, _EMPTY):
+                    if len(atom) > position:
+                        built.setdefault(atom[position], []).append(atom)
+                index = {k: tuple(v) for k, v in built.items()}
             if by_position is None:
                 self._by_arg[pred] = {position: index}
             else:
                 by_position[position] = index
         return index.get(value, ())
+
+    def _index_from_ancestor(self, pred: str, position: int) -> dict[str, tuple[Atom, ...]] | None:
+        """The (pred, position) index of the nearest ancestor that has one, with the changes since applied.
+
+        Each step's delta lists its deleted atoms before its added ones (see :meth:`_apply`); an atom of a delta
+        was added when the state that made the step holds it. Appending added atoms keeps every index list in
+        the predicate's insertion order, exactly as building it from scratch would.
+        """
+        chain: list[State] = []
+        cursor = self
+        for _ in range(INDEX_DEPTH):
+            parent = cursor._parent
+            if parent is None:
+                return None
+            chain.append(cursor)
+            by_position = parent._by_arg.get(pred)
+            if by_position is not None:
+                found = by_position.get(position)
+                if found is not None:
+                    break
+            cursor = parent
+        else:
+            return None
+        index = dict(found)
+        for state in reversed(chain):
+            atoms_of = state._preds.get(pred, _EMPTY)
+            for atom in state._delta:
+                if atom[0] != pred or len(atom) <= position:
+                    continue
+                key = atom[position]
+                if atom in atoms_of:
+                    index[key] = (*index.get(key, ()), atom)
+                else:
+                    remaining = tuple(a for a in index.get(key, ()) if a != atom)
+                    if remaining:
+                        index[key] = remaining
+                    else:
+                        index.pop(key, None)
+        return index
 
     def with_first(self, pred: str, first: str) -> tuple[Atom, ...]:
         """Atoms of ``pred`` whose first argument is ``first``."""
@@ -164,7 +208,6 @@ class State:
     def _apply(self, add: list[Atom], delete: list[Atom]) -> State:
         preds = self._preds
         copies: dict[str, dict[Atom, None]] = {}  # predicate -> its successor dict (copied on first change)
-        gone_by: dict[str, list[Atom]] = {}
         delta: list[Atom] = []
         hash_ = self._hash
         length = self._len
@@ -181,7 +224,6 @@ class State:
             del atoms_of[atom]
             hash_ -= hash(atom)
             length -= 1
-            gone_by.setdefault(pred, []).append(atom)
             delta.append(atom)
         new_by: dict[str, list[Atom]] = {}
         for atom in add:
@@ -217,32 +259,10 @@ class State:
                 new_preds[pred] = atoms_of
             else:
                 new_preds.pop(pred, None)
+        # indexes of unchanged predicates are shared; the others are remade on demand (see with_arg)
         by_arg = self._by_arg
-        new_by_arg = dict(by_arg)  # never shared: with_arg adds indexes to a state's own dict
-        if by_arg:
-            for pred in copies:
-                by_position = by_arg.get(pred)
-                if not by_position:
-                    continue
-                gone = gone_by.get(pred, ())
-                new = new_by.get(pred, ())
-                new_position: dict[int, dict[str, tuple[Atom, ...]]] = {}
-                for position, index in by_position.items():
-                    index = dict(index)
-                    for atom in gone:
-                        if len(atom) > position:
-                            key = atom[position]
-                            remaining = tuple(a for a in index.get(key, ()) if a != atom)
-                            if remaining:
-                                index[key] = remaining
-                            else:
-                                index.pop(key, None)
-                    for atom in new:
-                        if len(atom) > position:
-                            key = atom[position]
-                            index[key] = (*index.get(key, ()), atom)
-                    new_position[position] = index
-                new_by_arg[pred] = new_position
+        new_by_arg = {pred: by_position for pred, by_position in by_arg.items() if pred not in copies} \
+            if by_arg else {}
         successor = State._make(new_preds, length, hash_ & _MASK, new_by_arg)
         # parent and changed atoms let axiom memos be inherited (see AxiomSet.holds)
         successor._parent = self

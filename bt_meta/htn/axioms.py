@@ -16,7 +16,20 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from bt_meta.htn.conditions import DNEG, DPOS, POS, Clause, Condition, Step, Term, Var, candidates, ground, match_clause
+from bt_meta.htn.conditions import (
+    DNEG,
+    DPOS,
+    POS,
+    Clause,
+    Condition,
+    Step,
+    Term,
+    Var,
+    candidates,
+    ground,
+    match_clause,
+    template_builder,
+)
 from bt_meta.htn.state import Atom, State
 
 MAX_DEPTH = 200  # nested top-down proofs before falling back to the bottom-up extension
@@ -76,11 +89,13 @@ class Axiom:
     column: int | None = None
     # the head's variable names when they are all distinct variables (a ground atom binds them with one zip)
     head_names: tuple[str, ...] | None = field(default=None, init=False, repr=False, compare=False)
+    head_builder: Any = field(default=None, init=False, repr=False, compare=False)  # the head as a function of env
 
     def __post_init__(self) -> None:
         names = tuple(a.name for a in self.head_args if isinstance(a, Var))
         if len(names) == len(self.head_args) and len(set(names)) == len(names):
             self.head_names = names
+        self.head_builder = template_builder(self.head_pred, self.head_args)
 
 
 class DerivedIndex:
@@ -436,8 +451,7 @@ class AxiomSet:
             for clause in axiom.condition.clauses:
                 split = self._units.get(id(clause)) if self.incremental else None
                 if split is None:
-                    heads: Iterable[Atom] = (ground(pred, axiom.head_args, body_env)
-                                             for body_env in match_clause(clause, state, head_env, None, self))
+                    heads: Iterable[Atom] = map(axiom.head_builder, match_clause(clause, state, head_env, None, self))
                 else:
                     heads = self._unit_heads(state, axiom, split, head_env, pattern)
                 for atom in heads:
@@ -504,8 +518,7 @@ class AxiomSet:
                 if not consistent:
                     continue
                 recorder = _Recorder(state)
-                unit = (tuple(ground(axiom.head_pred, axiom.head_args, body_env)
-                              for body_env in match_clause(rest, recorder, seed_env, None, self)),)
+                unit = (tuple(map(axiom.head_builder, match_clause(rest, recorder, seed_env, None, self))),)
                 self._store(state, memo, key, unit, recorder)
                 volatile_memo = cache.get(self._volatile_key, _NO_ENTRIES)
                 table = memo.get(table_key)

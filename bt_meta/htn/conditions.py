@@ -681,7 +681,16 @@ def _atom_builder(pred: str, getters: tuple[tuple[bool, str], ...]) -> Callable[
         if first_var:
             return lambda env: (pred, env[first], second)
         return lambda env: (pred, first, env[second])
+    if len(getters) == 3 and all(is_var for is_var, _ in getters):
+        names = tuple(v for _, v in getters)
+        first, second, third = names
+        return lambda env: (pred, env[first], env[second], env[third])
     return lambda env: (pred, *[env[v] if is_var else v for is_var, v in getters])
+
+
+def template_builder(pred: str, args: Sequence[Term]) -> Callable[[dict[str, str]], Atom]:
+    """``ground(pred, args, env)`` as a function of ``env`` alone, for templates grounded again and again."""
+    return _atom_builder(pred, tuple((True, a.name) if isinstance(a, Var) else (False, a) for a in args))
 
 
 _TESTS = "tests-only"  # marks the plan of a clause that binds nothing (see match_clause)

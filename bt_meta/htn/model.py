@@ -22,7 +22,15 @@ from typing import Any
 
 from bt_meta.errors import PlanningError
 from bt_meta.htn.axioms import Axiom, AxiomSet
-from bt_meta.htn.conditions import Condition, DomainContext, ExternalFn, Term, Var, ground, template_text
+from bt_meta.htn.conditions import (
+    Condition,
+    DomainContext,
+    ExternalFn,
+    Term,
+    Var,
+    template_builder,
+    template_text,
+)
 from bt_meta.htn.state import Atom, State, atom_text
 
 Template = tuple  # (name, *terms)
@@ -62,6 +70,9 @@ class Primitive:
 
     def __post_init__(self) -> None:
         self._typed = any(t is not None for t in self.types)
+        # effect templates compiled once (the lists are not changed after construction)
+        self._add = [template_builder(t[0], t[1:]) for t in self.add]
+        self._delete = [template_builder(t[0], t[1:]) for t in self.delete]
 
     def fast_satisfiers(self, state: State, args: Sequence[str], external: ExternalFn | None) -> Iterable[dict]:
         """Planner fast path: arguments already checked against the arity at load time."""
@@ -81,9 +92,7 @@ class Primitive:
         return self.precondition.satisfiers(state, env, external)
 
     def effects(self, env: dict[str, str]) -> tuple[list[Atom], list[Atom]]:
-        add = [ground(t[0], t[1:], env) for t in self.add]
-        delete = [ground(t[0], t[1:], env) for t in self.delete]
-        return add, delete
+        return [build(env) for build in self._add], [build(env) for build in self._delete]
 
     def signature(self) -> str:
         return template_text(self.name, [Var(p) for p in self.parameters])
@@ -140,11 +149,14 @@ class Method:
     column: int | None = None
     # the head's variable names when they are all distinct variables (the planner binds them with one zip)
     head_names: tuple[str, ...] | None = field(default=None, init=False, repr=False, compare=False)
+    # the subtask templates compiled once (the list is not changed after construction)
+    subtask_builders: list[Any] = field(default_factory=list, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         names = tuple(a.name for a in self.task_args if isinstance(a, Var))
         if len(names) == len(self.task_args) and len(set(names)) == len(names):
             self.head_names = names
+        self.subtask_builders = [template_builder(t[0], t[1:]) for t in self.subtasks]
 
     def task_text(self) -> str:
         return template_text(self.task_name, self.task_args)

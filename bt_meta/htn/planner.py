@@ -26,7 +26,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
-from bt_meta.htn.conditions import ExternalFn, Var, ground
+from bt_meta.htn.conditions import ExternalFn, Var
 from bt_meta.htn.model import Domain, Method, Problem, types_hold
 from bt_meta.htn.state import Atom, State, atom_text
 from bt_meta.htn.tree import DecompositionNode, DecompositionTree
@@ -106,7 +106,7 @@ class Search:
         for method in self.domain.methods_by_task.get(task[0], ()):
             names = method.head_names
             if names is not None and len(names) == len(args):
-                env = dict(zip(names, args, strict=True))
+                env = dict(zip(names, args, strict=False))  # lengths checked just above
             else:
                 env = _unify_head(method, task)
                 if env is None:
@@ -219,7 +219,7 @@ class Search:
                             active.setdefault(key, []).append(state)
                             undo.append((True, key))
                             agenda = ((CLOSE, key, state), rest)
-                            subtasks = [ground(t[0], t[1:], env) for t in method.subtasks]
+                            subtasks = [build(env) for build in method.subtask_builders]
                             if method.ordered:
                                 for sub in reversed(subtasks):
                                     agenda = ((TASK, sub, index, None), agenda)

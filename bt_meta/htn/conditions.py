@@ -608,6 +608,8 @@ def match_clause(steps: Sequence[Step], state: State, env: dict[str, str], exter
             if not ok:
                 return ()
         return (env,)
+    if ops[0] is _SCAN:
+        return _scan(ops[1], ops[2], state, env, axioms, derived_source)
     return _match_many(ops, state, env, external, axioms, derived_source)
 
 
@@ -663,6 +665,8 @@ def _plan(steps: Sequence[Step], bound: frozenset[str]) -> tuple:
         have.update(name for _, name, _ in free)
     if all(op[0] != "F" for op in ops):
         return (_TESTS, tuple(ops))
+    if ops[0][0] == "F" and ops[0][1] == POS and all(op[0] == "T" for op in ops[1:]):
+        return (_SCAN, ops[0], tuple(ops[1:]))
     return tuple(ops)
 
 
@@ -694,6 +698,56 @@ def template_builder(pred: str, args: Sequence[Term]) -> Callable[[dict[str, str
 
 
 _TESTS = "tests-only"  # marks the plan of a clause that binds nothing (see match_clause)
+_SCAN = "scan-then-tests"  # marks the plan of a clause that binds only with its first literal, a fact (see _scan)
+
+
+def _scan(op: tuple, tests: tuple, state: State, env: dict[str, str], axioms: Any,
+          derived_source: Callable[[str], Any] | None) -> Iterator[dict[str, str]]:
+    """The matcher for a clause whose first literal, a fact pattern, binds every variable the rest tests.
+
+    The usual shape of axiom bodies and method preconditions (``on(?b, ?c) and goal_on(?b, ?c) and done(?c)``):
+    one loop over the candidate facts and the tests in order, the same results in the same order as
+    :func:`_match_many`, without its per-level bookkeeping.
+    """
+    pred = op[2]
+    position = op[4]
+    if position:
+        is_var, v = op[5]
+        pool: Iterable[Atom] = state.with_arg(pred, position, env[v] if is_var else v)
+    else:
+        pool = state.atoms_of(pred)
+    length = op[8]
+    fixed = [(p, env[v] if is_var else v) for p, is_var, v in op[6]] if op[6] else ()
+    free = op[7]
+    for found in pool:
+        if len(found) != length:
+            continue
+        for i, v in fixed:
+            if found[i] != v:
+                break
+        else:
+            new = dict(env)
+            for place, name, same in free:
+                if same and found[place] != found[same]:
+                    break
+                new[name] = found[place]
+            else:
+                for test in tests:
+                    kind = test[1]
+                    atom = test[4](new)
+                    if kind == POS:
+                        if atom not in state:
+                            break
+                    elif kind == NEG:
+                        if atom in state:
+                            break
+                    elif derived_source is not None:
+                        if (atom in derived_source(test[2])) == (kind == DNEG):
+                            break
+                    elif axioms.holds(state, atom) == (kind == DNEG):
+                        break
+                else:
+                    yield new
 
 
 def _match_many(ops: tuple, state: State, env: dict[str, str], external: ExternalFn | None,

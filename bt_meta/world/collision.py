@@ -8,8 +8,14 @@ Offers:
 * :class:`Contact` -- the first colliding pair found, by name, with its penetration depth when coal gives one
 * :class:`SceneObject` -- what the checker knows of one scene object
 * :func:`pose_from_xyz_rpy` -- a pose from position and roll/pitch/yaw, the form object states use
+* :func:`as_se3` -- a pose from an SE3, a 4x4 matrix, (x, y, z) or (x, y, z, roll, pitch, yaw)
 
 Robot geometries are reported by link name (``right_gripper_base_link``); scene objects by their own name.
+Pairs checked: robot against robot (minus the SRDF's and rigidly joined ones), robot against every scene object,
+and a carried object against the fixed ones (fixed objects never move relative to each other, so they are not
+paired; touching counts as colliding, so a block placed on another needs :meth:`CollisionChecker.allow`).
+A full check goes through an AABB-tree broad phase first (~25 us when nothing collides, ~110 us for the ordered
+pass over every pair that names the first colliding one).
 """
 
 from __future__ import annotations

@@ -34,7 +34,11 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="bt-meta", description=__doc__.split("\n\n")[0])
+    parser = _Parser(
+        prog="bt-meta",
+        description="Plan YAML task files into behaviour trees, run them on a simulated Baxter, and repair "
+        "failures from an episodic memory of successful runs.",
+    )
     parser.add_argument("--version", action="version", version=f"bt-meta {bt_meta.__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for module_info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):

@@ -303,7 +303,8 @@ def test_recorded_magnetic_attach_then_the_part_on_its_side_raises_a_keypoint_mi
 
     status, failures = sim_run(MAGNETIC, "nominal", variant="active_on_side", plugins=plugins())
     assert status is Status.FAILURE
-    assert failures[0].step == 3 and failures[0].kind.value == "unexpected_configuration"  # the end of PickPart (task_end)
+    # keypoints are checked at task ends by default: the first is the end of PickPart, step 3
+    assert failures[0].step == 3 and failures[0].kind.value == "unexpected_configuration"
     assert failures[0].evidence["mismatches"][0]["kind"] == "keypoint"
     assert "R_n 90.0 deg, expected 180.0 deg" in failures[0].message
     status, failures = sim_run(MAGNETIC, "nominal", plugins=plugins())

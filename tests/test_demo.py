@@ -18,10 +18,6 @@ from bt_meta.demo.report import grid_svg
 from bt_meta.demo.scenario import demonstrations, variants
 from bt_meta.demo.svg import TreeNode, _nice_ticks, line_plot_svg, tree_from_behaviour, tree_svg
 
-#: Families whose learned refinement does not plan on the next run yet: the letters refinement places b6, which
-#: problem A's initial state does not know (object substitution anchors it only while repairing).
-KNOWN_GAPS = {"letters"}
-
 
 def test_tree_svg_colours_nodes_by_status():
     tree = TreeNode("plan", "Sequence", "FAILURE", children=[
@@ -120,9 +116,5 @@ def test_quick_demo_twice_on_the_same_folder(tmp_path, capsys):
         if (run["family"], run["variant"]) not in repaired:
             continue
         assert run["status"] == "success", run
-        if run["family"] in KNOWN_GAPS:
-            # reported as it is: repaired again, and the summary does not claim a refinement was used
-            assert run["attempts"] == 0 or not run["refinements_used"], run
-            continue
         assert run["attempts"] == 0 and run["refinements_used"], run
     assert json.loads((out / "summary.json").read_text()) == again

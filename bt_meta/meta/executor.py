@@ -11,7 +11,11 @@ The loop (``docs/meta-reasoning.md``):
    first that applies becomes the new plan state and execution continues from its cursor (the executed prefix is
    never run again unless a proposal backtracks into it);
 4. stop on success, or when the reasoner stops (budgets, a recurring motion limit, nothing proposed);
-5. on a success that needed repairs, save the repaired plan as a method refinement.
+5. on a success that needed repairs, save the repaired plan as a method refinement, with the entity facts the
+   repairs wrote into the world's symbolic state from perception and the goal as the repairs rewrote it;
+6. a learned refinement whose precondition holds at the start (its objects where they were, its entities seen as
+   they were) has its perceived facts added to the world's and the problem's state before planning, and a run
+   that uses it is verified against its rewritten goal.
 
 Offers:
 
@@ -163,13 +167,21 @@ class MetaExecutor:
         report = RunReport(status="failed", problem=name)
         domain = self.base_domain
         added: list[str] = []
+        stored: dict[str, Any] = {}
         if self.refinements is not None:
             domain, added = self.refinements.apply(domain, self.problem)
+            listing = getattr(self.refinements, "list", None)
+            if added and listing is not None:
+                stored = {r.method: r for r in listing(domain=domain.name) if r.method in added}
         planned = _declare_symbols(self.world, domain, added, self.problem)
         run = RunContext(self.world, self.plugins, domain=domain, problem=self.problem, task_file=self.task_file)
         if self.memory is not None:
             run.memory = self.memory  # what expectation and repair plugins read (context.run.memory)
         run.install()  # external predicates (pose tolerance of refinements) read the world through the run
+        # Perceived entity facts of the refinements that apply here: known to the world and the planner (below).
+        anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]] = (set(), set())
+        planned = self._perceive(domain, [stored[n] for n in added if n in stored], planned, run, anchored)
+        start_state = planned.state
         start_objects = _objects(self.world)
         run.emit("run_start", task_file=getattr(self.task_file, "path", None), problem=name,
                  state=[atom_text(a) for a in sorted(run.state)])
@@ -183,6 +195,12 @@ class MetaExecutor:
         plan_state = PlanState(result.tree)
         report.refinements_used = [n.method for n in result.tree.walk() if n.method in added]
         report.initial_plan = [[a, *args] for a, args in plan_state.full_plan()]
+        refined_goal = next((g for m in report.refinements_used if m in stored
+                             and (g := stored[m].goal_atoms()) is not None), None)
+        # verified against the goal the used refinement's repair rewrote, else the problem's own
+        run.problem = dataclasses.replace(run.problem, goal=refined_goal if refined_goal is not None
+                                          else list(getattr(self.problem, "goal", None) or []))
+        base_goal = list(getattr(run.problem, "goal", None) or [])
         registry = domain_registry(domain, self.plugins)
         tried: set[str] = set()
         while True:
@@ -207,7 +225,9 @@ class MetaExecutor:
             if report.ticks >= self.limits.max_ticks:
                 decision = Decision([], stop=True, reason=f"tick budget spent ({self.limits.max_ticks} ticks)")
             else:
+                before = _symbolic(self.world)
                 decision = self.reasoner.decide(diagnosis, run, plan_state, report.attempts, tried, started)
+                _note_changes(anchored, before, _symbolic(self.world))  # what repair plugins anchored
             if decision.stop:
                 report.stop_reason = decision.reason
                 report.reported.append(self.reasoner.report_entry(diagnosis))
@@ -225,6 +245,14 @@ class MetaExecutor:
                 run.emit("repair", outcome="stopped", reason=report.stop_reason, diagnosis=diagnosis.to_dict())
                 break
             plan_state = applied
+            if base_goal:  # the goal as the repair rewrote it (spliced placements stand for the replaced ones)
+                from bt_meta.meta.refinements import rewrite_goal
+
+                goal = rewrite_goal(domain, base_goal, report.initial_plan,
+                                    [[a, *args] for a, args in plan_state.full_plan()], start_state,
+                                    start_state.apply(add=anchored[0], delete=anchored[1]),
+                                    self.plugins.external_predicate)
+                run.problem = dataclasses.replace(run.problem, goal=goal)
         report.plan = [[a, *args] for a, args in plan_state.full_plan()]
         if report.status == "success" and report.attempts and self.refinements is not None and self.save_refinements:
             unkept = [a.number for a in report.attempts if (a.proposal.get("evidence") or {}).get("keep") is False]
@@ -232,8 +260,50 @@ class MetaExecutor:
                 report.refinement_saved = {"saved": False, "reason": f"attempt(s) {unkept}: the proposing plugin says "
                                                                      "the repaired plan does not replay from the start"}
             else:
-                report.refinement_saved = self._save_refinement(domain, report, start_objects)
+                report.refinement_saved = self._save_refinement(domain, report, start_objects, anchored,
+                                                                list(getattr(run.problem, "goal", None) or []))
         return self._finish(report, run, started)
+
+    def _perceive(self, domain: Any, refinements: list[Any], problem: Any, run: RunContext,
+                  anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]]) -> Any:
+        """``problem`` (and the world's symbolic state) with the perceived entity facts of every refinement whose
+        precondition holds now -- its objects where they were, its entities seen as they were -- so the planner
+        checks the refinement's steps against what is seen (two red 1x1 blocks, not the blue 1x2 the problem
+        assumed). A refinement whose precondition fails adds nothing: the facts are not confirmed."""
+        apply = getattr(self.world, "apply_symbolic", None)
+        methods = {m.name: m for m in domain.methods}
+        goal_set = False
+        for refinement in refinements:
+            add, delete = refinement.fact_atoms()
+            method = methods.get(refinement.method)
+            if not (add or delete) or method is None:
+                continue
+            try:
+                holds = method.precondition.holds(problem.state, {}, self.plugins.external_predicate)
+            except BtMetaError as error:
+                log.info("meta: refinement %s: precondition not checkable: %s", refinement.method, error)
+                continue
+            if not holds:
+                continue
+            log.info("meta: refinement %s applies; its perceived facts join the state: +%s -%s", refinement.method,
+                     ", ".join(atom_text(a) for a in add), ", ".join(atom_text(a) for a in delete))
+            if apply is not None:
+                apply(add=add, delete=delete)
+            state = problem.state.apply(add=add, delete=delete)
+            init = [a for a in problem.init if tuple(a) not in set(delete)]
+            problem = dataclasses.replace(problem, init=[*init, *(a for a in add if a not in problem.state)],
+                                          state=state)
+            _note_changes(anchored, set(), set(add))
+            _note_changes(anchored, set(delete), set())
+            goal = refinement.goal_atoms()
+            if goal is not None and not goal_set:  # the planner checks the goal: the one this refinement achieves
+                problem = dataclasses.replace(problem, goal=goal)
+                goal_set = True
+        symbolic = getattr(self.world, "symbolic_state", None)
+        if symbolic is not None:
+            run.state = symbolic()
+        run.problem = problem
+        return problem
 
     def _segment(self, run: RunContext, plan_state: PlanState, registry: Any, domain: Any, report: RunReport,
                  started: float) -> tuple[list[Failure], Status]:
@@ -314,12 +384,15 @@ class MetaExecutor:
             return new_state
         return None
 
-    def _save_refinement(self, domain: Any, report: RunReport, start_objects: dict[str, Any]) -> dict[str, Any] | None:
+    def _save_refinement(self, domain: Any, report: RunReport, start_objects: dict[str, Any],
+                         anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]],
+                         goal: list[Any]) -> dict[str, Any] | None:
         from bt_meta.meta.refinements import RefinementError
 
         try:
             saved = self.refinements.save_repair(self.base_domain, self.problem, report, start_objects,
-                                                 variant=self.variant, names=_world_names(self.world, self.problem))
+                                                 variant=self.variant, names=_world_names(self.world, self.problem),
+                                                 facts=(sorted(anchored[0]), sorted(anchored[1])), goal=goal)
         except RefinementError as error:
             log.info("meta: repaired plan not saved as a refinement: %s", error)
             return {"saved": False, "reason": str(error)}
@@ -344,6 +417,24 @@ def _failed_step(failures: list[Failure], plan_state: PlanState) -> int:
             if below:
                 return min(below)
     return plan_state.cursor
+
+
+def _symbolic(world: Any) -> set[tuple[str, ...]]:
+    symbolic = getattr(world, "symbolic_state", None)
+    return set() if symbolic is None else {tuple(a) for a in symbolic()}
+
+
+def _note_changes(anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]], before: set[tuple[str, ...]],
+                  after: set[tuple[str, ...]]) -> None:
+    """Accumulate the facts added and deleted between ``before`` and ``after`` (a later change undoes an
+    earlier one)."""
+    added, deleted = anchored
+    for fact in after - before:
+        deleted.discard(fact)
+        added.add(fact)
+    for fact in before - after:
+        added.discard(fact)
+        deleted.add(fact)
 
 
 def _objects(world: Any) -> dict[str, Any]:

@@ -3,9 +3,16 @@
 A refinement is a ground method ``task -> [the repaired primitives]`` whose precondition is sub-symbolic: every
 object of the task and plan that the world reported a pose for must start within a tolerance of the pose it had
 in the repaired run, written as the external predicate ``pose_within(obj, x, y, z, roll, pitch, yaw, pos_tol,
-ang_tol)`` (evaluated by the plugin ``bt_meta_plugins.refinement_predicates``). Refinements live in the episodic
-memory file (table ``refinements``, schema v3); the next run of the same variant plans with them first, so it
-succeeds with zero repair attempts; a run whose objects are elsewhere fails the pose check and plans as before.
+ang_tol)`` (evaluated by the plugin ``bt_meta_plugins.refinement_predicates``). Entity facts a repair wrote
+into the world's symbolic state from perception (object substitution anchoring two red 1x1 blocks where the
+problem assumed a blue 1x2) are kept with the refinement (:attr:`Refinement.facts`) and guarded by ``seen(obj,
+attribute, value)`` conditions (the world reports the object with that attribute): the executor adds the facts
+when the refinement's precondition holds, so it applies exactly when the same entities are seen again. The
+repair's rewrite of the goal (:func:`rewrite_goal`) is kept as :attr:`Refinement.goal`, the goal a run that uses
+the refinement is verified against. Refinements live in the episodic memory file (table ``refinements``, schema
+v3; ``facts`` and ``goal`` ride in its ``repair`` column); the next run of the same variant plans with them
+first, so it succeeds with zero repair attempts; a run whose objects are elsewhere (or other) fails the
+precondition and plans as before.
 
 Offers:
 
@@ -14,10 +21,12 @@ Offers:
   :meth:`~RefinementStore.add`, :meth:`~RefinementStore.list`, :meth:`~RefinementStore.apply` (a domain copy
   with the refinements first), :meth:`~RefinementStore.export_yaml`
 * :func:`with_refinements` -- a copy of a domain with refinements added as its first methods
-* :func:`domain_with_pose_predicate` -- a copy of a domain that declares ``pose_within``
+* :func:`domain_with_pose_predicate` -- a copy of a domain that declares ``pose_within`` and ``seen``
+* :func:`seen_holds` -- whether the world reports an object's attribute with a value (``seen``'s test)
+* :func:`rewrite_goal` -- the problem's goal as a repair rewrote it (the goal the refined plan achieves)
 * :func:`task_file_yaml` -- a domain (and problems) written back in the task-file format, refinements included;
   ``bt_meta.htn.load_task_text`` loads it
-* :data:`POSE_PREDICATE`, :data:`POSE_ARITY`, :data:`DEFAULT_TOLERANCE`
+* :data:`POSE_PREDICATE`, :data:`POSE_ARITY`, :data:`SEEN_PREDICATE`, :data:`SEEN_ARITY`, :data:`DEFAULT_TOLERANCE`
 * :class:`RefinementError` -- a repaired run that cannot become a refinement, or a broken stored one
 """
 
@@ -28,6 +37,7 @@ import hashlib
 import json
 import logging
 import math
+import re
 import sqlite3
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -45,17 +55,24 @@ __all__ = [
     "DEFAULT_TOLERANCE",
     "POSE_ARITY",
     "POSE_PREDICATE",
+    "SEEN_ARITY",
+    "SEEN_PREDICATE",
     "Refinement",
     "RefinementError",
     "RefinementStore",
     "domain_with_pose_predicate",
     "pose_of",
+    "rewrite_goal",
+    "seen_holds",
     "task_file_yaml",
     "with_refinements",
 ]
 
 POSE_PREDICATE = "pose_within"
 POSE_ARITY = 9
+SEEN_PREDICATE = "seen"
+SEEN_ARITY = 3
+_SYMBOL = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.:+-]*$")  # what a task file reads back as one constant
 log = logging.getLogger("bt_meta.meta")
 
 DEFAULT_TOLERANCE = {"position": 0.02, "angle": 0.1}
@@ -97,11 +114,25 @@ class Refinement:
     repair: dict[str, Any] = field(default_factory=dict)
     domain_path: str | None = None
     """The task file the domain was loaded from (absolute), so ``bt-meta refinements export`` can find it."""
+    facts: dict[str, list[list[str]]] = field(default_factory=dict)
+    """``{"add": [atom, ...], "delete": [...]}``: the entity facts the repair relied on that came from perception
+    (anchored in the world's symbolic state while repairing); added to the run's state when the precondition
+    holds. Atoms are lists of strings."""
+    goal: list[list[str]] | None = None
+    """The problem's goal as the repair rewrote it (``None``: unchanged); what a run using it is verified against."""
     id: int | None = None
     created: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
+
+    def fact_atoms(self) -> tuple[list[tuple[str, ...]], list[tuple[str, ...]]]:
+        """(add, delete) of :attr:`facts` as atoms."""
+        return ([tuple(str(a) for a in f) for f in self.facts.get("add") or []],
+                [tuple(str(a) for a in f) for f in self.facts.get("delete") or []])
+
+    def goal_atoms(self) -> list[tuple[str, ...]] | None:
+        return None if self.goal is None else [tuple(str(a) for a in g) for g in self.goal]
 
     def to_method(self, domain: Any) -> Any:
         """The HTN method (checked against ``domain``, which must declare ``pose_within`` when poses are used)."""
@@ -114,24 +145,76 @@ class Refinement:
             raise RefinementError(f"refinement {self.method} does not fit domain {self.domain}: {error}") from None
 
 
-def pose_precondition(poses: dict[str, list[float]], tolerance: dict[str, float]) -> str:
-    if not poses:
-        return "true"
+def pose_precondition(poses: dict[str, list[float]], tolerance: dict[str, float],
+                      seen: Sequence[tuple[str, str, str]] = ()) -> str:
     position, angle = _number(tolerance["position"]), _number(tolerance["angle"])
-    return " and ".join(f"{POSE_PREDICATE}({name}, {', '.join(_number(v) for v in pose)}, {position}, {angle})"
-                        for name, pose in sorted(poses.items()))
+    parts = [f"{POSE_PREDICATE}({name}, {', '.join(_number(v) for v in pose)}, {position}, {angle})"
+             for name, pose in sorted(poses.items())]
+    parts += [f"{SEEN_PREDICATE}({name}, {attribute}, {value})" for name, attribute, value in sorted(set(seen))]
+    return " and ".join(parts) if parts else "true"
+
+
+def seen_holds(objects: dict[str, Any], name: str, attribute: str, value: str) -> bool:
+    """``seen(name, attribute, value)`` on a world's object report (``observe()["objects"]``)."""
+    state = objects.get(name)
+    found = state.get(attribute) if isinstance(state, dict) else getattr(state, attribute, None)
+    return found is not None and str(found) == str(value)
+
+
+def _final_state(domain: Any, steps: Sequence[Sequence[str]], state: Any, external: Any) -> Any:
+    """``state`` after ``steps`` applied symbolically; a step whose precondition does not hold there applies its
+    effects under its parameters alone, one whose effects need more bindings is skipped."""
+    for step in steps:
+        primitive = domain.primitives.get(str(step[0]))
+        if primitive is None:
+            continue
+        args = tuple(str(a) for a in step[1:])
+        try:
+            env = next(iter(primitive.satisfiers(state, args, external)), None)
+            if env is None:
+                env = primitive.ground(args).bindings
+            add, delete = primitive.effects(env)
+        except (BtMetaError, KeyError, TypeError, ValueError):
+            continue
+        state = state.apply(add=add, delete=delete)
+    return state
+
+
+def rewrite_goal(domain: Any, goal: Sequence[Sequence[str]], old_plan: Sequence[Sequence[str]],
+                 new_plan: Sequence[Sequence[str]], old_start: Any, new_start: Any, external: Any = None
+                 ) -> list[tuple[str, ...]]:
+    """The goal a repaired plan is verified against: goal facts the original plan achieved (from ``old_start``)
+    but the repaired one does not (from ``new_start``, the state with the repair's perceived facts) are replaced
+    by what only the repaired plan achieves. A spliced ``place(b5, 1.5, 1)`` -> ``place(b5, 1, 1), place(b6, 2,
+    1)`` turns ``at(b5, 1.5, 1)`` into ``at(b5, 1, 1), at(b6, 2, 1)``; a repair that keeps every goal fact (a new
+    approach pose) leaves the goal as it is."""
+    goal = [tuple(str(a) for a in g) for g in goal]
+    if not goal or [list(s) for s in old_plan] == [list(s) for s in new_plan]:
+        return goal
+    old_final = _final_state(domain, old_plan, old_start, external)
+    new_final = _final_state(domain, new_plan, new_start, external)
+    dropped = [g for g in goal if g in old_final and g not in new_final]
+    if not dropped:
+        return goal
+    achieved_old = {f for f in old_final if f not in old_start}
+    gained = sorted(f for f in new_final if f not in new_start and f not in achieved_old)
+    return [g for g in goal if g not in dropped] + [g for g in gained if g not in goal]
 
 
 def domain_with_pose_predicate(domain: Any) -> Any:
-    """A shallow copy of ``domain`` that declares the external predicate ``pose_within`` (the original is kept)."""
-    if POSE_PREDICATE in domain.external:
+    """A shallow copy of ``domain`` that declares the external predicates ``pose_within`` and ``seen`` (the
+    original is kept)."""
+    wanted = {POSE_PREDICATE: POSE_ARITY, SEEN_PREDICATE: SEEN_ARITY}
+    missing = {name: arity for name, arity in wanted.items() if name not in domain.external}
+    if not missing:
         return dataclasses.replace(domain, methods=list(domain.methods), methods_by_task={})
-    if POSE_PREDICATE in domain.context.arities:
-        raise RefinementError(f"domain {domain.name} already uses {POSE_PREDICATE!r} for something else")
-    context = DomainContext(arities={**domain.context.arities, POSE_PREDICATE: POSE_ARITY},
+    for name in missing:
+        if name in domain.context.arities:
+            raise RefinementError(f"domain {domain.name} already uses {name!r} for something else")
+    context = DomainContext(arities={**domain.context.arities, **missing},
                             derived=set(domain.context.derived),
-                            external={*domain.context.external, POSE_PREDICATE}, axioms=domain.context.axioms)
-    external = {**domain.external, POSE_PREDICATE: ["object"] * POSE_ARITY}
+                            external={*domain.context.external, *missing}, axioms=domain.context.axioms)
+    external = {**domain.external, **{name: ["object"] * arity for name, arity in missing.items()}}
     return dataclasses.replace(domain, external=external, context=context, methods=list(domain.methods),
                                methods_by_task={})
 
@@ -219,7 +302,7 @@ class RefinementStore:
                 (refinement.created, refinement.domain, refinement.domain_path, refinement.task, refinement.method,
                  refinement.precondition,
                  json.dumps(refinement.subtasks), json.dumps(refinement.poses), json.dumps(refinement.tolerance),
-                 refinement.problem, refinement.variant, json.dumps(refinement.repair, default=str)))
+                 refinement.problem, refinement.variant, json.dumps(_repair_column(refinement), default=str)))
         except sqlite3.IntegrityError:
             raise RefinementError(f"a refinement named {refinement.method} is already stored in {self.path}") from None
         except sqlite3.Error as error:
@@ -228,12 +311,18 @@ class RefinementStore:
         return refinement
 
     def save_repair(self, domain: Any, problem: Any, report: Any, start_objects: dict[str, Any],
-                    variant: str | None = None, names: dict[str, str] | None = None) -> Refinement:
+                    variant: str | None = None, names: dict[str, str] | None = None,
+                    facts: tuple[Iterable[Sequence[str]], Iterable[Sequence[str]]] | None = None,
+                    goal: Sequence[Sequence[str]] | None = None) -> Refinement:
         """Turn a successful repaired run (``report``, a :class:`~bt_meta.meta.executor.RunReport`) into a
         refinement of the problem's task and store it; the objects' starting poses become its precondition.
 
         ``names`` maps task-file symbols to the world's object names where they differ (``active_part`` ->
-        ``active``): the precondition names the world's objects, as ``pose_within`` looks them up."""
+        ``active``): the precondition names the world's objects, as ``pose_within`` looks them up. ``facts``
+        (add, delete) are the facts the repair wrote into the world's symbolic state; those naming an object of
+        the refinement the world reported are kept, and each ``attribute(obj, value)`` among them that the world
+        reported at the start (``start_objects[obj][attribute] == value``) becomes a ``seen`` condition. ``goal``
+        is the goal as the repair rewrote it (kept when it differs from the problem's)."""
         tasks = list(getattr(problem, "tasks", None) or [])
         if len(tasks) != 1:
             raise RefinementError(f"the problem has {len(tasks)} root tasks; a refinement refines exactly one")
@@ -247,7 +336,11 @@ class RefinementStore:
         names = names or {}
         poses = {name: pose for name in sorted({names.get(m, m) for m in mentioned})
                  if name in start_objects and (pose := pose_of(start_objects[name])) is not None}
-        digest = hashlib.sha1(json.dumps([subtasks, poses], sort_keys=True).encode()).hexdigest()[:8]
+        kept, seen = _perceived_facts(facts, mentioned, names, start_objects)
+        goal_atoms = None if goal is None else [[str(a) for a in g] for g in goal]
+        if goal_atoms is not None and goal_atoms == [[str(a) for a in g] for g in getattr(problem, "goal", None) or []]:
+            goal_atoms = None
+        digest = hashlib.sha1(json.dumps([subtasks, poses, kept, goal_atoms], sort_keys=True).encode()).hexdigest()[:8]
         method = f"refined_{task[0]}_{digest}"
         existing = [r for r in self.list(domain=domain.name) if r.method == method]
         if existing:
@@ -256,7 +349,8 @@ class RefinementStore:
         domain_path = str(Path(source).resolve()) if source and not source.startswith("<") else None
         refinement = Refinement(
             domain=domain.name, domain_path=domain_path, task=atom_text(task), method=method,
-            precondition=pose_precondition(poses, self.tolerance), subtasks=subtasks, poses=poses,
+            precondition=pose_precondition(poses, self.tolerance, seen), subtasks=subtasks, poses=poses,
+            facts=kept, goal=goal_atoms,
             tolerance=dict(self.tolerance), problem=getattr(problem, "name", None), variant=variant,
             repair={"attempts": len(report.attempts), "kinds": [a.kind for a in report.attempts],
                     "proposals": [{"action": a.proposal.get("action"), "plugin": a.proposal.get("plugin"),
@@ -280,10 +374,13 @@ class RefinementStore:
                + " ORDER BY id DESC")
         refinements = []
         for row in self._query(sql, params):
+            repair = json.loads(row[11])
+            facts = repair.pop("facts", None) if isinstance(repair, dict) else None
+            goal = repair.pop("goal", None) if isinstance(repair, dict) else None
             refinements.append(Refinement(
                 id=row[0], created=row[1], domain=row[2], task=row[3], method=row[4], precondition=row[5],
                 subtasks=json.loads(row[6]), poses=json.loads(row[7]), tolerance=json.loads(row[8]),
-                problem=row[9], variant=row[10], repair=json.loads(row[11]), domain_path=row[12]))
+                problem=row[9], variant=row[10], repair=repair, domain_path=row[12], facts=facts or {}, goal=goal))
         return refinements
 
     def apply(self, domain: Any, problem: Any = None) -> tuple[Any, list[str]]:
@@ -298,6 +395,40 @@ class RefinementStore:
         """The task file of ``domain`` with this memory's refinements of it first, plus ``problems``."""
         refined, _ = self.apply(domain)
         return task_file_yaml(refined, problems)
+
+
+def _repair_column(refinement: Refinement) -> dict[str, Any]:
+    """The ``repair`` column: the repair's account plus the perceived facts and the rewritten goal (schema v3 has
+    no columns of their own for them)."""
+    column = dict(refinement.repair)
+    if refinement.facts:
+        column["facts"] = refinement.facts
+    if refinement.goal is not None:
+        column["goal"] = refinement.goal
+    return column
+
+
+def _perceived_facts(facts: tuple[Iterable[Sequence[str]], Iterable[Sequence[str]]] | None, mentioned: set[str],
+                     names: dict[str, str], start_objects: dict[str, Any]
+                     ) -> tuple[dict[str, list[list[str]]], list[tuple[str, str, str]]]:
+    """The repair's facts about entities the refinement names and the world reported, and the ``seen`` conditions
+    (world name, attribute, value) that confirm them by perception."""
+    if facts is None:
+        return {}, []
+    entities = {m for m in mentioned if names.get(m, m) in start_objects}
+
+    def about_entities(atoms: Iterable[Sequence[str]]) -> list[list[str]]:
+        return sorted({tuple(str(a) for a in f) for f in atoms if entities.intersection(str(a) for a in f[1:])})
+
+    add, delete = (about_entities(atoms) for atoms in facts)
+    seen = []
+    for fact in add:
+        if len(fact) == 3 and fact[1] in entities and all(_SYMBOL.match(x) for x in fact):
+            world_name = names.get(fact[1], fact[1])
+            if seen_holds(start_objects, world_name, fact[0], fact[2]):
+                seen.append((world_name, fact[0], fact[2]))
+    kept = {key: [list(f) for f in atoms] for key, atoms in (("add", add), ("delete", delete)) if atoms}
+    return kept, seen
 
 
 # -- the task-file writer ---------------------------------------------------------------------------------------

@@ -667,7 +667,14 @@ def _plan(steps: Sequence[Step], bound: frozenset[str]) -> tuple:
         return (_TESTS, tuple(ops))
     if ops[0][0] == "F" and ops[0][1] == POS and all(op[0] == "T" for op in ops[1:]):
         return (_SCAN, ops[0], tuple(ops[1:]))
-    return tuple(ops)
+    # the tests right after a binding literal run on each of its candidates, without a level of their own
+    fused: list[tuple] = []
+    for op in ops:
+        if op[0] == "T" and fused and fused[-1][0] == "F":
+            fused[-1] = (*fused[-1][:9], (*fused[-1][9], op))
+        else:
+            fused.append((*op, ()) if op[0] == "F" else op)
+    return tuple(fused)
 
 
 def _atom_builder(pred: str, getters: tuple[tuple[bool, str], ...]) -> Callable[[dict[str, str]], Atom]:
@@ -698,6 +705,23 @@ def template_builder(pred: str, args: Sequence[Term]) -> Callable[[dict[str, str
 
 
 _TESTS = "tests-only"  # marks the plan of a clause that binds nothing (see match_clause)
+
+
+def _tests_pass(tests: tuple, state: State, env: dict[str, str], axioms: Any,
+                derived_source: Callable[[str], Any] | None) -> bool:
+    """Whether every ground test literal (``T`` op) holds under ``env``, in order."""
+    for op in tests:
+        atom = op[4](env)
+        kind = op[1]
+        if kind in (POS, NEG):
+            ok = atom in state
+        elif derived_source is not None:
+            ok = atom in derived_source(op[2])
+        else:
+            ok = axioms.holds(state, atom)
+        if ok == (kind in (NEG, DNEG)):
+            return False
+    return True
 _SCAN = "scan-then-tests"  # marks the plan of a clause that binds only with its first literal, a fact (see _scan)
 
 
@@ -810,13 +834,18 @@ def _match_many(ops: tuple, state: State, env: dict[str, str], external: Externa
             level -= 1
             continue
         free = op[7]
+        tests = op[9]
         if op[1] == DPOS and derived_source is None:  # a stream of bindings from the axiom evaluator
-            for _, name, _ in free:  # the stream extends the live env: drop the previous candidate's values
-                env.pop(name, None)
-            found = next(it, None)
-            if found is not None:
+            while True:
+                for _, name, _ in free:  # the stream extends the live env: drop the previous candidate's values
+                    env.pop(name, None)
+                found = next(it, None)
+                if found is None:
+                    break
                 for _, name, _ in free:
                     env[name] = found[name]
+                if not tests or _tests_pass(tests, state, env, axioms, derived_source):
+                    break
         else:
             length = op[8]
             fixed = [(p, env[v] if is_var else v) for p, is_var, v in op[6]] if op[6] else ()
@@ -835,7 +864,8 @@ def _match_many(ops: tuple, state: State, env: dict[str, str], external: Externa
                             break
                         env[name] = found[position]
                     else:
-                        break
+                        if not tests or _tests_pass(tests, state, env, axioms, derived_source):
+                            break
         if found is None:  # level exhausted: unbind its variables and go back
             for _, name, _ in free:
                 env.pop(name, None)

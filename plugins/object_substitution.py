@@ -27,8 +27,11 @@ The steps, as the paper gives them:
 Before proposing, the unknown entities are **anchored** in the world's symbolic state (``world.apply_symbolic``):
 their perceived ``block``/``shape``/``colour`` facts replace what the problem assumed, and an unknown entity the
 failed step itself moved is made ``available`` again (its placement did not meet the expectation, and the repair
-moves it). The executor resets its belief to ``world.symbolic_state()`` before applying a proposal, so the spliced
-steps' preconditions are checked against what was seen. ``anchor=False`` turns this off.
+moves it; when the failure's context does not carry the step's effects, the primitive's effects under its
+arguments are undone if the world shows them applied). The executor resets its belief to
+``world.symbolic_state()`` before applying a proposal, so the spliced steps' preconditions are checked against
+what was seen, and it keeps what was anchored with a learned refinement (``docs/meta-reasoning.md``).
+``anchor=False`` turns this off.
 
 Settings (:class:`ObjectSubstitution` arguments, :func:`configure` for the module-level plugin, or the
 environment variable ``BT_META_SUBSTITUTION_MATCHER`` = ``gridmap`` | ``symbolic`` for the module's default):
@@ -371,6 +374,23 @@ def _call(action: str, args: Sequence[Any]) -> str:
     return f"{action}({', '.join(str(a) for a in args)})"
 
 
+def _applied_effects(context: Any, current: set[Any]) -> tuple[list[Any], list[Any]]:
+    """The failed step's (add, delete) when the context does not carry them (the meta-reasoner's context of a
+    monitor failure): its primitive's effects under its arguments, if every added fact is in the world's state --
+    the skill ran and the world applied them before the monitor objected. Else nothing to undo."""
+    primitive = getattr(context, "primitive", None)
+    bindings = getattr(context, "bindings", None)
+    if primitive is None or not bindings:
+        return [], []
+    try:
+        add, delete = primitive.effects(dict(bindings))
+    except (KeyError, TypeError, ValueError):  # effects that need the precondition's bindings: not undone
+        return [], []
+    if not add or any(tuple(f) not in current for f in add):
+        return [], []
+    return list(add), list(delete)
+
+
 # -- the plugin -----------------------------------------------------------------------------------------------------
 
 
@@ -557,7 +577,7 @@ class ObjectSubstitution:
         missing = {e.name for e in vector.missing}
         template = sorted({f[0] for f in initial if len(f) == 2 and str(f[1]) in missing})
         current = set(state())
-        effects = getattr(context, "effects", None) or ([], [])
+        effects = getattr(context, "effects", None) or _applied_effects(context, current)
         add: list[tuple[str, ...]] = []
         delete: list[tuple[str, ...]] = []
         for entity in vector.unknown:

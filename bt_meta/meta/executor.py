@@ -180,6 +180,7 @@ class MetaExecutor:
         run.install()  # external predicates (pose tolerance of refinements) read the world through the run
         # Perceived entity facts of the refinements that apply here: known to the world and the planner (below).
         anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]] = (set(), set())
+        assumed = planned.state  # what the problem assumed, before any perceived facts
         planned = self._perceive(domain, [stored[n] for n in added if n in stored], planned, run, anchored)
         start_state = planned.state
         start_objects = _objects(self.world)
@@ -260,7 +261,9 @@ class MetaExecutor:
                 report.refinement_saved = {"saved": False, "reason": f"attempt(s) {unkept}: the proposing plugin says "
                                                                      "the repaired plan does not replay from the start"}
             else:
-                report.refinement_saved = self._save_refinement(domain, report, start_objects, anchored,
+                # kept: how what was perceived differs from what the problem assumed at the start
+                facts = ({f for f in anchored[0] if f not in assumed}, {f for f in anchored[1] if f in assumed})
+                report.refinement_saved = self._save_refinement(domain, report, start_objects, facts,
                                                                 list(getattr(run.problem, "goal", None) or []))
         return self._finish(report, run, started)
 

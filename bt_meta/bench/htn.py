@@ -207,7 +207,9 @@ def _blocks_problem(
     clear = dict(clear) if clear is not None else derived
     goal_clear = dict(goal_clear or {})
 
-    init: list[Atom] = []
+    # GTPyhop's m_moveblocks takes the first suitable clear block in the order of its ``clear`` dict: our
+    # ``block`` facts are listed in that order, so both planners try blocks alike and find the same plans.
+    init: list[Atom] = [("block", str(block)) for block in clear]
     for block, below in pos.items():
         init.append(("on_table", str(block)) if below == "table" else ("on", str(block), str(below)))
     init.extend(("clear", str(block)) for block, is_clear in clear.items() if is_clear)

@@ -2,7 +2,11 @@
 
 Offers:
 
-* :func:`register` -- adds ``plan FILE [--problem NAME] [--json] [--states] [--max-nodes N] [--max-seconds S]``
+* :func:`register` -- adds ``plan FILE [--problem NAME] [--json] [--states] [--max-nodes N] [--max-seconds S]
+  [--plugins DIR] [--no-entry-points]``
+
+A domain that declares external predicates asks the loaded plugins for their truth at plan time (the
+``bt_meta_external_predicate`` hook); a predicate no plugin answers ends the command with exit status 1.
 
 Exit status 0 with a plan, 1 when there is no plan or the budget ran out (with the reason), 2 on a file that
 does not load or a missing/unknown ``--problem``.
@@ -14,6 +18,7 @@ import argparse
 from typing import Any
 
 from bt_meta.commands._common import print_json
+from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
 from bt_meta.errors import UserInputError
 from bt_meta.htn import load_task_file, plan
 
@@ -26,6 +31,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--states", action="store_true", help="with --json: include each node's state_before")
     parser.add_argument("--max-nodes", type=int, default=None, help="node budget (task expansions)")
     parser.add_argument("--max-seconds", type=float, default=None, help="time budget in seconds")
+    add_plugin_arguments(parser)
     parser.set_defaults(func=run)
 
 
@@ -36,7 +42,11 @@ def run(args: argparse.Namespace) -> int:
         raise UserInputError("--max-seconds must be positive")
     taskfile = load_task_file(args.file)
     problem = taskfile.problem(args.problem)
-    result = plan(taskfile.domain, problem, max_nodes=args.max_nodes, max_seconds=args.max_seconds)
+    external = None
+    if taskfile.domain.external:  # only then are plugins needed: loading them costs more than most plans
+        external = plugin_host_from_args(args, args.file).external_predicate
+    result = plan(taskfile.domain, problem, max_nodes=args.max_nodes, max_seconds=args.max_seconds,
+                  external=external)
     if args.json:
         payload: dict[str, Any] = {
             "file": str(args.file),

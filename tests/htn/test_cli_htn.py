@@ -66,3 +66,49 @@ def test_a_malformed_file_gets_one_located_line_and_exit_2(tmp_path, capsys):
 def test_validate_summarises_a_good_file(capsys):
     assert main(["validate", LETTERS]) == 0
     assert capsys.readouterr().out == f"{LETTERS}: ok (1 primitives, 7 methods, 5 problems)\n"
+
+
+EXTERNAL_DOMAIN = """\
+domain:
+  name: reach
+  predicates:
+    at: [?b]
+  external:
+    reachable: [?b]
+  primitives:
+    pick:
+      parameters: [?b]
+      precondition: reachable(?b)
+      add: [at(?b)]
+  tasks:
+    fetch: [?b]
+  methods:
+    - name: fetch_it
+      task: fetch(?b)
+      subtasks: [pick(?b)]
+problems:
+  near:
+    tasks: [fetch(cup)]
+"""
+
+REACH_PLUGIN = """\
+from bt_meta.plugins import hookimpl
+
+
+@hookimpl
+def bt_meta_external_predicate(name, args, state):
+    if name == "reachable":
+        return args[0] == "cup"
+    return None
+"""
+
+
+def test_plan_asks_plugins_for_external_predicates(tmp_path, capsys):
+    task_file = tmp_path / "reach.yaml"
+    task_file.write_text(EXTERNAL_DOMAIN, encoding="utf-8")
+    assert main(["plan", str(task_file), "--json", "--no-entry-points"]) == 1  # nobody answers reachable/1
+    assert "reachable" in capsys.readouterr().err
+    (tmp_path / "plugins").mkdir()
+    (tmp_path / "plugins" / "reach.py").write_text(REACH_PLUGIN, encoding="utf-8")
+    assert main(["plan", str(task_file), "--json", "--no-entry-points"]) == 0  # the project's plugins/ folder
+    assert json.loads(capsys.readouterr().out)["plan"] == [["pick", "cup"]]

@@ -24,6 +24,7 @@ import yaml
 
 from bt_meta.errors import ConfigError
 from bt_meta.resources import robots_dir
+from bt_meta.world._yaml_nodes import YamlNodeReader
 
 __all__ = [
     "ArmDescription",
@@ -188,52 +189,10 @@ def read_urdf_summary(path: Path) -> UrdfSummary:
 # YAML with positions
 
 
-class _RobotFile:
+class _RobotFile(YamlNodeReader):
     """Walks the composed YAML node tree so that every error can name its line and column."""
 
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self.root: yaml.Node | None = None
-
     # -- node helpers ------------------------------------------------------------------------------------------
-
-    def error(self, message: str, node: yaml.Node | None) -> ConfigError:
-        if node is None:
-            return ConfigError(message, self.path)
-        return ConfigError(message, self.path, node.start_mark.line + 1, node.start_mark.column + 1)
-
-    def mapping(self, node: yaml.Node, what: str) -> dict[str, tuple[yaml.Node, yaml.Node]]:
-        if not isinstance(node, yaml.MappingNode):
-            raise self.error(f"{what} must be a mapping", node)
-        out: dict[str, tuple[yaml.Node, yaml.Node]] = {}
-        for key, value in node.value:
-            if not isinstance(key, yaml.ScalarNode):
-                raise self.error(f"{what}: keys must be plain names", key)
-            if key.value in out:
-                raise self.error(f"{what}: duplicate key {key.value!r}", key)
-            out[key.value] = (key, value)
-        return out
-
-    def require(self, entries: dict[str, tuple[yaml.Node, yaml.Node]], key: str, parent: yaml.Node, what: str):
-        if key not in entries:
-            raise self.error(f"{what}: missing key {key!r}", parent)
-        return entries[key][1]
-
-    def check_keys(self, entries: dict[str, tuple[yaml.Node, yaml.Node]], allowed: set[str], what: str) -> None:
-        for key, (key_node, _) in entries.items():
-            if key not in allowed:
-                raise self.error(f"{what}: unknown key {key!r}; expected one of {', '.join(sorted(allowed))}", key_node)
-
-    def scalar(self, node: yaml.Node, what: str) -> Any:
-        if not isinstance(node, yaml.ScalarNode):
-            raise self.error(f"{what} must be a single value", node)
-        return yaml.safe_load(yaml.serialize(node))
-
-    def string(self, node: yaml.Node, what: str) -> str:
-        value = self.scalar(node, what)
-        if not isinstance(value, str) or not value:
-            raise self.error(f"{what} must be a non-empty string", node)
-        return value
 
     def number(self, node: yaml.Node, what: str, *, positive: bool = False) -> float:
         value = self.scalar(node, what)
@@ -248,11 +207,6 @@ class _RobotFile:
         if isinstance(value, bool) or not isinstance(value, int) or value < 0:
             raise self.error(f"{what} must be a non-negative integer", node)
         return value
-
-    def sequence(self, node: yaml.Node, what: str) -> list[yaml.Node]:
-        if not isinstance(node, yaml.SequenceNode):
-            raise self.error(f"{what} must be a list", node)
-        return list(node.value)
 
     # -- checks against the URDF -------------------------------------------------------------------------------
 

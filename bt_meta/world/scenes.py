@@ -28,6 +28,7 @@ import yaml
 
 from bt_meta.errors import ConfigError
 from bt_meta.resources import trees_dir
+from bt_meta.world._yaml_nodes import YamlNodeReader
 from bt_meta.world.objects import COLOURS, OBJECT_TYPES, ObjectModel, make_model, pose_to_matrix
 
 __all__ = ["Scene", "SceneObject", "Variant", "load_scene", "scene_names", "scenes_dir"]
@@ -171,17 +172,9 @@ def load_scene(name: str | Path) -> Scene:
 # Reading, with every node's position
 
 
-class _SceneFile:
-    def __init__(self, path: Path) -> None:
-        self.path = path
-
+class _SceneFile(YamlNodeReader):
     def at(self, node: yaml.Node) -> Location:
         return Location(str(self.path), node.start_mark.line + 1, node.start_mark.column + 1)
-
-    def error(self, message: str, node: yaml.Node | None) -> ConfigError:
-        if node is None:
-            return ConfigError(message, self.path)
-        return self.at(node).error(message)
 
     def load(self) -> Scene:
         text = self.path.read_text(encoding="utf-8")
@@ -340,38 +333,6 @@ class _SceneFile:
             seen[obj.name] = obj
 
     # -- YAML node helpers -----------------------------------------------------------------------------------
-
-    def mapping(self, node: yaml.Node, what: str, allowed: set[str] | None) -> dict[str, tuple[yaml.Node, yaml.Node]]:
-        if not isinstance(node, yaml.MappingNode):
-            raise self.error(f"{what} must be a mapping", node)
-        out: dict[str, tuple[yaml.Node, yaml.Node]] = {}
-        for key, value in node.value:
-            if not isinstance(key, yaml.ScalarNode):
-                raise self.error(f"{what}: keys must be plain names", key)
-            if key.value in out:
-                raise self.error(f"{what}: duplicate key {key.value!r}", key)
-            if allowed is not None and key.value not in allowed:
-                raise self.error(
-                    f"{what}: unknown key {key.value!r}; expected one of {', '.join(sorted(allowed))}", key
-                )
-            out[key.value] = (key, value)
-        return out
-
-    def require(self, entries: dict[str, tuple[yaml.Node, yaml.Node]], key: str, parent: yaml.Node, what: str):
-        if key not in entries:
-            raise self.error(f"{what}: missing key {key!r}", parent)
-        return entries[key][1]
-
-    def scalar(self, node: yaml.Node, what: str) -> Any:
-        if not isinstance(node, yaml.ScalarNode):
-            raise self.error(f"{what} must be a single value", node)
-        return yaml.safe_load(yaml.serialize(node))
-
-    def string(self, node: yaml.Node, what: str) -> str:
-        value = self.scalar(node, what)
-        if not isinstance(value, str) or not value:
-            raise self.error(f"{what} must be a non-empty string", node)
-        return value
 
     def number(self, node: yaml.Node, what: str, *, minimum: float | None = None) -> float:
         value = self.scalar(node, what)

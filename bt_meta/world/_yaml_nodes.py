@@ -1,0 +1,77 @@
+"""Reading a composed YAML node tree so that every error names its ``path:line:column``.
+
+Offers:
+
+* :class:`YamlNodeReader` -- the node helpers (mapping, required key, scalar, string, list) shared by the robot
+  and scene file readers; each subclass adds the numbers and checks of its own format
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from bt_meta.errors import ConfigError
+
+__all__ = ["YamlNodeReader"]
+
+
+class YamlNodeReader:
+    """Node helpers that raise :class:`~bt_meta.errors.ConfigError` located at the offending node."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def error(self, message: str, node: yaml.Node | None) -> ConfigError:
+        if node is None:
+            return ConfigError(message, self.path)
+        return ConfigError(message, self.path, node.start_mark.line + 1, node.start_mark.column + 1)
+
+    def mapping(
+        self, node: yaml.Node, what: str, allowed: set[str] | None = None
+    ) -> dict[str, tuple[yaml.Node, yaml.Node]]:
+        """Key name -> (key node, value node); duplicate keys, and keys outside ``allowed`` when given, are errors."""
+        if not isinstance(node, yaml.MappingNode):
+            raise self.error(f"{what} must be a mapping", node)
+        out: dict[str, tuple[yaml.Node, yaml.Node]] = {}
+        for key, value in node.value:
+            if not isinstance(key, yaml.ScalarNode):
+                raise self.error(f"{what}: keys must be plain names", key)
+            if key.value in out:
+                raise self.error(f"{what}: duplicate key {key.value!r}", key)
+            if allowed is not None and key.value not in allowed:
+                raise self.error(f"{what}: {_unknown_key(key.value, allowed)}", key)
+            out[key.value] = (key, value)
+        return out
+
+    def check_keys(self, entries: dict[str, tuple[yaml.Node, yaml.Node]], allowed: set[str], what: str) -> None:
+        for key, (key_node, _) in entries.items():
+            if key not in allowed:
+                raise self.error(f"{what}: {_unknown_key(key, allowed)}", key_node)
+
+    def require(self, entries: dict[str, tuple[yaml.Node, yaml.Node]], key: str, parent: yaml.Node, what: str):
+        if key not in entries:
+            raise self.error(f"{what}: missing key {key!r}", parent)
+        return entries[key][1]
+
+    def scalar(self, node: yaml.Node, what: str) -> Any:
+        if not isinstance(node, yaml.ScalarNode):
+            raise self.error(f"{what} must be a single value", node)
+        return yaml.safe_load(yaml.serialize(node))
+
+    def string(self, node: yaml.Node, what: str) -> str:
+        value = self.scalar(node, what)
+        if not isinstance(value, str) or not value:
+            raise self.error(f"{what} must be a non-empty string", node)
+        return value
+
+    def sequence(self, node: yaml.Node, what: str) -> list[yaml.Node]:
+        if not isinstance(node, yaml.SequenceNode):
+            raise self.error(f"{what} must be a list", node)
+        return list(node.value)
+
+
+def _unknown_key(key: str, allowed: set[str]) -> str:
+    return f"unknown key {key!r}; expected one of {', '.join(sorted(allowed))}"

@@ -4,7 +4,9 @@ Both are pinhole cameras with known intrinsics and the principal point at the im
 a ray exactly and a ray meets a plane (the table top) at one point: :meth:`Camera.pixel_to_plane` is how
 perception turns a blob's pixel centroid into table coordinates. Pixel coordinates are continuous
 ``(u, v)``: ``u`` to the right, ``v`` down, the centre of pixel ``[row, col]`` is ``(col + 0.5, row + 0.5)``.
-The camera frame is the optical one (x right, y down, z forward).
+Rendered images follow that convention too: the projection matrix given to pybullet's TinyRenderer (which samples
+pixels at integer screen coordinates, not at their centres) is offset so a point projects to the pixel whose
+centre is nearest its ``(u, v)``. The camera frame is the optical one (x right, y down, z forward).
 
 Offers:
 
@@ -99,11 +101,18 @@ class Camera:
     # -- rendering -------------------------------------------------------------------------------------------
 
     def _projection_matrix(self) -> list[float]:
+        """OpenGL projection that makes TinyRenderer's image follow :class:`Intrinsics` exactly.
+
+        TinyRenderer samples pixel column ``i`` at screen x = ``i`` and row ``r`` at screen y = ``H - 1 - r`` (y up),
+        not at pixel centres, so the textbook matrix renders everything (+0.5, -0.5) px off the pinhole model
+        (measured: mean blob-centroid offset (+0.50, -0.50) px). The third column puts the principal point where
+        the samples fall, i.e. the continuous point (u, v) is drawn at screen ((u - 0.5), (H - 0.5 - v))."""
         k, n, f = self.intrinsics, self.near, self.far
+        w, h = k.width, k.height
         proj = np.array(
             [
-                [2.0 * k.fx / k.width, 0.0, 0.0, 0.0],
-                [0.0, 2.0 * k.fy / k.height, 0.0, 0.0],
+                [2.0 * k.fx / w, 0.0, (w + 1.0 - 2.0 * k.cx) / w, 0.0],
+                [0.0, 2.0 * k.fy / h, (2.0 * k.cy + 1.0 - h) / h, 0.0],
                 [0.0, 0.0, -(f + n) / (f - n), -2.0 * f * n / (f - n)],
                 [0.0, 0.0, -1.0, 0.0],
             ]

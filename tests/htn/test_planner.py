@@ -449,7 +449,7 @@ def test_incremental_axiom_evaluation_changes_no_plan(seed):
 
     rng = random.Random(seed)
     blocks = [f"b{i}" for i in range(30)]
-    init: list[tuple[str, ...]] = [("hand_empty",)]
+    init: list[tuple[str, ...]] = [("hand_empty",), *(("block", block) for block in blocks)]  # the methods' block order
     for tower in _random_towers(blocks, rng):
         init.append(("on_table", tower[0]))
         init.extend(("on", upper, lower) for lower, upper in itertools.pairwise(tower))

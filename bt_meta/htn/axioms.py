@@ -409,15 +409,86 @@ class AxiomSet:
 
     def query(self, state: State, pred: str, args: Sequence[Term], env: dict[str, str]) -> Iterable[dict[str, str]]:
         """Extensions of ``env`` under which ``pred(args)`` (some arguments unbound) is derived, lazily."""
+        recorder_in = None
         if isinstance(state, _Recorder):
-            state.volatile = True
+            recorder_in = state
             state = state.state
         extension = state._derived.get((self._key, pred))
         if extension is None and pred in self.recursive:
             extension = self.extension(state, pred)
         if extension is not None:
+            if recorder_in is not None:
+                recorder_in.volatile = True
             return candidates(extension, pred, args, env)
+        pattern: tuple[str | None, ...] = tuple(
+            (env.get(a.name) if a.__class__ is Var else a) for a in args  # type: ignore[misc, union-attr]
+        )
+        if self.incremental and any(value is not None for value in pattern):
+            heads = self._query_heads(state, pred, pattern, recorder_in)
+            results = []
+            for atom in heads:
+                result = _unify(args, atom, env)
+                if result is not None:
+                    results.append(result)
+            return results
+        if recorder_in is not None:
+            recorder_in.volatile = True
         return self._stream(state, pred, args, env)
+
+    def _query_heads(self, state: State, pred: str, pattern: tuple[str | None, ...],
+                     recorder_in: _Recorder | None) -> tuple[Atom, ...]:
+        """Every derived atom of a non-recursive ``pred`` matching ``pattern`` (None: any value), memoised.
+
+        The answer is a memo entry keyed ``("?pred", *pattern)``, recorded and inherited like a proof (what it
+        read, which derived atoms and nested queries it used), so a query that a successor's changes do not
+        reach costs one lookup. Atoms come in the order the rules and their matches give them, first occurrence
+        kept, exactly as the streamed evaluation yields them.
+        """
+        cache = state._derived
+        memo = cache.get(self._memo_key)
+        if memo is None:
+            memo = cache[self._memo_key] = self._inherit(state)
+        key = ("?" + pred, *pattern)
+        known = memo.get(key)
+        if known is None:
+            known = cache.get(self._volatile_key, _NO_ENTRIES).get(key)
+            if known is not None and recorder_in is not None:
+                recorder_in.volatile = True
+        if known is None:
+            recorder = _Recorder(state)
+            heads: list[Atom] = []
+            seen: set[Atom] = set()
+            for axiom in self.rules[pred]:
+                head_env: dict[str, str] | None = {}
+                for term, value in zip(axiom.head_args, pattern, strict=True):
+                    if value is None:
+                        continue
+                    if term.__class__ is Var:
+                        prior = head_env.get(term.name)  # type: ignore[union-attr]
+                        if prior is None:
+                            head_env[term.name] = value  # type: ignore[index, union-attr]
+                        elif prior != value:
+                            head_env = None
+                            break
+                    elif term != value:
+                        head_env = None
+                        break
+                if head_env is None:
+                    continue
+                build = axiom.head_builder
+                for clause in axiom.condition.clauses:
+                    for found in match_clause(clause, recorder, head_env, None, self):
+                        atom = build(found)
+                        if atom not in seen:
+                            seen.add(atom)
+                            heads.append(atom)
+            known = (tuple(heads),)
+            self._store(state, memo, key, known, recorder)
+            if recorder.volatile and recorder_in is not None:
+                recorder_in.volatile = True
+        if recorder_in is not None:
+            recorder_in.deps.append(key)
+        return known[0]  # type: ignore[no-any-return]
 
     def _stream(self, state: State, pred: str, args: Sequence[Term], env: dict[str, str]
                 ) -> Iterator[dict[str, str]]:

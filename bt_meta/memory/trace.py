@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from bt_meta.errors import BtMetaError
+from bt_meta.world.objects import rpy_to_matrix
 
 #: Outcomes an episode or a step may have.
 OUTCOMES = ("success", "failure", "aborted")
@@ -144,16 +145,7 @@ class ObjectState:
     def rotation(self) -> np.ndarray:
         """The object's orientation as a 3x3 matrix, R = Rz(yaw) Ry(pitch) Rx(roll) (pybullet's and ROS's RPY)."""
         roll, pitch, yaw = self.pose[3:]
-        cr, sr = math.cos(roll), math.sin(roll)
-        cp, sp = math.cos(pitch), math.sin(pitch)
-        cy, sy = math.cos(yaw), math.sin(yaw)
-        return np.array(
-            [
-                [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                [-sp, cp * sr, cp * cr],
-            ]
-        )
+        return rpy_to_matrix(roll, pitch, yaw)
 
     @property
     def an_base(self) -> tuple[float, float, float]:

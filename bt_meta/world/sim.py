@@ -658,20 +658,7 @@ class Simulation:
         for link in self._hand_links[arm]:
             pybullet.setCollisionFilterPair(self.robot_id, body.body_id, link, -1, 0, physicsClientId=c)
         self._pending_collision = [p for p in self._pending_collision if p[1] != name]
-        cid = pybullet.createConstraint(
-            self.robot_id,
-            end,
-            body.body_id,
-            -1,
-            pybullet.JOINT_FIXED,
-            [0.0, 0.0, 0.0],
-            list(rel[:3, 3]),
-            [0.0, 0.0, 0.0],
-            list(_quat(rel[:3, :3])),
-            [0.0, 0.0, 0.0, 1.0],
-            physicsClientId=c,
-        )
-        pybullet.changeConstraint(cid, maxForce=2000.0, physicsClientId=c)
+        cid = _fix(self.robot_id, end, body.body_id, rel, c)
         self._grasps[arm] = _Grasp(arm, name, cid)
         return True
 
@@ -772,20 +759,7 @@ class Simulation:
         rel = np.linalg.inv(tr) @ ta
         c = self.client
         pybullet.setCollisionFilterPair(a.body_id, r.body_id, -1, -1, 0, physicsClientId=c)
-        cid = pybullet.createConstraint(
-            r.body_id,
-            -1,
-            a.body_id,
-            -1,
-            pybullet.JOINT_FIXED,
-            [0.0, 0.0, 0.0],
-            list(rel[:3, 3]),
-            [0.0, 0.0, 0.0],
-            list(_quat(rel[:3, :3])),
-            [0.0, 0.0, 0.0, 1.0],
-            physicsClientId=c,
-        )
-        pybullet.changeConstraint(cid, maxForce=2000.0, physicsClientId=c)
+        cid = _fix(r.body_id, -1, a.body_id, rel, c)
         self._joins[pair] = cid
         return True
 
@@ -824,6 +798,25 @@ class Simulation:
         if len(values) != 6 or not all(math.isfinite(v) for v in values):
             raise SimulationError(f"{what}: a pose is 6 finite numbers (x, y, z, roll, pitch, yaw), got {pose!r}")
         return values  # type: ignore[return-value]
+
+
+def _fix(parent_body: int, parent_link: int, child_body: int, rel: np.ndarray, client: int) -> int:
+    """A fixed constraint holding ``child_body`` at ``rel`` (4x4) in the parent link's frame, as strong as a grasp."""
+    cid = pybullet.createConstraint(
+        parent_body,
+        parent_link,
+        child_body,
+        -1,
+        pybullet.JOINT_FIXED,
+        [0.0, 0.0, 0.0],
+        list(rel[:3, 3]),
+        [0.0, 0.0, 0.0],
+        list(_quat(rel[:3, :3])),
+        [0.0, 0.0, 0.0, 1.0],
+        physicsClientId=client,
+    )
+    pybullet.changeConstraint(cid, maxForce=2000.0, physicsClientId=client)
+    return cid
 
 
 def _transform(pos: Sequence[float], quat: Sequence[float]) -> np.ndarray:

@@ -19,16 +19,17 @@ Offers:
 * :func:`create_plugin_host` -- a host with the hookspecs, built-ins, entry points and folders loaded
 * :func:`project_plugins_dir` -- the project plugins folder for a task file
 * :class:`PluginLoadError` -- a plugin file or entry point that fails to import (``path:line: message``)
+* :class:`ConfiguredPlugin` -- the one settable instance behind a plugin module's module-level hooks
 """
 
 from __future__ import annotations
 
 import importlib.metadata
 import traceback
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import pluggy
 
@@ -39,6 +40,7 @@ from bt_meta.hookspecs import PROJECT_NAME, hookimpl
 
 __all__ = [
     "ENTRY_POINT_GROUP",
+    "ConfiguredPlugin",
     "HookError",
     "HookResult",
     "PluginHost",
@@ -51,6 +53,26 @@ __all__ = [
 ENTRY_POINT_GROUP = "bt_meta"
 BUILTIN_PLUGINS: tuple[tuple[str, str], ...] = (("fake_world", "bt_meta.world.fake"),)
 LAZY_WORLDS: dict[str, str] = {"sim": "bt_meta.world.sim_world"}
+
+
+P = TypeVar("P")
+
+
+class ConfiguredPlugin(Generic[P]):
+    """The one instance behind a plugin module's module-level hooks, replaceable with other settings.
+
+    A plugin loaded as a module (an entry point, a ``plugins/`` file) is called through module-level functions;
+    they delegate to :attr:`current`, and the module exposes :meth:`configure` as its ``configure``.
+    """
+
+    def __init__(self, factory: Callable[..., P]) -> None:
+        self.factory = factory
+        self.current: P = factory()
+
+    def configure(self, **settings: Any) -> P:
+        """Replace the module-level plugin by one built with these settings (keyword arguments of its class)."""
+        self.current = self.factory(**settings)
+        return self.current
 
 
 class _LazyWorlds:

@@ -30,7 +30,7 @@ from typing import Any
 from bt_meta.perception.gridmap import DEFAULT_SPEC, GridSpec
 from bt_meta.perception.hsv import DEFAULT_THRESHOLDS, HSVThresholds
 from bt_meta.perception.topview import TopView, capture
-from bt_meta.plugins import hookimpl
+from bt_meta.plugins import ConfiguredPlugin, hookimpl
 from bt_meta.world.objects import LB
 
 
@@ -121,16 +121,10 @@ class CameraPerception:
                 "object_gridmaps": self.object_grid_maps(world, view)}
 
 
-_plugin = CameraPerception()
-
-
-def configure(**settings: Any) -> CameraPerception:
-    """Replace the module-level plugin's settings (keyword arguments of :class:`CameraPerception`)."""
-    global _plugin
-    _plugin = CameraPerception(**settings)
-    return _plugin
+plugin = ConfiguredPlugin(CameraPerception)
+configure = plugin.configure
 
 
 @hookimpl
 def bt_meta_observe(world: Any, context: Any) -> dict[str, Any] | None:
-    return _plugin.bt_meta_observe(world, context)
+    return plugin.current.bt_meta_observe(world, context)

@@ -32,7 +32,7 @@ from bt_meta.bt.expectations import Comparison, Expectation
 from bt_meta.bt.failures import FailureKind
 from bt_meta.perception.gridmap import grid_difference, render
 from bt_meta.perception.recall import memory_for, remember
-from bt_meta.plugins import hookimpl
+from bt_meta.plugins import ConfiguredPlugin, hookimpl
 from bt_meta.world.objects import LB
 
 KIND = "gridmap"
@@ -160,19 +160,13 @@ def compare(expectation: Expectation, observations: dict[str, Any]) -> Compariso
     )
 
 
-_plugin = GridMapExpectations()
-
-
-def configure(**settings: Any) -> GridMapExpectations:
-    """Replace the module-level plugin's settings (keyword arguments of :class:`GridMapExpectations`)."""
-    global _plugin
-    _plugin = GridMapExpectations(**settings)
-    return _plugin
+plugin = ConfiguredPlugin(GridMapExpectations)
+configure = plugin.configure
 
 
 @hookimpl
 def bt_meta_expectations(context: Any) -> list[Expectation] | None:
-    return _plugin.bt_meta_expectations(context)
+    return plugin.current.bt_meta_expectations(context)
 
 
 @hookimpl

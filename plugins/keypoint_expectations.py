@@ -41,7 +41,7 @@ from bt_meta.perception.keypoints import (
     relation,
 )
 from bt_meta.perception.recall import memory_for, remember
-from bt_meta.plugins import hookimpl
+from bt_meta.plugins import ConfiguredPlugin, hookimpl
 
 KIND = "keypoint"
 CHECKS = ("all", "task_end")
@@ -178,19 +178,13 @@ def compare(expectation: Expectation, observations: dict[str, Any]) -> Compariso
     return Comparison(matched=False, message=f"{expectation.description}: {'; '.join(parts)}", evidence=evidence)
 
 
-_plugin = KeypointExpectations()
-
-
-def configure(**settings: Any) -> KeypointExpectations:
-    """Replace the module-level plugin's settings (keyword arguments of :class:`KeypointExpectations`)."""
-    global _plugin
-    _plugin = KeypointExpectations(**settings)
-    return _plugin
+plugin = ConfiguredPlugin(KeypointExpectations)
+configure = plugin.configure
 
 
 @hookimpl
 def bt_meta_expectations(context: Any) -> list[Expectation] | None:
-    return _plugin.bt_meta_expectations(context)
+    return plugin.current.bt_meta_expectations(context)
 
 
 @hookimpl

@@ -50,7 +50,7 @@ import numpy as np
 from bt_meta.bt.failures import Failure, FailureKind, RepairProposal
 from bt_meta.perception.keypoints import KeypointError, expected_relation, judge, keypoints_of, relation
 from bt_meta.perception.recall import memory_for, root_task
-from bt_meta.plugins import hookimpl
+from bt_meta.plugins import ConfiguredPlugin, hookimpl
 from bt_meta.world.objects import matrix_to_pose, pose_to_matrix
 
 __all__ = ["PoseBacktracking", "StepRelation", "configure", "good_object_poses", "gripper_pose_for",
@@ -597,21 +597,15 @@ def _jsonable(value: Any) -> bool:
     return isinstance(value, (str, int, float, bool, type(None), list, tuple, dict))
 
 
-_plugin = PoseBacktracking()
-
-
-def configure(**settings: Any) -> PoseBacktracking:
-    """Replace the module-level plugin's settings (keyword arguments of :class:`PoseBacktracking`)."""
-    global _plugin
-    _plugin = PoseBacktracking(**settings)
-    return _plugin
+plugin = ConfiguredPlugin(PoseBacktracking)
+configure = plugin.configure
 
 
 @hookimpl
 def bt_meta_observe(world: Any, context: Any) -> dict[str, Any] | None:
-    return _plugin.bt_meta_observe(world, context)
+    return plugin.current.bt_meta_observe(world, context)
 
 
 @hookimpl
 def bt_meta_propose_repairs(failure: Failure, context: Any) -> list[Any] | None:
-    return _plugin.bt_meta_propose_repairs(failure, context)
+    return plugin.current.bt_meta_propose_repairs(failure, context)

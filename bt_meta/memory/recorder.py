@@ -359,7 +359,7 @@ class TraceRecorder:
                 import bt_meta_plugins.camera_perception as camera_perception
             except ImportError:  # an installation without the shipped plugins: no grid-maps
                 return None
-            return getattr(camera_perception, "_plugin", None) or camera_perception.CameraPerception()
+            return camera_perception.plugin.current
         return self.camera
 
     def _parent(self, run: Any, node_id: str | None, action: str,

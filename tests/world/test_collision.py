@@ -6,22 +6,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from bt_meta.world.collision import CollisionChecker, as_se3, pose_from_xyz_rpy
-from bt_meta.world.kinematics import Kinematics, KinematicsError
-from bt_meta.world.robot import load_robot
+from bt_meta.world.collision import as_se3, pose_from_xyz_rpy
+from bt_meta.world.kinematics import KinematicsError
 
 # Right shoulder swung in and raised, elbow bent: the elbow goes into the head's collision sphere.
 ELBOW_IN_HEAD = {"right_s0": 1.0, "right_s1": -1.5, "right_e0": 0.0, "right_e1": 1.5, "right_w0": 0.0, "right_w1": 0.0}
-
-
-@pytest.fixture(scope="module")
-def kin() -> Kinematics:
-    return Kinematics(load_robot("baxter"))
-
-
-@pytest.fixture(scope="module")
-def checker(kin) -> CollisionChecker:
-    return CollisionChecker(kin)
 
 
 @pytest.fixture

@@ -8,20 +8,10 @@ import mink
 import numpy as np
 import pytest
 
-from bt_meta.world.collision import CollisionChecker, pose_from_xyz_rpy
+from bt_meta.world.collision import pose_from_xyz_rpy
 from bt_meta.world.ik import COLLISION, REACHABILITY, InverseKinematics, _Run
-from bt_meta.world.kinematics import Kinematics, KinematicsError
+from bt_meta.world.kinematics import KinematicsError
 from bt_meta.world.robot import load_robot
-
-
-@pytest.fixture(scope="module")
-def kin() -> Kinematics:
-    return Kinematics(load_robot("baxter"))
-
-
-@pytest.fixture(scope="module")
-def checker(kin) -> CollisionChecker:
-    return CollisionChecker(kin)
 
 
 @pytest.fixture(scope="module")

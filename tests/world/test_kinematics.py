@@ -13,11 +13,6 @@ from bt_meta.world.robot import load_robot
 FRAMES = ("right_gripper", "left_gripper", "right_hand_camera_link", "head_camera_link", "l_gripper_r_finger_tip")
 
 
-@pytest.fixture(scope="module")
-def kin() -> Kinematics:
-    return Kinematics(load_robot("baxter"))
-
-
 def test_joint_order_and_arm_indices(kin):
     assert kin.nq == 19
     assert kin.joint_names[0] == "head_pan"

@@ -25,11 +25,7 @@ from bt_meta.bt.registry import (
 S, F, R = Status.SUCCESS, Status.FAILURE, Status.RUNNING
 
 
-@pytest.fixture(autouse=True)
-def clean_blackboard():
-    py_trees.blackboard.Blackboard.clear()
-    yield
-    py_trees.blackboard.Blackboard.clear()
+pytestmark = pytest.mark.usefixtures("clean_blackboard")
 
 
 class Scripted(py_trees.behaviour.Behaviour):

@@ -23,11 +23,7 @@ from bt_meta.errors import TreeXMLError
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "hand_written_tree.xml"
 
 
-@pytest.fixture(autouse=True)
-def clean_blackboard():
-    py_trees.blackboard.Blackboard.clear()
-    yield
-    py_trees.blackboard.Blackboard.clear()
+pytestmark = pytest.mark.usefixtures("clean_blackboard")
 
 
 class Recorder(py_trees.behaviour.Behaviour):

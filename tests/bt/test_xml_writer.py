@@ -18,11 +18,7 @@ from bt_meta.bt.xml.writer import TreeWriteError, tree_to_xml, write_tree
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "hand_written_tree.xml"
 
 
-@pytest.fixture(autouse=True)
-def clean_blackboard():
-    py_trees.blackboard.Blackboard.clear()
-    yield
-    py_trees.blackboard.Blackboard.clear()
+pytestmark = pytest.mark.usefixtures("clean_blackboard")
 
 
 def example_registry():

@@ -32,10 +32,11 @@ _CSS = """
 body{font-family:system-ui,sans-serif;margin:24px;max-width:1250px;color:#263238}
 h1{font-size:24px}h2{font-size:19px;border-bottom:2px solid #cfd8dc;padding-bottom:4px;margin-top:36px}
 h3{font-size:16px;margin:18px 0 6px}h4{font-size:14px;margin:12px 0 4px}
-table{border-collapse:collapse;font-size:13px;margin:6px 0}td,th{border:1px solid #cfd8dc;padding:3px 7px;
-vertical-align:top;text-align:left}th{background:#eceff1}
+table{border-collapse:collapse;font-size:13px;margin:6px 0;max-width:100%}td,th{border:1px solid #cfd8dc;
+padding:3px 7px;vertical-align:top;text-align:left}th{background:#eceff1}td{overflow-wrap:anywhere}
+table.fit{width:100%;table-layout:fixed}
 .success{background:#e8f5e9}.failed,.crashed,.no_plan{background:#ffebee}.reused{background:#f3e5f5}
-.pill{display:inline-block;border-radius:9px;padding:0 7px;font-size:12px;color:#fff}
+.pill{display:inline-block;border-radius:9px;padding:0 7px;font-size:12px;color:#fff;white-space:nowrap}
 .ok{background:#43a047}.bad{background:#e53935}.neutral{background:#78909c}
 .row{display:flex;flex-wrap:wrap;gap:18px;align-items:flex-start}.fig{font-size:12px;color:#546e7a}
 pre{background:#f5f5f5;padding:8px;font-size:12px;overflow-x:auto;max-height:420px}
@@ -89,10 +90,18 @@ def _truth(run: dict[str, Any]) -> str:
     return f"{pill} <span class=small>{_e(run.get('truth'))}</span>"
 
 
+# (header, width in % of the page): a fixed layout with these widths keeps the 13 columns inside the page; long
+# refinement names and stop reasons wrap inside their cells instead of pushing the table past the right edge.
+_SUMMARY_COLUMNS = (
+    ("pass", 3.5), ("family", 7.0), ("problem / variant", 11.0), ("status", 6.5), ("attempts", 6.0),
+    ("failure kinds seen", 9.0), ("repairs applied", 11.0), ("refinement used", 8.5), ("refinement learned", 8.5),
+    ("not repaired because", 12.0), ("task done (simulator)", 8.0), ("ticks", 4.5), ("time (s)", 4.5),
+)
+
+
 def _summary_table(summary: dict[str, Any]) -> str:
-    head = ("<tr><th>pass</th><th>family</th><th>problem / variant</th><th>status</th><th>attempts</th>"
-            "<th>failure kinds seen</th><th>repairs applied</th><th>refinement used</th><th>refinement learned</th>"
-            "<th>not repaired because</th><th>task done (simulator)</th><th>ticks</th><th>time (s)</th></tr>")
+    cols = "".join(f'<col style="width:{width}%">' for _, width in _SUMMARY_COLUMNS)
+    head = "<tr>" + "".join(f"<th>{_e(name)}</th>" for name, _ in _SUMMARY_COLUMNS) + "</tr>"
     rows = []
     for run in summary["runs"]:
         repairs = "<br>".join(f"#{r['number']} {_e(r['action'])} ({_e(r['plugin'])}) → {_e(r['outcome'])}"
@@ -105,7 +114,7 @@ def _summary_table(summary: dict[str, Any]) -> str:
             f'<td>{_e(", ".join(run["refinements_used"]) or "-")}</td><td>{_e(run["refinement_saved"] or "-")}</td>'
             f'<td>{_e(run["stop_reason"] or run["error"] or "") if run["status"] != "success" else ""}</td>'
             f'<td>{_truth(run)}</td><td>{run["ticks"]}</td><td>{run["seconds"]}</td></tr>')
-    return f"<table>{head}{''.join(rows)}</table>"
+    return f'<table class="fit summary"><colgroup>{cols}</colgroup>{head}{"".join(rows)}</table>'
 
 
 def _demonstrations(summary: dict[str, Any]) -> str:

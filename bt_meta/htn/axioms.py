@@ -32,6 +32,7 @@ from bt_meta.htn.conditions import (
 )
 from bt_meta.htn.state import Atom, State
 
+SEEDED_MIN = 32  # fewer seeds than this: a planner clause is matched directly (keeping units costs more)
 MAX_DEPTH = 200  # nested top-down proofs before falling back to the bottom-up extension
 INHERIT_DEPTH = 16  # how far up the parent chain a state looks for a memo to inherit
 
@@ -594,6 +595,81 @@ class AxiomSet:
                 volatile_memo = cache.get(self._volatile_key, _NO_ENTRIES)
                 table = memo.get(table_key)
             yield from unit[0]
+
+    def seeded(self, state: State, spec: tuple, env: dict[str, str]) -> Iterable[dict[str, str]]:
+        """Satisfiers of a planner clause (see ``_seeded_spec``) per seed of its first literal, memoised.
+
+        The rest of the clause for one seed (a fact the first literal matches) is a memo unit keyed by the seed
+        and the values ``env`` gives the clause's variables, recorded and inherited like an axiom's unit, so a
+        successor state re-matches only the seeds its changes reach and skips the seeds known to give nothing.
+        Results come in matching order (seeds in state order), as fresh dicts extending ``env``.
+        """
+        token, first, rest, names, clause = spec
+        pred = first[1]
+        vals: list[Any] = [pred]
+        free: list[tuple[int, str]] = []
+        for arg in first[2]:
+            if arg.__class__ is Var:
+                value = env.get(arg.name)  # type: ignore[union-attr]
+                if value is None:
+                    free.append((len(vals), arg.name))  # type: ignore[union-attr]
+                vals.append(value)
+            else:
+                vals.append(arg)
+        if not free:
+            return match_clause(clause, state, env, None, self)
+        length = len(vals)
+        bound = [i for i in range(1, length) if vals[i] is not None]
+        pool: Iterable[Atom] = state.with_arg(pred, bound[0], vals[bound[0]]) if bound else state.atoms_of(pred)
+        if len(pool) < SEEDED_MIN:  # type: ignore[arg-type]
+            return match_clause(clause, state, env, None, self)
+        fixed = [(i, vals[i]) for i in bound[1:]]
+        return self._seeded(state, token, rest, names, env, pool, length, fixed, free)
+
+    def _seeded(self, state: State, token: object, rest: Clause, names: tuple[str, ...], env: dict[str, str],
+                pool: Iterable[Atom], length: int, fixed: list[tuple[int, str]], free: list[tuple[int, str]]
+                ) -> Iterator[dict[str, str]]:
+        cache = state._derived
+        memo = cache.get(self._memo_key)
+        if memo is None:
+            memo = cache[self._memo_key] = self._inherit(state)
+        pattern = tuple(env.get(name) for name in names)
+        base = {name: value for name, value in zip(names, pattern, strict=True) if value is not None}
+        volatile_memo = cache.get(self._volatile_key, _NO_ENTRIES)
+        table_key = (token, pattern)
+        table = memo.get(table_key)
+        if table is not None and not volatile_memo:  # skip the seeds known to give nothing, at C speed
+            get = table.get
+            pool = [seed for seed in pool if (known := get(seed)) is None or known[0]]
+        for seed in pool:
+            if len(seed) != length:
+                continue
+            if fixed and any(seed[i] != v for i, v in fixed):
+                continue
+            unit = table.get(seed) if table is not None else None
+            if unit is None:
+                unit = volatile_memo.get((token, seed, pattern))
+            if unit is None:
+                seed_env = dict(base)
+                consistent = True
+                for i, name in free:
+                    prior = seed_env.get(name)
+                    if prior is None:
+                        seed_env[name] = seed[i]
+                    elif prior != seed[i]:
+                        consistent = False
+                        break
+                if not consistent:
+                    continue
+                recorder = _Recorder(state)
+                unit = (tuple(match_clause(rest, recorder, seed_env, None, self)),)
+                self._store(state, memo, (token, seed, pattern), unit, recorder)
+                volatile_memo = cache.get(self._volatile_key, _NO_ENTRIES)
+                table = memo.get(table_key)
+            for found in unit[0]:
+                result = dict(env)
+                result.update(found)
+                yield result
 
     def derived_atoms(self, state: State) -> list[Atom]:
         """Every derived atom true in ``state`` (for display and tests)."""

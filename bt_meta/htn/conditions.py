@@ -380,6 +380,7 @@ class Condition:
         self.context = context
         self.variables_bound = variables_bound
         self.trivial = len(clauses) == 1 and not clauses[0]
+        self.seeded = _seeded_spec(clauses)
 
     def __repr__(self) -> str:
         return f"Condition({self.source!r})"
@@ -397,7 +398,12 @@ class Condition:
         """Like :meth:`satisfiers` but ``env`` is the caller's fresh dict, not copied (planner fast path)."""
         clauses = self.clauses
         if len(clauses) == 1:
-            return match_clause(clauses[0], state, env, external, self.context.axioms)
+            seeded = self.seeded
+            if seeded is not None and state.__class__ is State:
+                axioms = self.context.axioms
+                if axioms.incremental:
+                    return axioms.seeded(state, seeded, env)  # type: ignore[no-any-return]
+            return match_clause(clauses[0], state, env, external, axioms if seeded else self.context.axioms)
         return self._union(state, env, external)
 
     def _union(self, state: State, env: dict[str, str], external: ExternalFn | None) -> Iterator[dict[str, str]]:
@@ -413,6 +419,28 @@ class Condition:
         for _ in self.satisfiers(state, bindings, external):
             return True
         return False
+
+
+def _seeded_spec(clauses: list[list[Step]]) -> tuple | None:
+    """``(token, first literal, rest, clause variables)`` when the planner may match the clause per seed.
+
+    That is a single clause that starts with a fact pattern and tests derived predicates after it (so its
+    per-seed results are worth keeping in the axiom memo, see :meth:`AxiomSet.seeded`), and calls no external
+    predicate (those are asked lazily, at plan time, and never cached).
+    """
+    if len(clauses) != 1:
+        return None
+    clause = clauses[0]
+    if not clause or clause[0][0] != POS or not any(step[0] in (DPOS, DNEG) for step in clause[1:]):
+        return None
+    names: set[str] = set()
+    for step in clause:
+        kind = step[0]
+        if kind in (EXT, NEXT):
+            return None
+        terms = (step[1], step[2]) if kind in (EQ, NEQ) else step[2]
+        names.update(term.name for term in terms if isinstance(term, Var))
+    return (object(), clause[0], Clause(clause[1:]), tuple(sorted(names)), clause)
 
 
 def compile_condition(source: str, expr: Expr, context: DomainContext, bound: Iterable[str]) -> Condition:

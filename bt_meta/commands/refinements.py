@@ -3,7 +3,8 @@
 Offers:
 
 * ``bt-meta refinements ls [--domain D] [--json]`` -- the stored refinements, newest first (the order they are
-  tried in): task, method, precondition (the starting poses), the repaired plan and the repair it came from
+  tried in): task, method, precondition (the starting poses), the repaired plan, the perceived facts it adds and
+  the goal as the repair rewrote it (when it has them), and the repair it came from
 * ``bt-meta refinements export [TASK_FILE] [--domain D] [-o FILE]`` -- a task file (YAML, the ``bt-meta plan``
   format) of the domain with its refinements as its first methods, plus the problems of ``TASK_FILE``. Without
   ``TASK_FILE`` the domain's file recorded with the refinements is used.
@@ -22,6 +23,7 @@ from pathlib import Path
 
 from bt_meta.commands._common import print_json
 from bt_meta.errors import UserInputError
+from bt_meta.htn.state import atom_text
 from bt_meta.memory import add_memory_argument, resolve_memory_path
 from bt_meta.meta.refinements import Refinement, RefinementStore
 
@@ -76,6 +78,14 @@ def _print(refinement: Refinement) -> None:
           f"({refinement.created}; problem {refinement.problem or '-'}; variant {refinement.variant or '-'})")
     print(f"    precondition: {refinement.precondition}")
     print(f"    plan: {', '.join(refinement.subtasks)}")
+    add, delete = refinement.fact_atoms()
+    if add or delete:
+        parts = [f"{label} {', '.join(atom_text(a) for a in atoms)}"
+                 for label, atoms in (("add", add), ("delete", delete)) if atoms]
+        print(f"    perceived facts: {'; '.join(parts)}")
+    goal = refinement.goal_atoms()
+    if goal is not None:
+        print(f"    goal (rewritten): {', '.join(atom_text(g) for g in goal) or '(empty)'}")
     changes = "; ".join(f"{p.get('action')} by {p.get('plugin')}: {p.get('change')}"
                         for p in repair.get("proposals", []))
     print(f"    learned from {repair.get('attempts', '?')} repair attempt(s): {changes or '-'}")

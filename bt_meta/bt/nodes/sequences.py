@@ -18,34 +18,18 @@ from __future__ import annotations
 import py_trees
 from py_trees.common import Status
 
+from bt_meta.bt.nodes._ordered import ReactiveControl, ResumingControl
 from bt_meta.bt.nodes.base import ControlNode, TickGenerator
 
 
-class Sequence(ControlNode):
+class Sequence(ResumingControl):
     """BT.CPP ``Sequence``."""
+
+    stop_on = Status.FAILURE
+    exhausted = Status.SUCCESS
 
     def __init__(self, name: str = "Sequence", children: list[py_trees.behaviour.Behaviour] | None = None) -> None:
         super().__init__(name, children)
-        self.current_child_idx = 0
-
-    def execute(self) -> TickGenerator:
-        self.status = Status.RUNNING
-        while self.current_child_idx < len(self.children):
-            child_status = yield from self.tick_child(self.current_child_idx)
-            if child_status == Status.RUNNING:
-                return Status.RUNNING
-            if child_status == Status.FAILURE:
-                self.reset_children()
-                self.current_child_idx = 0
-                return Status.FAILURE
-            self.current_child_idx += 1
-        self.reset_children()
-        self.current_child_idx = 0
-        return Status.SUCCESS
-
-    def halt(self) -> None:
-        self.current_child_idx = 0
-        super().halt()
 
 
 class SequenceWithMemory(ControlNode):
@@ -77,25 +61,13 @@ class SequenceWithMemory(ControlNode):
         return Status.SUCCESS
 
 
-class ReactiveSequence(ControlNode):
+class ReactiveSequence(ReactiveControl):
     """BT.CPP ``ReactiveSequence``."""
+
+    stop_on = Status.FAILURE
+    exhausted = Status.SUCCESS
 
     def __init__(
         self, name: str = "ReactiveSequence", children: list[py_trees.behaviour.Behaviour] | None = None
     ) -> None:
         super().__init__(name, children)
-
-    def execute(self) -> TickGenerator:
-        self.status = Status.RUNNING
-        for index in range(len(self.children)):
-            child_status = yield from self.tick_child(index)
-            if child_status == Status.RUNNING:
-                for other in range(len(self.children)):
-                    if other != index:
-                        self.reset_child(other)
-                return Status.RUNNING
-            if child_status == Status.FAILURE:
-                self.reset_children()
-                return Status.FAILURE
-        self.reset_children()
-        return Status.SUCCESS

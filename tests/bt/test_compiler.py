@@ -170,43 +170,23 @@ def test_unknown_primitive_in_a_decomposition_is_a_compile_error(task_file):
         compile_plan(result.tree, task_file.domain)
 
 
-def _btcpp_order(compiled, tree_id):
+def _btcpp_order(compiled, tree_id, btcpp_tick_order):
     """Tick the compiled tree's XML once in the real BehaviorTree.CPP (behaviortreepy), every custom node a
     SUCCESS-returning simple node registered without ports (behaviortreepy cannot declare ports), and return the
     names of the custom nodes in the order BT.CPP ticked them."""
     import xml.etree.ElementTree as ET
 
-    import behaviortreepy as btpy
-
     document = ET.fromstring(tree_to_xml(compiled.root, tree_id=tree_id, registry=compiled.registry))
     custom = {node_type.id: node_type.category for node_type in compiled.registry.custom_types()}
-    for element in document.iter():
-        if element.tag in custom:
-            for attribute in [a for a in element.attrib if a != "name"]:
-                del element.attrib[attribute]
-    factory = btpy.BehaviorTreeFactory()
-    order: list[str] = []
-
-    def tick(node):
-        order.append(node.name())
-        return btpy.NodeStatus.SUCCESS
-
-    for node_id, category in custom.items():
-        if category == "Condition":
-            factory.register_simple_condition(node_id, tick)
-        else:
-            factory.register_simple_action(node_id, tick)
-    tree = factory.create_tree_from_text(ET.tostring(document, encoding="unicode"))
-    assert tree.tick_once() == btpy.NodeStatus.SUCCESS
-    return order
+    return btcpp_tick_order(document, custom)
 
 
 @pytest.mark.parametrize("policy", [False, True])
-def test_compiled_letters_load_and_tick_in_behaviortree_cpp(policy, bt_blackboard):
+def test_compiled_letters_load_and_tick_in_behaviortree_cpp(policy, bt_blackboard, btcpp_tick_order):
     from bt_meta.resources import shipped_tree
 
     compiled = compile_task_file(shipped_tree("letters.yaml"), "A", policy=policy)
-    btcpp = _btcpp_order(compiled, "Policy_A" if policy else "Plan_A")
+    btcpp = _btcpp_order(compiled, "Policy_A" if policy else "Plan_A", btcpp_tick_order)
     harness = TreeHarness(compiled.root, RunContext(FakeWorld(compiled.domain, compiled.problem),
                                                     create_plugin_host(), domain=compiled.domain))
     assert harness.tick() is Status.SUCCESS

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 
-import behaviortreepy as btpy
 import pytest
 from py_trees.common import Status
 
@@ -42,32 +41,14 @@ def test_shipped_xml_is_what_compile_writes(name, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("name", sorted(SHIPPED))
-def test_shipped_xml_loads_and_ticks_in_behaviortree_cpp(name):
+def test_shipped_xml_loads_and_ticks_in_behaviortree_cpp(name, btcpp_tick_order):
     document = ET.fromstring((trees_dir() / name).read_text(encoding="utf-8"))
     model = document.find("TreeNodesModel")
     assert model is not None, "Groot2 needs a TreeNodesModel entry for every custom node"
     custom = {element.get("ID"): element.tag for element in model}
     assert custom, "a compiled tree declares its primitives and guards"
-    # Nodes registered from Python cannot declare ports in behaviortreepy: drop the custom nodes' port attributes.
-    for element in document.iter():
-        if element.tag in custom:
-            for attribute in [a for a in element.attrib if a != "name"]:
-                del element.attrib[attribute]
     document.remove(model)
-    factory = btpy.BehaviorTreeFactory()
-    ticked: list[str] = []
-
-    def tick(node):
-        ticked.append(node.name())
-        return btpy.NodeStatus.SUCCESS
-
-    for node_id, category in custom.items():
-        if category == "Condition":
-            factory.register_simple_condition(node_id, tick)
-        else:
-            factory.register_simple_action(node_id, tick)
-    tree = factory.create_tree_from_text(ET.tostring(document, encoding="unicode"))
-    assert tree.tick_once() == btpy.NodeStatus.SUCCESS
+    ticked = btcpp_tick_order(document, custom)  # asserts the tree ticks to SUCCESS
     assert ticked, "the primitives ran"
 
 

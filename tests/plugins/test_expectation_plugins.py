@@ -318,31 +318,24 @@ def _tick(harness, limit: int = 4000):
     return status
 
 
-@pytest.mark.slow
-def test_recorded_nominal_a_then_substituted_bar_raises_gridmap_mismatch_at_the_bar_step(tmp_path, monkeypatch):
-    import bt_meta_plugins.camera_perception as camera_plugin
-
+def _record_nominal(path, problem: str, observe_state) -> tuple[Step, ...]:
+    """Run ``problem`` in the simulator (seed 0) to SUCCESS with a plugin recording ``observe_state(world, context)``
+    (a :class:`State`) after each step; the steps of the trace a nominal run leaves in memory."""
     from bt_meta.plugins import create_plugin_host, hookimpl
-    from bt_meta.resources import trees_dir
     from bt_meta.testing import TreeHarness
     from bt_meta.world.sim_world import SimWorld, quiet_stdout
 
-    path = trees_dir() / "letters.yaml"
-    camera = camera_plugin.CameraPerception()
-    recorded: dict[int, tuple[StepContext, object]] = {}
+    recorded: dict[int, tuple[StepContext, State]] = {}
 
     class Recorder:
-        """Records, after each place, the placed block's grid-map at its true position (the instructor's key)."""
-
         @hookimpl
         def bt_meta_observe(self, world, context):
-            maps = camera.object_grid_maps(world, camera.look(world))
-            recorded[context.step] = (context, maps[world.object_name(context.args[0])])
+            recorded[context.step] = (context, observe_state(world, context))
 
     with quiet_stdout():
-        world = SimWorld.from_task_file(path, "A", seed=0)
+        world = SimWorld.from_task_file(path, problem, seed=0)
     try:
-        harness = TreeHarness.from_file(path, "A", world=world, plugins=create_plugin_host(
+        harness = TreeHarness.from_file(path, problem, world=world, plugins=create_plugin_host(
             entry_points=False, plugins=[("recorder", Recorder())]))
         assert _tick(harness).value == "SUCCESS"
         tree = harness.compiled.plan_result.tree
@@ -350,13 +343,34 @@ def test_recorded_nominal_a_then_substituted_bar_raises_gridmap_mismatch_at_the_
         world.close()
     steps = []
     for i in sorted(recorded):
-        context, grid = recorded[i]
+        context, state = recorded[i]
         parent = tree.nodes[tree.nodes[context.node_id].parent]
         steps.append(Step(i, context.action, context.args, node_id=context.node_id, parent_task=parent.task[0],
-                          parent_node=parent.id, state=State(grid_maps=(grid,))))
+                          parent_node=parent.id, state=state))
+    return tuple(steps)
+
+
+@pytest.mark.slow
+def test_recorded_nominal_a_then_substituted_bar_raises_gridmap_mismatch_at_the_bar_step(tmp_path, monkeypatch):
+    import bt_meta_plugins.camera_perception as camera_plugin
+
+    from bt_meta.plugins import create_plugin_host
+    from bt_meta.resources import trees_dir
+    from bt_meta.testing import TreeHarness
+    from bt_meta.world.sim_world import SimWorld, quiet_stdout
+
+    path = trees_dir() / "letters.yaml"
+    camera = camera_plugin.CameraPerception()
+
+    def placed_block_grid_map(world, context) -> State:
+        """After each place, the placed block's grid-map at its true position (the instructor's key)."""
+        maps = camera.object_grid_maps(world, camera.look(world))
+        return State(grid_maps=(maps[world.object_name(context.args[0])],))
+
+    steps = _record_nominal(path, "A", placed_block_grid_map)
     memory_path = tmp_path / "memory.sqlite"
     with EpisodicMemory.open(memory_path) as memory:
-        memory.write(Trace(Episode("draw_A", str(path), "A", started=time.time(), outcome="success"), tuple(steps)))
+        memory.write(Trace(Episode("draw_A", str(path), "A", started=time.time(), outcome="success"), steps))
     monkeypatch.setenv("BT_META_MEMORY", str(memory_path))
 
     def run_variant(variant: str):
@@ -386,38 +400,21 @@ def test_recorded_nominal_a_then_substituted_bar_raises_gridmap_mismatch_at_the_
 def test_recorded_nominal_attach_then_part_on_its_side_raises_keypoint_mismatch(tmp_path, check_at, step):
     import bt_meta_plugins.ground_truth_perception as truth_plugin
 
-    from bt_meta.plugins import create_plugin_host, hookimpl
+    from bt_meta.plugins import create_plugin_host
     from bt_meta.resources import trees_dir
     from bt_meta.testing import TreeHarness
     from bt_meta.world.sim_world import SimWorld, quiet_stdout
 
     path = trees_dir() / "magnetic_attach.yaml"
-    recorded: dict[int, tuple[StepContext, tuple[ObjectState, ...]]] = {}
 
-    class Recorder:
-        @hookimpl
-        def bt_meta_observe(self, world, context):
-            recorded[context.step] = (context, tuple(
-                ObjectState(s.name, s.pose, s.ap, s.an_object) for s in world.sim.object_states().values()))
+    def object_states(world, context) -> State:
+        return State(objects=tuple(
+            ObjectState(s.name, s.pose, s.ap, s.an_object) for s in world.sim.object_states().values()))
 
-    with quiet_stdout():
-        world = SimWorld.from_task_file(path, "attach_only", seed=0)
-    try:
-        harness = TreeHarness.from_file(path, "attach_only", world=world, plugins=create_plugin_host(
-            entry_points=False, plugins=[("recorder", Recorder())]))
-        assert _tick(harness).value == "SUCCESS"
-        tree = harness.compiled.plan_result.tree
-    finally:
-        world.close()
-    steps = []
-    for i in sorted(recorded):
-        context, objects = recorded[i]
-        parent = tree.nodes[tree.nodes[context.node_id].parent]
-        steps.append(Step(i, context.action, context.args, node_id=context.node_id, parent_task=parent.task[0],
-                          parent_node=parent.id, state=State(objects=objects)))
+    steps = _record_nominal(path, "attach_only", object_states)
     memory = EpisodicMemory.open(tmp_path / "memory.sqlite")
     memory.write(Trace(Episode("MagneticAttach", str(path), "attach_only", started=time.time(), outcome="success"),
-                       tuple(steps)))
+                       steps))
 
     def run_variant(variant: str):
         plugin = keypoint_plugin.KeypointExpectations(memory, check=check_at)

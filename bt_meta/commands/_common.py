@@ -1,4 +1,4 @@
-"""Helpers shared by the subcommands: JSON output and the discovery of sub-subcommands."""
+"""Helpers shared by the subcommands: JSON output, the discovery of sub-subcommands, the nodes a trace shows."""
 
 from __future__ import annotations
 
@@ -26,3 +26,11 @@ def register_modules(package: ModuleType, subparsers: argparse._SubParsersAction
         register = getattr(module, "register", None)
         if register is not None:
             register(subparsers)
+
+
+def shown_in_trace(behaviour: Any) -> bool:
+    """Whether ``run`` and ``tick`` print a node's status changes: the plan's primitives and their guards."""
+    from bt_meta.bt.actions import PrimitiveAction
+    from bt_meta.bt.guards import CheckCondition
+
+    return isinstance(behaviour, (PrimitiveAction, CheckCondition))

@@ -36,7 +36,7 @@ from typing import Any
 
 from py_trees.common import Status
 
-from bt_meta.commands._common import print_json
+from bt_meta.commands._common import print_json, shown_in_trace
 from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
 from bt_meta.errors import PlanningError, UserInputError
 from bt_meta.memory import ENV_VAR, add_memory_argument, resolve_memory_path
@@ -64,13 +64,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_memory_argument(parser)
     add_plugin_arguments(parser)
     parser.set_defaults(func=run)
-
-
-def _shown(behaviour: Any) -> bool:
-    from bt_meta.bt.actions import PrimitiveAction
-    from bt_meta.bt.guards import CheckCondition
-
-    return isinstance(behaviour, (PrimitiveAction, CheckCondition))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -155,7 +148,7 @@ def _run_plain(args: argparse.Namespace, problem: Any, world: Any, plugins: Any,
     if not args.json:
         print(f"{problem.name} in scene {world.scene.name} ({world.variant}), seed {args.seed}: "
               f"{len(plan)} primitives planned")
-    shown = {b.name for b in harness.root.iterate() if _shown(b)}
+    shown = {b.name for b in harness.root.iterate() if shown_in_trace(b)}
     last: dict[str, str] = {}
     status = Status.RUNNING
     reported = 0

@@ -19,7 +19,7 @@ from typing import Any
 
 from py_trees.common import Status
 
-from bt_meta.commands._common import print_json
+from bt_meta.commands._common import print_json, shown_in_trace
 from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
 from bt_meta.errors import UserInputError
 
@@ -44,13 +44,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-def _shown(name: str, behaviour: Any) -> bool:
-    from bt_meta.bt.actions import PrimitiveAction
-    from bt_meta.bt.guards import CheckCondition
-
-    return isinstance(behaviour, (PrimitiveAction, CheckCondition))
-
-
 def run(args: argparse.Namespace) -> int:
     from bt_meta.testing import TreeHarness
     from bt_meta.world.fake import Fault
@@ -70,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     harness = TreeHarness.from_file(args.file, args.problem, task_file=args.task_file, policy=args.policy,
                                     world=args.world, faults=faults, ticks_per_skill=args.ticks_per_skill,
                                     world_options=world_options, plugins=plugins)
-    shown = {b.name for b in harness.root.iterate() if _shown(b.name, b)}
+    shown = {b.name for b in harness.root.iterate() if shown_in_trace(b)}
     ticks: list[dict[str, Any]] = []
     status = Status.INVALID
     reported = 0

@@ -304,6 +304,8 @@ class AxiomSet:
         except _Fallback:
             if not outermost:
                 raise
+            if recorder_in is not None:  # answered from the extension, which the indexes do not track
+                recorder_in.volatile = True
             return atom in self.extension(state, pred)
 
     def _store(self, state: State, memo: dict[Any, Any], key: Any, entry: tuple, recorder: _Recorder) -> None:

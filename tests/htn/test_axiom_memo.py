@@ -8,7 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from bt_meta.htn import State, axioms, load_task_file
+from bt_meta.htn import State, axioms, load_task_file, load_task_text
+from bt_meta.htn.conditions import Var
 
 BLOCKS_HTN = Path(__file__).resolve().parents[2] / "bt_meta" / "bench" / "problems" / "blocks_htn.yaml"
 
@@ -84,3 +85,36 @@ def test_states_revisited_in_any_order_answer_as_fresh_states(seed, monkeypatch)
         if child is not parent:
             states.append(child)
     assert answered > 20  # the conditions had satisfiers in many of the states asked
+
+
+FALLBACK = """
+domain:
+  predicates: {edge: [x, x], link: [x, x]}
+  axioms:
+    - head: path(?x, ?z)
+      when: edge(?x, ?z)
+    - head: path(?x, ?z)
+      when: edge(?x, ?y) and path(?y, ?z)
+    - head: good(?a, ?b)
+      when: link(?a, ?b) and path(?b, end)
+  primitives: {}
+  tasks: {}
+"""
+
+
+def test_answers_that_used_the_fixpoint_fallback_are_not_inherited():
+    """A query answered through a proof too deep for top-down evaluation is not reused by a successor state.
+
+    ``path(c0, end)`` along a chain longer than ``MAX_DEPTH`` comes from the bottom-up extension, which the
+    reader indexes do not track; cutting the chain far from ``c0`` must still reach ``good(a, ?b)``.
+    """
+    axiom_set = load_task_text(FALLBACK).domain.axiom_set
+    axiom_set.begin()
+    n = axioms.MAX_DEPTH + 5
+    chain = [f"c{i}" for i in range(n)] + ["end"]
+    parent = State([("link", "a", "c0"), *(("edge", x, y) for x, y in itertools.pairwise(chain))])
+    query = ("good", (Var("a"), Var("b")), {"a": "a"})
+    assert list(axiom_set.query(parent, *query)) == [{"a": "a", "b": "c0"}]
+    child = parent.apply(delete=[("edge", chain[n // 2], chain[n // 2 + 1])])
+    assert list(axiom_set.query(State(child), *query)) == []
+    assert list(axiom_set.query(child, *query)) == []

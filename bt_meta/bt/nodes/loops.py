@@ -14,6 +14,8 @@ always take one iteration per tick and count differently, so these classes re-im
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import py_trees
 from py_trees.common import Status
 
@@ -24,73 +26,71 @@ def _read(value: PortValue | int) -> int:
     return value.get() if isinstance(value, PortValue) else value
 
 
-class Repeat(DecoratorNode):
+class _CountedLoop(DecoratorNode):
+    """Repeat and RetryUntilSuccessful are one loop with SUCCESS and FAILURE swapped: ``loops_on`` counts a cycle
+    and ticks again (returned when the count is used up), the other finished status ends the loop at once."""
+
+    loops_on: ClassVar[Status]
+    ends_on: ClassVar[Status]
+
+    def __init__(self, name: str, child: py_trees.behaviour.Behaviour) -> None:
+        super().__init__(name, child)
+        self.count = 0
+
+    def limit(self) -> int:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def execute(self) -> TickGenerator:
+        limit = self.limit()
+        do_loop = self.count < limit or limit == -1
+        self.status = Status.RUNNING
+        while do_loop:
+            previous = self.decorated.status
+            child_status = yield from self.tick_child()
+            if child_status == self.loops_on:
+                self.count += 1
+                do_loop = self.count < limit or limit == -1
+                self.reset_child()
+                if self.requires_wake_up() and previous == Status.INVALID and do_loop:
+                    self.emit_wake_up()
+                    return Status.RUNNING
+            elif child_status == self.ends_on:
+                self.count = 0
+                self.reset_child()
+                return self.ends_on
+            else:
+                return child_status
+        self.count = 0
+        return self.loops_on
+
+    def halt(self) -> None:
+        self.count = 0
+        super().halt()
+
+
+class Repeat(_CountedLoop):
     """BT.CPP ``Repeat``."""
+
+    loops_on = Status.SUCCESS
+    ends_on = Status.FAILURE
 
     def __init__(self, name: str, child: py_trees.behaviour.Behaviour, num_cycles: PortValue | int) -> None:
         super().__init__(name, child)
         self.num_cycles = num_cycles
-        self.repeat_count = 0
 
-    def execute(self) -> TickGenerator:
-        cycles = _read(self.num_cycles)
-        do_loop = self.repeat_count < cycles or cycles == -1
-        self.status = Status.RUNNING
-        while do_loop:
-            previous = self.decorated.status
-            child_status = yield from self.tick_child()
-            if child_status == Status.SUCCESS:
-                self.repeat_count += 1
-                do_loop = self.repeat_count < cycles or cycles == -1
-                self.reset_child()
-                if self.requires_wake_up() and previous == Status.INVALID and do_loop:
-                    self.emit_wake_up()
-                    return Status.RUNNING
-            elif child_status == Status.FAILURE:
-                self.repeat_count = 0
-                self.reset_child()
-                return Status.FAILURE
-            else:
-                return child_status
-        self.repeat_count = 0
-        return Status.SUCCESS
-
-    def halt(self) -> None:
-        self.repeat_count = 0
-        super().halt()
+    def limit(self) -> int:
+        return _read(self.num_cycles)
 
 
-class RetryUntilSuccessful(DecoratorNode):
+class RetryUntilSuccessful(_CountedLoop):
     """BT.CPP ``RetryUntilSuccessful``."""
+
+    loops_on = Status.FAILURE
+    ends_on = Status.SUCCESS
 
     def __init__(self, name: str, child: py_trees.behaviour.Behaviour, num_attempts: PortValue | int) -> None:
         super().__init__(name, child)
         self.num_attempts = num_attempts
-        self.try_count = 0
 
-    def execute(self) -> TickGenerator:
-        attempts = _read(self.num_attempts)
-        do_loop = self.try_count < attempts or attempts == -1
-        self.status = Status.RUNNING
-        while do_loop:
-            previous = self.decorated.status
-            child_status = yield from self.tick_child()
-            if child_status == Status.SUCCESS:
-                self.try_count = 0
-                self.reset_child()
-                return Status.SUCCESS
-            if child_status == Status.FAILURE:
-                self.try_count += 1
-                do_loop = self.try_count < attempts or attempts == -1
-                self.reset_child()
-                if self.requires_wake_up() and previous == Status.INVALID and do_loop:
-                    self.emit_wake_up()
-                    return Status.RUNNING
-            else:
-                return child_status
-        self.try_count = 0
-        return Status.FAILURE
-
-    def halt(self) -> None:
-        self.try_count = 0
-        super().halt()
+    def limit(self) -> int:
+        return _read(self.num_attempts)

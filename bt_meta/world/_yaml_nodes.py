@@ -4,10 +4,12 @@ Offers:
 
 * :class:`YamlNodeReader` -- the node helpers (mapping, required key, scalar, string, list) shared by the robot
   and scene file readers; each subclass adds the numbers and checks of its own format
+* :func:`shipped_yaml_path` -- a shipped name (``baxter``) or a ``.yaml``/``.yml`` path, as an existing file
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -15,7 +17,20 @@ import yaml
 
 from bt_meta.errors import ConfigError
 
-__all__ = ["YamlNodeReader"]
+__all__ = ["YamlNodeReader", "shipped_yaml_path"]
+
+
+def shipped_yaml_path(name: str | Path, folder: Path, unknown: Callable[[str], str], missing: str) -> Path:
+    """``name`` without a YAML suffix is ``folder/NAME.yaml``; ``unknown(shipped names)`` words the error when
+    that does not exist, ``missing`` when a given path does not."""
+    path = Path(name)
+    if path.suffix not in (".yaml", ".yml"):
+        path = folder / f"{name}.yaml"
+        if not path.is_file():
+            raise ConfigError(unknown(", ".join(sorted(p.stem for p in folder.glob("*.yaml"))) or "none"))
+    if not path.is_file():
+        raise ConfigError(missing, path)
+    return path
 
 
 class YamlNodeReader:

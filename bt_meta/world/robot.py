@@ -24,7 +24,7 @@ import yaml
 
 from bt_meta.errors import ConfigError
 from bt_meta.resources import robots_dir
-from bt_meta.world._yaml_nodes import YamlNodeReader
+from bt_meta.world._yaml_nodes import YamlNodeReader, shipped_yaml_path
 
 __all__ = [
     "ArmDescription",
@@ -140,13 +140,8 @@ def available_robots() -> list[str]:
 
 def load_robot(name: str | Path = "baxter") -> RobotDescription:
     """Load a robot description by shipped name or by path to a YAML file."""
-    path = Path(name)
-    if path.suffix not in (".yaml", ".yml"):
-        path = robots_dir() / f"{name}.yaml"
-        if not path.is_file():
-            raise ConfigError(f"no robot description {name!r}; available: {', '.join(available_robots()) or 'none'}")
-    if not path.is_file():
-        raise ConfigError("robot description file not found", path)
+    path = shipped_yaml_path(name, robots_dir(), lambda shipped: f"no robot description {name!r}; available: {shipped}",
+                             "robot description file not found")
     return _RobotFile(path).load()
 
 

@@ -28,7 +28,7 @@ import yaml
 
 from bt_meta.errors import ConfigError
 from bt_meta.resources import trees_dir
-from bt_meta.world._yaml_nodes import YamlNodeReader
+from bt_meta.world._yaml_nodes import YamlNodeReader, shipped_yaml_path
 from bt_meta.world.objects import COLOURS, OBJECT_TYPES, ObjectModel, make_model, pose_to_matrix
 
 __all__ = ["Scene", "SceneObject", "Variant", "load_scene", "scene_names", "scenes_dir"]
@@ -158,13 +158,8 @@ def scene_names() -> list[str]:
 
 def load_scene(name: str | Path) -> Scene:
     """A scene by shipped name (``letters_A``) or by the path of a YAML file."""
-    path = Path(name)
-    if path.suffix not in (".yaml", ".yml"):
-        path = scenes_dir() / f"{name}.yaml"
-        if not path.is_file():
-            raise ConfigError(f"no scene {str(name)!r}; shipped scenes: {', '.join(scene_names()) or 'none'}")
-    if not path.is_file():
-        raise ConfigError("scene file not found", path)
+    path = shipped_yaml_path(name, scenes_dir(), lambda shipped: f"no scene {str(name)!r}; shipped scenes: {shipped}",
+                             "scene file not found")
     return _SceneFile(path).load()
 
 

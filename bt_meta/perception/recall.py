@@ -28,10 +28,21 @@ from pathlib import Path
 from typing import Any
 
 from bt_meta.memory import EpisodicMemory, StepRecord, resolve_memory_path
+from bt_meta.memory.location import ENV_VAR
 
 __all__ = ["Remembered", "memory_for", "remember", "root_task"]
 
 _OPENED: dict[Path, tuple[float, EpisodicMemory]] = {}
+_RESOLVED: dict[tuple[str | None, str], Path] = {}
+
+
+def _default_path() -> Path:
+    """``resolve_memory_path`` for the current environment and folder, remembered: monitors ask at every step."""
+    key = (os.environ.get(ENV_VAR), os.getcwd())
+    path = _RESOLVED.get(key)
+    if path is None:
+        path = _RESOLVED[key] = resolve_memory_path(None)
+    return path
 
 
 def memory_for(context: Any, explicit: EpisodicMemory | None = None) -> EpisodicMemory | None:
@@ -42,7 +53,7 @@ def memory_for(context: Any, explicit: EpisodicMemory | None = None) -> Episodic
     memory = getattr(run, "memory", None)
     if memory is not None:
         return memory
-    path = resolve_memory_path(None)
+    path = _default_path()
     try:
         stamp = os.stat(path).st_mtime
     except OSError:

@@ -205,6 +205,12 @@ class AxiomSet:
         self._volatile_key = (self._key, "volatile")
         self._depth = 0
         self.incremental = True  # memo inheritance and per-seed units (off only to test they change nothing)
+        # Method preconditions that test derived predicates run as generated code (bt_meta.htn.codegen); off:
+        # the reference matcher above answers them (the two give the same satisfiers in the same order).
+        self.codegen = True
+        self.reference_proofs: bool | None = None  # None: chosen by state size (conditions.REFERENCE_PROOFS_MIN)
+        self._generated: Any = None
+        self._generated_reference: Any = None
         # Shared by every state: which memo entries read a fact key / used a derived atom (append-only, so
         # an invalidation may drop more than needed, never less).
         self._readers: dict[tuple[str, str | None], set[Any]] = {}
@@ -227,6 +233,20 @@ class AxiomSet:
                     if step[0] == DPOS and step[1] in component:
                         rest = Clause(s for k, s in enumerate(clause) if k != j)
                         self._recursive.setdefault(step[1], []).append((axiom, j, step, rest))
+
+    def generated(self, reference_proofs: bool = False) -> Any:
+        """The :class:`~bt_meta.htn.codegen.Generated` functions of this set (built on first use), or None."""
+        attr = "_generated_reference" if reference_proofs else "_generated"
+        found = getattr(self, attr)
+        if found is None:
+            from bt_meta.htn.codegen import Generated, Unsupported
+
+            try:
+                found = Generated(self, MAX_DEPTH, reference_proofs)
+            except Unsupported:
+                found = False
+            setattr(self, attr, found)
+        return found or None
 
     def begin(self) -> None:
         """Start a new epoch (the planner calls this once per search): empty reader indexes.

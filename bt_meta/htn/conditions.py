@@ -31,6 +31,12 @@ from typing import Any
 from bt_meta.errors import PlanningError
 from bt_meta.htn.state import Atom, State
 
+# From this many facts on, generated preconditions prove ground derived atoms with AxiomSet.holds, whose memo a
+# successor state inherits, rather than with generated provers, whose memo starts empty in every state (cheaper per
+# proof, but re-proves everything a state asks). Measured on the generated blocks problems: 330 facts, generated
+# provers 1.35x faster; 664 facts, inherited memo 1.1x faster.
+REFERENCE_PROOFS_MIN = 500
+
 KEYWORDS = frozenset({"and", "or", "not", "true", "false"})
 
 ExternalFn = Callable[[str, tuple, State], bool]
@@ -381,6 +387,10 @@ class Condition:
         self.variables_bound = variables_bound
         self.trivial = len(clauses) == 1 and not clauses[0]
         self.seeded = _seeded_spec(clauses)
+        # generated matchers per tuple of bound variable names; only for conditions that test derived predicates
+        self.generatable = any(step[0] in (DPOS, DNEG) for clause in clauses for step in clause) and not any(
+            step[0] in (EXT, NEXT) for clause in clauses for step in clause)
+        self._matchers: dict[tuple[Any, ...], Any] = {}
 
     def __repr__(self) -> str:
         return f"Condition({self.source!r})"
@@ -397,6 +407,19 @@ class Condition:
     def satisfiers_of(self, state: State, env: dict[str, str], external: ExternalFn | None) -> Iterable[dict]:
         """Like :meth:`satisfiers` but ``env`` is the caller's fresh dict, not copied (planner fast path)."""
         clauses = self.clauses
+        if self.generatable and state.__class__ is State and self.context.axioms.codegen:
+            axioms = self.context.axioms
+            reference = axioms.reference_proofs
+            if reference is None:
+                reference = state._len >= REFERENCE_PROOFS_MIN
+            shape = (reference, *env)
+            matchers = self._matchers.get(shape)
+            if matchers is None:
+                matchers = self._matchers[shape] = self._generate(tuple(env), reference)
+            if matchers:
+                if len(matchers) == 1:
+                    return matchers[0](state, env)  # type: ignore[no-any-return]
+                return self._union_of(matchers, state, env)
         if len(clauses) == 1:
             seeded = self.seeded
             if seeded is not None and state.__class__ is State:
@@ -405,6 +428,28 @@ class Condition:
                     return axioms.seeded(state, seeded, env)  # type: ignore[no-any-return]
             return match_clause(clauses[0], state, env, external, axioms if seeded else self.context.axioms)
         return self._union(state, env, external)
+
+    def _generate(self, bound: tuple[str, ...], reference_proofs: bool) -> list[Any]:
+        """The generated matcher of each clause (:mod:`bt_meta.htn.codegen`), or [] to keep the reference one."""
+        from bt_meta.htn.codegen import Unsupported
+
+        generated = self.context.axioms.generated(reference_proofs)
+        if generated is None:
+            return []
+        try:
+            return [generated.clause_matcher(clause, bound, self.source) for clause in self.clauses]
+        except Unsupported:
+            return []
+
+    @staticmethod
+    def _union_of(matchers: list[Any], state: State, env: dict[str, str]) -> Iterator[dict[str, str]]:
+        seen: set[tuple] = set()
+        for matcher in matchers:
+            for result in matcher(state, env):
+                key = tuple(sorted(result.items()))
+                if key not in seen:
+                    seen.add(key)
+                    yield result
 
     def _union(self, state: State, env: dict[str, str], external: ExternalFn | None) -> Iterator[dict[str, str]]:
         seen: set[tuple] = set()

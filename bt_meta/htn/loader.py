@@ -15,6 +15,7 @@ and splits it at the top-level commas itself.
 from __future__ import annotations
 
 import bisect
+import re
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +27,7 @@ from bt_meta.errors import TaskFileError
 from bt_meta.htn.axioms import Axiom, AxiomSet, StratificationError
 from bt_meta.htn.conditions import (
     EXT,
+    KEYWORDS,
     NEXT,
     AtomExpr,
     Condition,
@@ -40,6 +42,8 @@ from bt_meta.htn.conditions import (
 )
 from bt_meta.htn.model import Domain, Method, Primitive, Problem, TaskDecl, TaskFile
 from bt_meta.htn.state import Atom, State
+
+_PREDICATE_NAME = re.compile(r"[A-Za-z0-9_.+\-][A-Za-z0-9_.+\-/:]*")
 
 # -- flow lists of atoms ----------------------------------------------------------------------------------------
 
@@ -191,6 +195,12 @@ class _Loader:
     def at_index(self, index: int) -> tuple[int, int]:
         line = bisect.bisect_right(self.line_starts, index) - 1
         return line + 1, index - self.line_starts[line] + 1
+
+    def check_predicate_name(self, pred: str, where: Any) -> None:
+        """A declared predicate must be usable in a condition: one name token, not a keyword."""
+        if not _PREDICATE_NAME.fullmatch(pred) or pred in KEYWORDS:
+            raise self.error(f"predicate name {pred!r} is not a name (letters, digits and _ . + - / :, not "
+                             "starting with / or :, and not and/or/not/true/false)", where)
 
     def error(self, message: str, where: Any) -> TaskFileError:
         line = column = None
@@ -455,6 +465,7 @@ class _Loader:
             arities[type_name] = 1
         if "predicates" in keys and not self.is_null(keys["predicates"][1]):
             for pred, key_node, value in self.mapping(keys["predicates"][1], "predicates"):
+                self.check_predicate_name(pred, key_node)
                 arg_types = [src.text for src in self.items(value, f"the argument types of predicate {pred}")]
                 if pred in types and arg_types != [pred] and len(arg_types) != 1:
                     raise self.error(f"predicate {pred} has the name of a type (a type is a 1-argument "
@@ -466,6 +477,7 @@ class _Loader:
         external: dict[str, list[str]] = {}
         if "external" in keys and not self.is_null(keys["external"][1]):
             for pred, key_node, value in self.mapping(keys["external"][1], "external"):
+                self.check_predicate_name(pred, key_node)
                 if pred in arities:
                     raise self.error(f"external predicate {pred} is already declared as a predicate or type",
                                      key_node)

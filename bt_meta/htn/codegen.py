@@ -1,0 +1,466 @@
+"""Generated evaluators for derived predicates and the method preconditions that use them (a planner fast path).
+
+Offers:
+
+* :class:`Generated` -- per :class:`~bt_meta.htn.axioms.AxiomSet`: one plain Python function per derived
+  predicate (truth of a ground atom), per query shape (the derived atoms matching a partly bound pattern) and per
+  precondition clause, with a memo dict per state
+* :class:`Unsupported` -- a condition the generator does not handle (external atoms): the caller keeps the
+  reference matcher
+
+Why: the reference engine (:mod:`bt_meta.htn.conditions`, :mod:`bt_meta.htn.axioms`) interprets match plans and
+spends most of its time in the bookkeeping of that interpretation; straight-line loops over the same state
+indexes answer the same questions several times faster.
+
+Safety: no text is parsed or executed. Each function is built as a Python :mod:`ast` tree in which every value
+that comes from a task file (predicate names, constants) is an ``ast.Constant``; every identifier (``v0``,
+``h3``, ``q7``, ...) is made up here, never taken from a task file. The tree is compiled with
+``compile(tree, "<bt-meta rule ...>", "exec")``.
+
+Semantics are the reference engine's, exactly: rules in file order, facts in state insertion order, the first
+occurrence of a derived atom kept; a ground derived atom is proved top-down with an in-progress marker and the
+same depth limit, and a proof that meets its own atom or goes deeper than ``MAX_DEPTH`` falls back, at the
+outermost proof, to the bottom-up extension; free queries on recursive predicates and queries on a predicate
+whose extension a state already has are answered from that extension, as the reference does.
+"""
+
+from __future__ import annotations
+
+import ast
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from bt_meta.htn.conditions import DNEG, DPOS, EQ, EXT, NEG, NEQ, NEXT, POS, Term, Var
+from bt_meta.htn.state import Atom
+
+
+class Unsupported(Exception):
+    """The generator does not handle this condition; the reference matcher is used instead."""
+
+
+def _name(ident: str) -> ast.Name:
+    return ast.Name(id=ident, ctx=ast.Load())
+
+
+def _store(ident: str) -> ast.Name:
+    return ast.Name(id=ident, ctx=ast.Store())
+
+
+def _const(value: Any) -> ast.Constant:
+    return ast.Constant(value=value)
+
+
+def _tuple(elts: Sequence[ast.expr]) -> ast.Tuple:
+    return ast.Tuple(elts=list(elts), ctx=ast.Load())
+
+
+def _call(func: ast.expr, *args: ast.expr) -> ast.Call:
+    return ast.Call(func=func, args=list(args), keywords=[])
+
+
+def _method(obj: str, meth: str, *args: ast.expr) -> ast.Call:
+    return _call(ast.Attribute(value=_name(obj), attr=meth, ctx=ast.Load()), *args)
+
+
+def _assign(target: str, value: ast.expr) -> ast.Assign:
+    return ast.Assign(targets=[_store(target)], value=value)
+
+
+def _if(test: ast.expr, body: list[ast.stmt], orelse: list[ast.stmt] | None = None) -> ast.If:
+    return ast.If(test=test, body=body or [ast.Pass()], orelse=orelse or [])
+
+
+def _cmp(left: ast.expr, op: ast.cmpop, right: ast.expr) -> ast.Compare:
+    return ast.Compare(left=left, ops=[op], comparators=[right])
+
+
+def _sub(value: ast.expr, index: int) -> ast.Subscript:
+    return ast.Subscript(value=value, slice=_const(index), ctx=ast.Load())
+
+
+def _function(name: str, params: Sequence[str], body: list[ast.stmt]) -> ast.FunctionDef:
+    arguments = ast.arguments(posonlyargs=[], args=[ast.arg(arg=p) for p in params], vararg=None, kwonlyargs=[],
+                              kw_defaults=[], kwarg=None, defaults=[])
+    extra: dict[str, Any] = {"type_params": []} if sys.version_info >= (3, 12) else {}
+    return ast.FunctionDef(name=name, args=arguments, body=body, decorator_list=[], returns=None, **extra)
+
+
+class _Fn:
+    """Local names of one function being generated."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.facts: dict[str, str] = {}
+
+    def fresh(self, prefix: str) -> str:
+        self.count += 1
+        return f"{prefix}{self.count}"
+
+    def fact(self, pred: str) -> str:
+        local = self.facts.get(pred)
+        if local is None:
+            local = self.facts[pred] = f"f{len(self.facts)}"
+        return local
+
+    def prologue(self) -> list[ast.stmt]:
+        """``pr = st._preds`` and one local per fact predicate the body reads (its atoms, insertion order)."""
+        if not self.facts:
+            return []
+        out: list[ast.stmt] = [_assign("pr", ast.Attribute(value=_name("st"), attr="_preds", ctx=ast.Load()))]
+        for pred, local in self.facts.items():
+            out.append(_assign(local, _method("pr", "get", _const(pred), _name("EMPTY"))))
+        return out
+
+
+class _Fallback(Exception):
+    pass
+
+
+_IN_PROGRESS = object()
+
+
+class Generated:
+    """The generated functions of one axiom set, compiled on first use into one namespace."""
+
+    def __init__(self, axioms: Any, max_depth: int, reference_proofs: bool = False) -> None:
+        self.axioms = axioms
+        # reference_proofs: ground derived tests ask AxiomSet.holds (whose memo successor states inherit) instead
+        # of the generated provers (whose memo starts empty in every state): cheaper on large states
+        self.reference_proofs = reference_proofs
+        self.memo_key = (axioms._key, "generated", reference_proofs)
+        self.ns: dict[str, Any] = {
+            "__builtins__": {"len": len, "set": set, "tuple": tuple, "dict": dict},
+            "EMPTY": {}, "INP": _IN_PROGRESS, "Fallback": _Fallback, "MAXD": max_depth,
+            "fb": self._fallback, "holds": axioms.holds, "exth": self._extension_heads, "ext": axioms.extension,
+        }
+        self.ids: dict[str, int] = {pred: i for i, pred in enumerate(axioms.rules)}
+        for pred, i in self.ids.items():
+            self.ns[f"ek{i}"] = (axioms._key, pred)  # the state cache key of the predicate's extension
+        self.queries: dict[tuple[str, tuple[int, ...]], str] = {}
+        self._provers_built = False
+        self._matchers = 0
+        for axiom in axioms.axioms:
+            for clause in axiom.condition.clauses:
+                if any(step[0] in (EXT, NEXT) for step in clause):
+                    raise Unsupported(f"axiom {axiom.head_pred} uses an external predicate")
+
+    # -- runtime helpers --------------------------------------------------------------------------------------
+    def _fallback(self, state: Any, atom: Atom) -> bool:
+        return atom in self.axioms.extension(state, atom[0])
+
+    @staticmethod
+    def _extension_heads(index: Any, pred: str, pattern: tuple[str | None, ...]) -> list[Atom]:
+        """The atoms of a computed extension matching ``pattern``, in the order :func:`candidates` gives them."""
+        length = len(pattern) + 1
+        for position, value in enumerate(pattern, start=1):
+            if value is not None:
+                pool = index.with_arg(pred, position, value)
+                fixed = [(i, v) for i, v in enumerate(pattern, start=1) if i > position and v is not None]
+                break
+        else:
+            pool = index.atoms_of(pred)
+            fixed = []
+        out = []
+        for atom in pool:
+            if len(atom) != length:
+                continue
+            for i, v in fixed:
+                if atom[i] != v:
+                    break
+            else:
+                out.append(atom)
+        return out
+
+    def _compile(self, label: str, functions: list[ast.FunctionDef]) -> None:
+        tree = ast.Module(body=list(functions), type_ignores=[])
+        ast.fix_missing_locations(tree)
+        code = compile(tree, f"<bt-meta rule {label}>", "exec")
+        exec(code, self.ns)  # a code object built from an ast tree above, never task-file text
+
+    # -- provers ----------------------------------------------------------------------------------------------
+    def _build_provers(self) -> None:
+        if self._provers_built:
+            return
+        self._provers_built = True
+        functions: list[ast.FunctionDef] = []
+        for pred, i in self.ids.items():
+            rules = self.axioms.rules[pred]
+            arity = len(rules[0].head_args)
+            params = [f"a{j}" for j in range(arity)]
+            fn = _Fn()
+            proof: list[ast.stmt] = []
+            for axiom in rules:
+                proof.extend(self._rule_body(fn, axiom, params))
+            subscript_k = ast.Subscript(value=_name("m"), slice=_name("k"), ctx=ast.Store())
+            body: list[ast.stmt] = [
+                _if(_cmp(_method("m", "get", _name("k")), ast.Is(), _name("INP")),
+                    [ast.Raise(exc=_name("Fallback"), cause=None)]),
+                _assign("e", _call(ast.Attribute(value=ast.Attribute(value=_name("st"), attr="_derived",
+                                                                     ctx=ast.Load()), attr="get", ctx=ast.Load()),
+                                   _name(f"ek{i}"))),
+                _if(_cmp(_name("e"), ast.IsNot(), _const(None)),
+                    [ast.Return(value=_cmp(_name("k"), ast.In(), _name("e")))]),
+                _if(_cmp(_name("d"), ast.GtE(), _name("MAXD")), [ast.Raise(exc=_name("Fallback"), cause=None)]),
+                ast.Assign(targets=[subscript_k], value=_name("INP")),
+                _assign("dd", ast.BinOp(left=_name("d"), op=ast.Add(), right=_const(1))),
+                ast.Try(body=[*fn.prologue(), *proof,
+                              ast.Assign(targets=[subscript_k], value=_const(False)),
+                              ast.Return(value=_const(False))],
+                        handlers=[ast.ExceptHandler(type=_name("Fallback"), name=None, body=[
+                            ast.Delete(targets=[ast.Subscript(value=_name("m"), slice=_name("k"), ctx=ast.Del())]),
+                            ast.Raise(exc=None, cause=None)])],
+                        orelse=[], finalbody=[]),
+            ]
+            functions.append(_function(f"h{i}", ["st", "m", "d", "k", *params], body))
+        self._compile("provers", functions)
+
+    def _rule_body(self, fn: _Fn, axiom: Any, params: list[str]) -> list[ast.stmt]:
+        """Statements that store True and return when one rule proves the head ``k`` (inner proofs at ``dd``)."""
+        checks: list[ast.expr] = []
+        varmap: dict[str, str] = {}
+        for term, param in zip(axiom.head_args, params, strict=True):
+            if term.__class__ is Var:
+                prior = varmap.get(term.name)
+                if prior is None:
+                    varmap[term.name] = param
+                else:
+                    checks.append(_cmp(_name(param), ast.Eq(), _name(prior)))
+            else:
+                checks.append(_cmp(_name(param), ast.Eq(), _const(term)))
+        proved: list[ast.stmt] = [
+            ast.Assign(targets=[ast.Subscript(value=_name("m"), slice=_name("k"), ctx=ast.Store())],
+                       value=_const(True)),
+            ast.Return(value=_const(True))]
+        body: list[ast.stmt] = []
+        for clause in axiom.condition.clauses:
+            body.extend(self._clause(fn, list(clause), dict(varmap), "dd", False, lambda _vm: list(proved)))
+        if not checks:
+            return body
+        return [_if(checks[0] if len(checks) == 1 else ast.BoolOp(op=ast.And(), values=checks), body)]
+
+    # -- queries ----------------------------------------------------------------------------------------------
+    def query(self, pred: str, mask: tuple[int, ...]) -> str:
+        """The name of the function giving the derived atoms of ``pred`` bound at positions ``mask``."""
+        found = self.queries.get((pred, mask))
+        if found is not None:
+            return found
+        i = self.ids[pred]
+        name = f"q{i}_" + "_".join(str(p) for p in mask)
+        self.queries[(pred, mask)] = name
+        rules = self.axioms.rules[pred]
+        arity = len(rules[0].head_args)
+        params = {position: f"p{position}" for position in mask}
+        pattern = _tuple([_name(params[p]) if p in params else _const(None) for p in range(1, arity + 1)])
+        if pred in self.axioms.recursive:
+            body: list[ast.stmt] = [ast.Return(value=_call(_name("exth"), _call(_name("ext"), _name("st"),
+                                                                                 _const(pred)),
+                                                           _const(pred), pattern))]
+            self._compile(pred, [_function(name, ["st", "m", "d", *params.values()], body)])
+            return name
+        fn = _Fn()
+        rules_body: list[ast.stmt] = []
+        for axiom in rules:
+            varmap: dict[str, str] = {}
+            checks: list[ast.expr] = []
+            for position, term in enumerate(axiom.head_args, start=1):
+                if position not in params:
+                    continue
+                param = params[position]
+                if term.__class__ is Var:
+                    prior = varmap.get(term.name)
+                    if prior is None:
+                        varmap[term.name] = param
+                    else:
+                        checks.append(_cmp(_name(param), ast.Eq(), _name(prior)))
+                else:
+                    checks.append(_cmp(_name(param), ast.Eq(), _const(term)))
+
+            def emit(vm: dict[str, str], axiom: Any = axiom) -> list[ast.stmt]:
+                elts: list[ast.expr] = [_const(axiom.head_pred)]
+                for term in axiom.head_args:
+                    if term.__class__ is Var:
+                        if term.name not in vm:
+                            raise Unsupported(f"head variable ?{term.name} of {axiom.head_pred} is not bound")
+                        elts.append(_name(vm[term.name]))
+                    else:
+                        elts.append(_const(term))
+                atom = fn.fresh("x")
+                return [_assign(atom, _tuple(elts)),
+                        _if(_cmp(_name(atom), ast.NotIn(), _name("seen")), [
+                            ast.Expr(value=_method("seen", "add", _name(atom))),
+                            ast.Expr(value=_method("out", "append", _name(atom)))])]
+
+            rule_body: list[ast.stmt] = []
+            for clause in axiom.condition.clauses:
+                rule_body.extend(self._clause(fn, list(clause), dict(varmap), "d", True, emit))
+            if checks:
+                test = checks[0] if len(checks) == 1 else ast.BoolOp(op=ast.And(), values=checks)
+                rules_body.append(_if(test, rule_body))
+            else:
+                rules_body.extend(rule_body)
+        key = _tuple([_const(i), *[_name(p) for p in params.values()]])
+        body = [
+            _assign("k", key),
+            _assign("v", _method("m", "get", _name("k"))),
+            _if(_cmp(_name("v"), ast.IsNot(), _const(None)), [ast.Return(value=_name("v"))]),
+            _assign("e", _call(ast.Attribute(value=ast.Attribute(value=_name("st"), attr="_derived", ctx=ast.Load()),
+                                             attr="get", ctx=ast.Load()), _name(f"ek{i}"))),
+            _if(_cmp(_name("e"), ast.IsNot(), _const(None)),
+                [ast.Return(value=_call(_name("exth"), _name("e"), _const(pred), pattern))]),
+            *fn.prologue(),
+            _assign("out", ast.List(elts=[], ctx=ast.Load())),
+            _assign("seen", _call(_name("set"))),
+            *rules_body,
+            _assign("v", _call(_name("tuple"), _name("out"))),
+            ast.Assign(targets=[ast.Subscript(value=_name("m"), slice=_name("k"), ctx=ast.Store())],
+                       value=_name("v")),
+            ast.Return(value=_name("v")),
+        ]
+        self._compile(pred, [_function(name, ["st", "m", "d", *params.values()], body)])
+        return name
+
+    # -- preconditions ----------------------------------------------------------------------------------------
+    def clause_matcher(self, clause: Sequence[tuple], bound: Sequence[str], label: str) -> Callable[..., Any]:
+        """A generator function ``(state, env)`` yielding what :func:`match_clause` yields, in the same order."""
+        if not self.reference_proofs:
+            self._build_provers()
+        fn = _Fn()
+        varmap = {name: f"b{k}" for k, name in enumerate(bound)}
+        fresh_vars: list[str] = []
+
+        def emit(vm: dict[str, str]) -> list[ast.stmt]:
+            out: list[ast.stmt] = [_assign("res", _call(_name("dict"), _name("env")))]
+            for var in fresh_vars:
+                out.append(ast.Assign(targets=[ast.Subscript(value=_name("res"), slice=_const(var), ctx=ast.Store())],
+                                      value=_name(vm[var])))
+            out.append(ast.Expr(value=ast.Yield(value=_name("res"))))
+            return out
+
+        have = set(bound)
+        for step in clause:
+            if step[0] in (POS, DPOS):
+                for arg in step[2]:
+                    if arg.__class__ is Var and arg.name not in have:
+                        have.add(arg.name)
+                        fresh_vars.append(arg.name)
+        matched = self._clause(fn, list(clause), dict(varmap), "0", True, emit)
+        used = [ast.Assign(targets=[_store(local)], value=ast.Subscript(value=_name("env"), slice=_const(name),
+                                                                         ctx=ast.Load()))
+                for name, local in varmap.items()]
+        body: list[ast.stmt] = [
+            _assign("dv", ast.Attribute(value=_name("st"), attr="_derived", ctx=ast.Load())),
+            _assign("m", _method("dv", "get", _name("GK"))),
+            _if(_cmp(_name("m"), ast.Is(), _const(None)), [
+                ast.Assign(targets=[_store("m"), ast.Subscript(value=_name("dv"), slice=_name("GK"), ctx=ast.Store())],
+                           value=ast.Dict(keys=[], values=[]))]),
+            *fn.prologue(), *used, *matched,
+        ]
+        self.ns["GK"] = self.memo_key
+        self._matchers += 1
+        name = f"c{self._matchers}"
+        self._compile(label, [_function(name, ["st", "env"], body)])
+        return self.ns[name]  # type: ignore[no-any-return]
+
+    # -- clause bodies ----------------------------------------------------------------------------------------
+    def _value(self, term: Term, varmap: dict[str, str]) -> ast.expr:
+        return _name(varmap[term.name]) if term.__class__ is Var else _const(term)  # type: ignore[union-attr]
+
+    def _clause(self, fn: _Fn, steps: list[tuple], varmap: dict[str, str], depth: str, outermost: bool,
+                on_match: Callable[[dict[str, str]], list[ast.stmt]]) -> list[ast.stmt]:
+        """Nested loops and tests matching ``steps`` left to right; ``on_match`` gives the innermost statements.
+
+        ``depth``: the local holding the proof depth of derived tests here (``"0"``: a constant 0); ``outermost``:
+        whether a derived test here may be an outermost proof, so catches a fallback (when its depth is 0).
+        """
+        if not steps:
+            return on_match(varmap)
+        step, rest = steps[0], steps[1:]
+        kind = step[0]
+        if kind in (EXT, NEXT):
+            raise Unsupported("external predicate")
+        if kind in (EQ, NEQ):
+            test = _cmp(self._value(step[1], varmap), ast.Eq() if kind == EQ else ast.NotEq(),
+                        self._value(step[2], varmap))
+            return [_if(test, self._clause(fn, rest, varmap, depth, outermost, on_match))]
+        pred, args = step[1], step[2]
+        free = [a for a in args if a.__class__ is Var and a.name not in varmap]
+        depth_expr: ast.expr = _const(0) if depth == "0" else _name(depth)
+        if not free:
+            atom = _tuple([_const(pred), *[self._value(a, varmap) for a in args]])
+            if kind in (POS, NEG):
+                test = _cmp(atom, ast.In() if kind == POS else ast.NotIn(), _name(fn.fact(pred)))
+                return [_if(test, self._clause(fn, rest, varmap, depth, outermost, on_match))]
+            if self.reference_proofs:
+                test_expr = _call(_name("holds"), _name("st"), atom)
+                if kind == DNEG:
+                    test_expr = ast.UnaryOp(op=ast.Not(), operand=test_expr)
+                return [_if(test_expr, self._clause(fn, rest, varmap, depth, outermost, on_match))]
+            key = fn.fresh("k")
+            truth = fn.fresh("t")
+            prover = _call(_name(f"h{self.ids[pred]}"), _name("st"), _name("m"), depth_expr, _name(key),
+                           *[self._value(a, varmap) for a in args])
+            compute: list[ast.stmt] = [_assign(truth, prover)]
+            if outermost:
+                handler: list[ast.stmt] = []
+                if depth != "0":
+                    handler.append(_if(_name(depth), [ast.Raise(exc=None, cause=None)]))
+                handler.append(_assign(truth, _call(_name("fb"), _name("st"), _name(key))))
+                compute = [ast.Try(body=compute, handlers=[ast.ExceptHandler(type=_name("Fallback"), name=None,
+                                                                             body=handler)],
+                                   orelse=[], finalbody=[])]
+            pre: list[ast.stmt] = [
+                _assign(key, atom),
+                _assign(truth, _method("m", "get", _name(key))),
+                _if(ast.BoolOp(op=ast.Or(), values=[_cmp(_name(truth), ast.Is(), _const(None)),
+                                                    _cmp(_name(truth), ast.Is(), _name("INP"))]), compute),
+            ]
+            test_expr: ast.expr = _name(truth)
+            if kind == DNEG:
+                test_expr = ast.UnaryOp(op=ast.Not(), operand=test_expr)
+            return [*pre, _if(test_expr, self._clause(fn, rest, varmap, depth, outermost, on_match))]
+        if kind not in (POS, DPOS):  # a negation with unbound variables: the loader rejects it
+            raise Unsupported("negated atom with unbound variables")
+        loop = fn.fresh("i")
+        new_map = dict(varmap)
+        guards: list[ast.expr] = []
+        binds: list[ast.stmt] = []
+        if kind == POS:
+            bound_positions = [p for p, a in enumerate(args, start=1)
+                               if not (a.__class__ is Var and a.name not in varmap)]
+            if bound_positions:
+                first = bound_positions[0]
+                pool: ast.expr = _method("st", "with_arg", _const(pred), _const(first),
+                                         self._value(args[first - 1], varmap))
+                fixed = bound_positions[1:]
+            else:
+                pool = _name(fn.fact(pred))
+                fixed = []
+            guards.append(_cmp(_call(_name("len"), _name(loop)), ast.NotEq(), _const(len(args) + 1)))
+            for p in fixed:
+                guards.append(_cmp(_sub(_name(loop), p), ast.NotEq(), self._value(args[p - 1], varmap)))
+        else:
+            bound_positions = [p for p, a in enumerate(args, start=1)
+                               if not (a.__class__ is Var and a.name not in varmap)]
+            mask = tuple(bound_positions)
+            qname = self.query(pred, mask)
+            pool = _call(_name(qname), _name("st"), _name("m"), depth_expr,
+                         *[self._value(args[p - 1], varmap) for p in mask])
+        first_position: dict[str, int] = {}
+        for p, a in enumerate(args, start=1):
+            if a.__class__ is Var and a.name not in varmap:
+                if a.name in first_position:
+                    guards.append(_cmp(_sub(_name(loop), p), ast.NotEq(), _sub(_name(loop), first_position[a.name])))
+                else:
+                    first_position[a.name] = p
+        for var_name, p in first_position.items():
+            local = fn.fresh("v")
+            new_map[var_name] = local
+            binds.append(_assign(local, _sub(_name(loop), p)))
+        body: list[ast.stmt] = []
+        if guards:
+            test = guards[0] if len(guards) == 1 else ast.BoolOp(op=ast.Or(), values=guards)
+            body.append(_if(test, [ast.Continue()]))
+        body.extend(binds)
+        body.extend(self._clause(fn, rest, new_map, depth, outermost, on_match))
+        return [ast.For(target=_store(loop), iter=pool, body=body, orelse=[])]

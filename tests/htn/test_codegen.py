@@ -1,0 +1,271 @@
+"""Generated precondition matchers and derived-predicate provers answer exactly as the reference engine does."""
+
+from __future__ import annotations
+
+import itertools
+import random
+import re
+import textwrap
+import types
+from pathlib import Path
+
+import pytest
+
+from bt_meta.errors import TaskFileError
+from bt_meta.htn import State, axioms, load_task_file, load_task_text, plan
+
+BLOCKS_HTN = Path(__file__).resolve().parents[2] / "bt_meta" / "bench" / "problems" / "blocks_htn.yaml"
+MODES = {"reference": (False, None), "generated": (True, False), "inherited-proofs": (True, True), "auto": (True, None)}
+
+
+def _set_mode(axiom_set, mode: str) -> None:
+    axiom_set.codegen, axiom_set.reference_proofs = MODES[mode]
+
+
+def _answers(condition, state: State, env: dict[str, str], mode: str) -> list[list[tuple[str, str]]]:
+    _set_mode(condition.context.axioms, mode)
+    try:
+        return [list(found.items()) for found in condition.satisfiers_of(State(list(state)), dict(env), None)]
+    finally:
+        _set_mode(condition.context.axioms, "auto")
+
+
+def _blocks_state(rng: random.Random, n: int) -> State:
+    blocks = [f"b{i}" for i in range(n)]
+
+    def towers() -> list[list[str]]:
+        out: list[list[str]] = []
+        for block in rng.sample(blocks, n):
+            if out and rng.random() < 0.6:
+                rng.choice(out).append(block)
+            else:
+                out.append([block])
+        return out
+
+    atoms: list[tuple[str, ...]] = [("hand_empty",), *(("block", b) for b in blocks)]
+    for tower in towers():
+        atoms.append(("on_table", tower[0]))
+        atoms.extend(("on", upper, lower) for lower, upper in itertools.pairwise(tower))
+        atoms.append(("clear", tower[-1]))
+    for tower in towers():
+        atoms.append(("goal_on_table", tower[0]))
+        atoms.extend(("goal_on", upper, lower) for lower, upper in itertools.pairwise(tower))
+    return State(atoms)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_blocks_preconditions_give_the_same_satisfiers_in_the_same_order(seed):
+    domain = load_task_file(BLOCKS_HTN).domain
+    rng = random.Random(seed)
+    state = _blocks_state(rng, 12)
+    conditions = [method.precondition for method in domain.methods_by_task["achieve"]]
+    assert any(condition.generatable for condition in conditions)
+    for condition in conditions:
+        expected = _answers(condition, state, {}, "reference")
+        for mode in ("generated", "inherited-proofs", "auto"):
+            assert _answers(condition, state, {}, mode) == expected, (condition.source, mode)
+
+
+def test_successor_states_answer_as_fresh_ones():
+    """The generated memo belongs to one state: a successor's changed facts are never answered from it."""
+    domain = load_task_file(BLOCKS_HTN).domain
+    condition = domain.methods_by_task["achieve"][0].precondition
+    rng = random.Random(3)
+    state = _blocks_state(rng, 10)
+    _set_mode(domain.axiom_set, "generated")
+    try:
+        for _ in range(30):
+            clear = [atom[1] for atom in state.atoms_of("clear")]
+            block = rng.choice(clear)
+            below = state.with_arg("on", 1, block)
+            if below:
+                child = state.apply(add=[("on_table", block), ("clear", below[0][2])], delete=[below[0]])
+            else:
+                targets = [c for c in clear if c != block]
+                if not targets:
+                    continue
+                target = rng.choice(targets)
+                child = state.apply(add=[("on", block, target)], delete=[("on_table", block), ("clear", target)])
+            list(condition.satisfiers_of(state, {}, None))  # fill the parent's memo first
+            got = [list(f.items()) for f in condition.satisfiers_of(child, {}, None)]
+            assert got == _answers(condition, child, {}, "reference")
+            state = child
+    finally:
+        _set_mode(domain.axiom_set, "auto")
+
+
+PATH = """
+domain:
+  predicates: {edge: [x, x], start: [x], link: [x, x], node: [x]}
+  axioms:
+    - head: path(?x, ?z)
+      when: edge(?x, ?z)
+    - head: path(?x, ?z)
+      when: edge(?x, ?y) and path(?y, ?z)
+    - head: good(?a, ?b)
+      when: link(?a, ?b) and path(?b, end)
+    - head: good(?a, ?b)
+      when: link(?a, ?b) and ?b == end
+  primitives: {}
+  tasks: {t: []}
+  methods:
+    - name: cut_off
+      task: t()
+      precondition: start(?s) and not path(?s, zz)
+    - name: reaches
+      task: t()
+      precondition: start(?s) and node(?x) and path(?s, ?x)
+    - name: good_link
+      task: t()
+      precondition: start(?s) and good(?s, ?b) and not path(?b, ?s)
+    - name: free_path
+      task: t()
+      precondition: path(?s, ?x) and start(?s)
+"""
+
+
+def _conditions(domain) -> list:
+    return [method.precondition for method in domain.methods_by_task["t"]]
+
+
+def test_cycles_fall_back_to_the_fixpoint_exactly():
+    domain = load_task_text(PATH).domain
+    cycle = State([("start", "a"), ("edge", "a", "b"), ("edge", "b", "c"), ("edge", "c", "a"), ("link", "a", "b"),
+                   ("link", "a", "end"), *(("node", x) for x in "abcz")])
+    for condition in _conditions(domain):
+        expected = _answers(condition, cycle, {}, "reference")
+        for mode in ("generated", "inherited-proofs"):
+            assert _answers(condition, cycle, {}, mode) == expected, condition.source
+    cut_off, reaches, good_link, _ = _conditions(domain)
+    assert _answers(cut_off, cycle, {}, "generated") == [[("s", "a")]]
+    assert _answers(reaches, cycle, {}, "generated") == [[("s", "a"), ("x", x)] for x in "abc"]
+    assert _answers(good_link, cycle, {}, "generated") == [[("s", "a"), ("b", "end")]]
+
+
+def test_proofs_deeper_than_the_depth_limit_fall_back_to_the_fixpoint():
+    domain = load_task_text(PATH).domain
+    n = axioms.MAX_DEPTH + 5
+    chain = [f"c{i}" for i in range(n)] + ["end"]
+    state = State([("start", "c0"), ("link", "c0", "c1"), *(("edge", x, y) for x, y in itertools.pairwise(chain)),
+                   ("node", "end"), ("node", "c3")])
+    for condition in _conditions(domain):
+        expected = _answers(condition, state, {}, "reference")
+        assert expected or condition.source.startswith("start(?s) and not")
+        assert _answers(condition, state, {}, "generated") == expected, condition.source
+    good_link = _conditions(domain)[2]
+    assert _answers(good_link, state, {}, "generated") == [[("s", "c0"), ("b", "c1")]]
+
+
+def test_conditions_with_external_atoms_keep_the_reference_matcher():
+    text = """
+    domain:
+      predicates: {item: [x], base: [x]}
+      external: {allowed: [x]}
+      axioms:
+        - head: ok(?x)
+          when: base(?x)
+      primitives: {}
+      tasks: {t: []}
+      methods:
+        - name: m
+          task: t()
+          precondition: item(?x) and ok(?x) and allowed(?x)
+    """
+    domain = load_task_text(textwrap.dedent(text)).domain
+    condition = domain.methods_by_task["t"][0].precondition
+    assert not condition.generatable
+    state = State([("item", "a"), ("item", "b"), ("base", "b"), ("base", "a")])
+    found = list(condition.satisfiers_of(state, {}, lambda name, args, st: args == ("a",)))
+    assert found == [{"x": "a"}]
+
+
+HOSTILE = '''
+domain:
+  predicates: {thing: [x], rel: [x, x]}
+  axioms:
+    - head: marked(?x)
+      when: rel(?x, "\\"); import os; (\\"")
+    - head: marked(?x)
+      when: rel(?x, '__import__("os").system("false")')
+  primitives:
+    mark:
+      parameters: [?x]
+      precondition: thing(?x)
+      add: [rel(?x, done)]
+  tasks: {t: []}
+  methods:
+    - name: m
+      task: t()
+      precondition: thing(?x) and not marked(?x) and not rel(?x, done)
+      subtasks: [mark(?x), t()]
+    - name: stop
+      task: t()
+      precondition: "true"
+problems:
+  p:
+    init:
+      - thing(a)
+      - thing(b)
+      - thing(c)
+      - rel(a, '"); import os; ("')
+      - rel(c, '__import__("os").system("false")')
+    tasks: [t()]
+'''
+
+_OWN_NAME = re.compile(r"^(st|m|d|dd|k|e|r|v|pr|dv|env|res|out|seen|[a-z]\d+(_\d+)*|[a-z]{1,2}\d+(_\d+)*)$")
+_RUNTIME_NAMES = {"EMPTY", "INP", "Fallback", "MAXD", "fb", "holds", "exth", "ext", "GK", "len", "set", "tuple",
+                  "dict", "get", "_preds", "_derived", "with_arg", "add", "append"}
+
+
+def test_hostile_constants_plan_as_data_and_never_become_identifiers():
+    taskfile = load_task_text(HOSTILE)
+    domain = taskfile.domain
+    for mode in ("generated", "inherited-proofs"):
+        _set_mode(domain.axiom_set, mode)
+        try:
+            result = plan(domain, taskfile.problems["p"])
+        finally:
+            _set_mode(domain.axiom_set, "auto")
+        assert [str(action) for action in result.plan] == ["mark(b)"]
+    identifiers: set[str] = set()
+    for generated in (domain.axiom_set.generated(False), domain.axiom_set.generated(True)):
+        for value in generated.ns.values():
+            if isinstance(value, types.FunctionType) and value.__code__.co_filename.startswith("<bt-meta rule"):
+                code = value.__code__
+                identifiers.update(code.co_names, code.co_varnames, code.co_cellvars, code.co_freevars, [code.co_name])
+    assert identifiers
+    strange = {name for name in identifiers if name not in _RUNTIME_NAMES and not _OWN_NAME.match(name)}
+    assert strange == set()
+    assert not any("os" in name or "import" in name for name in identifiers)
+
+
+def test_a_predicate_named_like_code_is_rejected_by_the_loader():
+    text = """
+    domain:
+      predicates: {"__import__('os')": [x]}
+      primitives: {}
+      tasks: {}
+    """
+    with pytest.raises(TaskFileError, match=r"<string>:3:16: predicate name \"__import__\('os'\)\" is not a name"):
+        load_task_text(textwrap.dedent(text))
+
+
+def test_bench_problems_plan_identically_with_and_without_generated_code():
+    gtpyhop = pytest.importorskip("gtpyhop")
+    from bt_meta.bench import htn as bench
+
+    problems = bench.select_problems(bench.build_problems(gtpyhop, seed=1), "sussman,bw_*,blocks_100,childsnack_p01")
+    ours = bench.OurPlanner(problems)
+    for problem in problems:
+        domain, prob = ours.domains[problem.family], ours.problems[problem.name]
+        outcomes = []
+        for mode in ("reference", "generated", "inherited-proofs", "auto"):
+            _set_mode(domain.axiom_set, mode)
+            try:
+                result = plan(domain, prob)
+            finally:
+                _set_mode(domain.axiom_set, "auto")
+            nodes = result.tree.nodes.values()
+            outcomes.append(([str(a) for a in result.plan],
+                             [(n.task, n.method, n.parent, list(n.bindings.items())) for n in nodes]))
+        assert all(outcome == outcomes[0] for outcome in outcomes), problem.name

@@ -318,3 +318,47 @@ def test_an_atom_met_again_inside_its_own_proof_is_never_taken_as_false():
     condition = _conditions(domain)[0]
     for mode in ("reference", "generated", "inherited-proofs"):
         assert _answers(condition, state, {}, mode) == [[("s", "a")]], mode
+
+
+EDGES = """
+domain:
+  predicates: {flag: [x], item: [x], pair: [x, x], start: [x]}
+  axioms:
+    - head: ready()
+      when: flag(?x)
+    - head: same(?x, ?x)
+      when: item(?x)
+    - head: to_end(?x, end)
+      when: pair(?x, ?y) and item(?y)
+  primitives: {}
+  tasks: {t: []}
+  methods:
+    - name: nullary
+      task: t()
+      precondition: item(?y) and ready()
+    - name: repeated_head
+      task: t()
+      precondition: pair(?a, ?b) and not same(?a, ?b) and same(?a, ?a)
+    - name: constant_in_query
+      task: t()
+      precondition: to_end(?x, end) and item(?x)
+    - name: constant_mismatch
+      task: t()
+      precondition: item(?x) and to_end(?x, ?z) and not to_end(?x, elsewhere)
+"""
+
+
+@pytest.mark.parametrize("flag", [True, False])
+def test_nullary_repeated_and_constant_heads(flag):
+    domain = load_task_text(EDGES).domain
+    facts = [("item", "a"), ("item", "b"), ("pair", "a", "b"), ("pair", "b", "b"), ("pair", "b", "a")]
+    state = State([*facts, ("flag", "f")] if flag else facts)
+    for condition in _conditions(domain):
+        expected = _answers(condition, state, {}, "reference")
+        for mode in ("generated", "inherited-proofs"):
+            assert _answers(condition, state, {}, mode) == expected, (condition.source, mode)
+    nullary, repeated, constant, mismatch = _conditions(domain)
+    assert _answers(nullary, state, {}, "generated") == ([[("y", "a")], [("y", "b")]] if flag else [])
+    assert _answers(repeated, state, {}, "generated") == [[("a", "a"), ("b", "b")], [("a", "b"), ("b", "a")]]
+    assert _answers(constant, state, {}, "generated") == [[("x", "a")], [("x", "b")]]
+    assert _answers(mismatch, state, {}, "generated") == [[("x", "a"), ("z", "end")], [("x", "b"), ("z", "end")]]

@@ -31,6 +31,7 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from bt_meta.htn.axioms import _IN_PROGRESS as _REFERENCE_IN_PROGRESS
 from bt_meta.htn.conditions import DNEG, DPOS, EQ, EXT, NEG, NEQ, NEXT, POS, Term, Var
 from bt_meta.htn.state import Atom
 
@@ -92,6 +93,7 @@ class _Fn:
     def __init__(self) -> None:
         self.count = 0
         self.facts: dict[str, str] = {}
+        self.reference_memo = False  # whether the body reads the reference engine's memo (local ``om``)
 
     def fresh(self, prefix: str) -> str:
         self.count += 1
@@ -105,12 +107,21 @@ class _Fn:
 
     def prologue(self) -> list[ast.stmt]:
         """``pr = st._preds`` and one local per fact predicate the body reads (its atoms, insertion order)."""
+        out: list[ast.stmt] = []
+        if self.reference_memo:
+            out.append(_assign("om", _reference_memo()))
         if not self.facts:
-            return []
-        out: list[ast.stmt] = [_assign("pr", ast.Attribute(value=_name("st"), attr="_preds", ctx=ast.Load()))]
+            return out
+        out.append(_assign("pr", ast.Attribute(value=_name("st"), attr="_preds", ctx=ast.Load())))
         for pred, local in self.facts.items():
             out.append(_assign(local, _method("pr", "get", _const(pred), _name("EMPTY"))))
         return out
+
+
+def _reference_memo() -> ast.expr:
+    """``st._derived.get(OMK, EMPTY)``: the reference engine's memo of the state (AxiomSet.holds), if made yet."""
+    return _call(ast.Attribute(value=ast.Attribute(value=_name("st"), attr="_derived", ctx=ast.Load()), attr="get",
+                               ctx=ast.Load()), _name("OMK"), _name("EMPTY"))
 
 
 class _Fallback(Exception):
@@ -132,7 +143,9 @@ class Generated:
         self.ns: dict[str, Any] = {
             "__builtins__": {"len": len, "set": set, "tuple": tuple, "dict": dict},
             "EMPTY": {}, "INP": _IN_PROGRESS, "Fallback": _Fallback, "MAXD": max_depth,
-            "fb": self._fallback, "holds": axioms.holds, "exth": self._extension_heads, "ext": axioms.extension,
+            "fb": self._fallback, "holds": axioms.holds,
+            "OMK": axioms._memo_key, "OINP": _REFERENCE_IN_PROGRESS,
+            "exth": self._extension_heads, "ext": axioms.extension,
         }
         self.ids: dict[str, int] = {pred: i for i, pred in enumerate(axioms.rules)}
         for pred, i in self.ids.items():
@@ -392,10 +405,23 @@ class Generated:
                 test = _cmp(atom, ast.In() if kind == POS else ast.NotIn(), _name(fn.fact(pred)))
                 return [_if(test, self._clause(fn, rest, varmap, depth, outermost, on_match))]
             if self.reference_proofs:
-                test_expr = _call(_name("holds"), _name("st"), atom)
+                # a memo entry of AxiomSet.holds is ``(truth,)``, valid for this state: read it without the call
+                fn.reference_memo = True
+                key = fn.fresh("k")
+                truth = fn.fresh("t")
+                ask: list[ast.stmt] = [
+                    _assign(key, atom),
+                    _assign(truth, _method("om", "get", _name(key))),
+                    _if(ast.BoolOp(op=ast.Or(), values=[_cmp(_name(truth), ast.Is(), _const(None)),
+                                                        _cmp(_name(truth), ast.Is(), _name("OINP"))]),
+                        [_assign(truth, _call(_name("holds"), _name("st"), _name(key))),
+                         _assign("om", _reference_memo())],
+                        [_assign(truth, _sub(_name(truth), 0))]),
+                ]
+                test_expr = _name(truth)
                 if kind == DNEG:
                     test_expr = ast.UnaryOp(op=ast.Not(), operand=test_expr)
-                return [_if(test_expr, self._clause(fn, rest, varmap, depth, outermost, on_match))]
+                return [*ask, _if(test_expr, self._clause(fn, rest, varmap, depth, outermost, on_match))]
             key = fn.fresh("k")
             truth = fn.fresh("t")
             prover = _call(_name(f"h{self.ids[pred]}"), _name("st"), _name("m"), depth_expr, _name(key),

@@ -490,3 +490,145 @@ class Generated:
         body.extend(binds)
         body.extend(self._clause(fn, rest, new_map, depth, outermost, on_match))
         return [ast.For(target=_store(loop), iter=pool, body=body, orelse=[])]
+
+    # -- whole tasks and primitives ---------------------------------------------------------------------------
+    def _head(self, fn: _Fn, head: Sequence[Term], params: Sequence[str]) -> tuple[list[ast.expr], dict[str, str]]:
+        """Tests a task's arguments must pass to unify with a method head, and the head variables' locals."""
+        checks: list[ast.expr] = []
+        varmap: dict[str, str] = {}
+        for term, param in zip(head, params, strict=True):
+            if term.__class__ is Var:
+                prior = varmap.get(term.name)  # type: ignore[union-attr]
+                if prior is None:
+                    varmap[term.name] = param  # type: ignore[union-attr]
+                else:
+                    checks.append(_cmp(_name(param), ast.Eq(), _name(prior)))
+            else:
+                checks.append(_cmp(_name(param), ast.Eq(), _const(term)))
+        return checks, varmap
+
+    @staticmethod
+    def _fresh_variables(clause: Sequence[tuple], bound: Sequence[str]) -> list[str]:
+        """Variables a clause binds beyond ``bound``, in the order the reference matcher adds them to a binding."""
+        have = set(bound)
+        fresh: list[str] = []
+        for step in clause:
+            if step[0] in (POS, DPOS):
+                for arg in step[2]:
+                    if arg.__class__ is Var and arg.name not in have:
+                        have.add(arg.name)
+                        fresh.append(arg.name)
+        return fresh
+
+    def _bindings(self, names: Sequence[str], vm: dict[str, str]) -> ast.Dict:
+        return ast.Dict(keys=[_const(n) for n in names], values=[_name(vm[n]) for n in names])
+
+    def _ground(self, pred: str, args: Sequence[Term], vm: dict[str, str]) -> ast.Tuple:
+        values: list[ast.expr] = [_const(pred)]
+        for term in args:
+            if term.__class__ is Var:
+                if term.name not in vm:  # type: ignore[union-attr]
+                    raise Unsupported(f"?{term.name} is not bound")  # type: ignore[union-attr]
+                values.append(_name(vm[term.name]))  # type: ignore[union-attr]
+            else:
+                values.append(_const(term))
+        return _tuple(values)
+
+    def _memo_prologue(self) -> list[ast.stmt]:
+        """``m``: this state's memo of generated proofs (made on first use), as :meth:`clause_matcher` reads it."""
+        self.ns["GK"] = self.memo_key
+        return [
+            _assign("dv", ast.Attribute(value=_name("st"), attr="_derived", ctx=ast.Load())),
+            _assign("m", _method("dv", "get", _name("GK"))),
+            _if(_cmp(_name("m"), ast.Is(), _const(None)), [
+                ast.Assign(targets=[_store("m"), ast.Subscript(value=_name("dv"), slice=_name("GK"), ctx=ast.Store())],
+                           value=ast.Dict(keys=[], values=[]))]),
+        ]
+
+    def task_expander(self, task: str, arity: int, methods: Sequence[Any]) -> Callable[..., Any]:
+        """A generator function ``(state, *args)`` yielding ``(method, bindings, subtasks)`` for a compound task.
+
+        It yields what the planner's reference path does (methods in order; per method the satisfiers of its
+        precondition in the reference order, each clause's new ones once), with the subtasks already ground.
+        Raises :class:`Unsupported` when a precondition uses something the generator does not handle.
+        """
+        if not self.reference_proofs:
+            self._build_provers()
+        fn = _Fn()
+        self._matchers += 1
+        name = f"x{self._matchers}"
+        params = [f"a{j}" for j in range(arity)]
+        body: list[ast.stmt] = []
+        uses_memo = False
+        for k, method in enumerate(methods):
+            if len(method.task_args) != arity:
+                continue  # never unifies (the loader rejects it; a learned method could still be malformed)
+            method_ref = f"M{self._matchers}_{k}"
+            self.ns[method_ref] = method
+            checks, varmap = self._head(fn, method.task_args, params)
+            head_names = list(varmap)
+            clauses = method.precondition.clauses
+            seen = fn.fresh("s") if len(clauses) > 1 else None
+            method_body: list[ast.stmt] = [_assign(seen, _call(_name("set")))] if seen else []
+            for clause in clauses:
+                if any(step[0] in (DPOS, DNEG) for step in clause):
+                    uses_memo = True
+                names = head_names + self._fresh_variables(clause, head_names)
+
+                def emit(vm: dict[str, str], names: list[str] = names, method: Any = method,
+                         method_ref: str = method_ref, seen: str | None = seen) -> list[ast.stmt]:
+                    subtasks = _tuple([self._ground(t[0], t[1:], vm) for t in method.subtasks])
+                    out_tuple = _tuple([_name(method_ref), self._bindings(names, vm), subtasks])
+                    if seen is None:
+                        return [ast.Expr(value=ast.Yield(value=out_tuple))]
+                    # the reference keeps a binding once across clauses (compared as a set of items)
+                    key = fn.fresh("u")
+                    items = [_tuple([_const(n), _name(vm[n])]) for n in sorted(names)]
+                    return [_assign(key, _tuple(items)),
+                            _if(_cmp(_name(key), ast.NotIn(), _name(seen)), [
+                                ast.Expr(value=_method(seen, "add", _name(key))),
+                                ast.Expr(value=ast.Yield(value=out_tuple))])]
+
+                method_body.extend(self._clause(fn, list(clause), dict(varmap), "0", True, emit))
+            if checks:
+                test = checks[0] if len(checks) == 1 else ast.BoolOp(op=ast.And(), values=checks)
+                body.append(_if(test, method_body))
+            else:
+                body.extend(method_body)
+        body.append(ast.If(test=_const(False), body=[ast.Expr(value=ast.Yield(value=None))], orelse=[]))
+        prologue = (self._memo_prologue() if uses_memo else []) + fn.prologue()
+        self._compile(f"task {task}", [_function(name, ["st", *params], prologue + body)])
+        return self.ns[name]  # type: ignore[no-any-return]
+
+    def primitive_stepper(self, primitive: Any) -> Callable[..., Any]:
+        """A function ``(state, *args)`` giving ``(bindings, add, delete)`` when the primitive applies, else None.
+
+        Only for preconditions that bind nothing beyond the parameters (so there is at most one satisfier);
+        :class:`Unsupported` otherwise.
+        """
+        if not self.reference_proofs:
+            self._build_provers()
+        fn = _Fn()
+        params = [f"a{j}" for j in range(len(primitive.parameters))]
+        varmap = dict(zip(primitive.parameters, params, strict=True))
+        names = list(varmap)
+        body: list[ast.stmt] = []
+        uses_memo = False
+        for clause in primitive.precondition.clauses:
+            if self._fresh_variables(clause, names):
+                raise Unsupported(f"the precondition of {primitive.name} binds variables of its own")
+            if any(step[0] in (DPOS, DNEG) for step in clause):
+                uses_memo = True
+
+            def emit(vm: dict[str, str]) -> list[ast.stmt]:
+                add = ast.List(elts=[self._ground(t[0], t[1:], vm) for t in primitive.add], ctx=ast.Load())
+                delete = ast.List(elts=[self._ground(t[0], t[1:], vm) for t in primitive.delete], ctx=ast.Load())
+                return [ast.Return(value=_tuple([self._bindings(names, vm), add, delete]))]
+
+            body.extend(self._clause(fn, list(clause), dict(varmap), "0", True, emit))
+        body.append(ast.Return(value=_const(None)))
+        prologue = (self._memo_prologue() if uses_memo else []) + fn.prologue()
+        self._matchers += 1
+        name = f"p{self._matchers}"
+        self._compile(f"primitive {primitive.name}", [_function(name, ["st", *params], prologue + body)])
+        return self.ns[name]  # type: ignore[no-any-return]

@@ -26,6 +26,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
+from bt_meta.htn.compiled import compiled_domain
 from bt_meta.htn.conditions import ExternalFn, Var
 from bt_meta.htn.model import Domain, Method, Problem, types_hold
 from bt_meta.htn.state import Atom, State, atom_text
@@ -101,6 +102,7 @@ class Search:
 
     # -- alternatives ----------------------------------------------------------------------------------------
     def _method_alternatives(self, task: tuple[str, ...], state: State, exclude: Any) -> Iterator[tuple]:
+        """The reference path: ``(method, bindings, subtasks)`` per method and satisfier, in search order."""
         external = self.external
         args = task[1:]
         for method in self.domain.methods_by_task.get(task[0], ()):
@@ -111,10 +113,11 @@ class Search:
                 env = _unify_head(method, task)
                 if env is None:
                     continue
+            builders = method.subtask_builders
             for satisfier in method.precondition.satisfiers_of(state, env, external):
                 if exclude is not None and (method.name, frozenset(satisfier.items())) == exclude:
                     continue
-                yield method, satisfier
+                yield method, satisfier, tuple(build(satisfier) for build in builders)
 
     def _dead_end(self, plan_len: int, description: str) -> None:
         if self.deepest is None or plan_len >= self.deepest[0]:
@@ -161,19 +164,28 @@ class Search:
         primitives = domain.primitives
         tasks_decl = domain.tasks
         external = self.external
+        compiled = compiled_domain(domain)
+        recursive = compiled.recursive
+        fixed_variant = compiled.fixed_variant
+        threshold = compiled.threshold
+        small = compiled.variant(False) if fixed_variant is not True else compiled.variant(True)
+        large = compiled.variant(True) if fixed_variant is not False else small
         agenda: tuple | None = None
         for item in reversed(items):
             agenda = (item, agenda)
-        trail: list[list] = []  # [task, kind, method, bindings, parent_key, state_before, step]
+        trail: list[tuple] = []  # (task, kind, method, bindings, parent_key, state_before, step)
         plan: list[int] = []
         active: dict[tuple, list[State]] = {}
         undo: list[tuple] = []
-        stack: list[list] = []  # [alternatives, item, rest, state, trail_len, plan_len, undo_len, taken]
+        stack: list[list] = []  # [alternatives, item, rest, state, trail_len, plan_len, undo_len]
+        step_offset = self.step_offset
         max_nodes = self.max_nodes
         deadline = self.started + self.max_seconds if self.max_seconds is not None else None
+        expansions = self.expansions
         advance = False
         while True:
             if advance:
+                # backtrack: resume the most recent choice point that has another alternative
                 advance = False
                 while stack:
                     cp = stack[-1]
@@ -190,111 +202,137 @@ class Search:
                         else:
                             active.setdefault(entry[1], []).append(entry[2])
                     alternative = next(cp[0], None)
-                    if alternative is None:
-                        stack.pop()
-                        if cp[7] == 0 and cp[1][0] == TASK:
-                            self._dead_end(len(plan), self._explain(cp[1][1], state))
-                        continue
-                    if cp[7]:
+                    if alternative is not None:
                         self.backtracks += 1
-                    cp[7] += 1
-                    item = cp[1]
-                    rest = cp[2]
-                    kind = item[0]
-                    if kind == TASK:
-                        task = item[1]
-                        if task[0] in primitives:
-                            prim = primitives[task[0]]
-                            add, delete = prim.effects(alternative)
-                            trail.append([task, "primitive", None, alternative, item[2], state,
-                                          self.step_offset + len(plan)])
-                            plan.append(len(trail) - 1)
-                            state = state._apply(add, delete)
-                            agenda = rest
-                        else:
-                            method, env = alternative
-                            index = len(trail)
-                            trail.append([task, "compound", method.name, env, item[2], state, None])
-                            key = (task, state._hash)
-                            active.setdefault(key, []).append(state)
-                            undo.append((True, key))
-                            agenda = ((CLOSE, key, state), rest)
-                            subtasks = [build(env) for build in method.subtask_builders]
-                            if method.ordered:
-                                for sub in reversed(subtasks):
-                                    agenda = ((TASK, sub, index, None), agenda)
-                            elif subtasks:
-                                agenda = ((UNORDERED, tuple(subtasks), index), agenda)
-                    else:  # UNORDERED: the alternative is the index of the subtask to do first
-                        subs = item[1]
-                        remaining = subs[:alternative] + subs[alternative + 1:]
-                        agenda = rest
-                        if remaining:
-                            agenda = ((UNORDERED, remaining, item[2]), agenda)
-                        agenda = ((TASK, subs[alternative], item[2], None), agenda)
-                    break
+                        item = cp[1]
+                        rest = cp[2]
+                        break
+                    stack.pop()
                 else:
+                    self.expansions = expansions
                     return self._failure("no_plan", trail)
-            if agenda is None:
-                if self.goal and not self._goal_holds(state):
-                    missing = [atom_text(a) for a in self.goal if not self._holds(a, state)]
-                    self._dead_end(len(plan) + 1, f"goal facts do not hold at the end: {', '.join(missing)}")
-                    advance = True
-                    continue
-                return self._success(trail, plan, state)
-            item, rest = agenda
-            kind = item[0]
-            if kind == CLOSE:
-                states = active[item[1]]
-                states.remove(item[2]) if states[-1] is not item[2] else states.pop()
-                if not states:
-                    del active[item[1]]
-                undo.append((False, item[1], item[2]))
-                agenda = rest
-                continue
-            self.expansions += 1
-            if max_nodes is not None and self.expansions > max_nodes:
-                return self._failure("budget_exhausted", trail, f"node budget of {max_nodes} expansions exhausted")
-            if deadline is not None and (self.expansions & 255) == 0 and time.perf_counter() > deadline:
-                return self._failure("budget_exhausted", trail, f"time budget of {self.max_seconds} s exhausted")
-            if kind == UNORDERED:
-                alternatives: Iterator[Any] = iter(range(len(item[1])))
             else:
-                task = item[1]
-                name = task[0]
-                if name in primitives:
-                    prim = primitives[name]
-                    found = prim.fast_satisfiers(state, task[1:], external)
-                    if found.__class__ is tuple and len(found) < 2:
-                        # at most one way to apply it: no choice point (backtracking resumes the previous one)
-                        if not found:
+                if agenda is None:
+                    if self.goal and not self._goal_holds(state):
+                        missing = [atom_text(a) for a in self.goal if not self._holds(a, state)]
+                        self._dead_end(len(plan) + 1, f"goal facts do not hold at the end: {', '.join(missing)}")
+                        advance = True
+                        continue
+                    self.expansions = expansions
+                    return self._success(trail, plan, state)
+                item, rest = agenda
+                kind = item[0]
+                if kind == CLOSE:
+                    states = active[item[1]]
+                    states.remove(item[2]) if states[-1] is not item[2] else states.pop()
+                    if not states:
+                        del active[item[1]]
+                    undo.append((False, item[1], item[2]))
+                    agenda = rest
+                    continue
+                expansions += 1
+                if max_nodes is not None and expansions > max_nodes:
+                    self.expansions = expansions
+                    return self._failure("budget_exhausted", trail, f"node budget of {max_nodes} expansions exhausted")
+                if deadline is not None and (expansions & 255) == 0 and time.perf_counter() > deadline:
+                    self.expansions = expansions
+                    return self._failure("budget_exhausted", trail, f"time budget of {self.max_seconds} s exhausted")
+                if kind == UNORDERED:
+                    alternatives: Iterator[Any] = iter(range(len(item[1])))
+                else:
+                    task = item[1]
+                    name = task[0]
+                    expanders, steppers = large if state._len >= threshold else small
+                    stepper = steppers.get(name)
+                    if stepper is not None:
+                        # a primitive with at most one way to apply: no choice point
+                        found = stepper(state, *task[1:])
+                        if found is None:
                             self._dead_end(len(plan), self._explain(task, state))
                             advance = True
                             continue
-                        env = found[0]
-                        add, delete = prim.effects(env)
-                        trail.append([task, "primitive", None, env, item[2], state, self.step_offset + len(plan)])
+                        env, add, delete = found
+                        trail.append((task, "primitive", None, env, item[2], state, step_offset + len(plan)))
                         plan.append(len(trail) - 1)
                         state = state._apply(add, delete)
                         agenda = rest
                         continue
-                    alternatives = iter(found)
-                else:
-                    decl = tasks_decl[name]
-                    key = (task, state._hash)
-                    seen = active.get(key)
-                    if seen is not None and any(s == state for s in seen):
-                        self.loops += 1
-                        self._dead_end(len(plan), f"{atom_text(task)}: loop (the task recurs below itself in the "
-                                                  "same state)")
-                        advance = True
-                        continue
-                    if decl.types and not types_hold(decl.types, task[1:], state):
-                        alternatives = iter(())
+                    if name in primitives:
+                        prim = primitives[name]
+                        found = prim.fast_satisfiers(state, task[1:], external)
+                        if found.__class__ is tuple and len(found) < 2:
+                            if not found:
+                                self._dead_end(len(plan), self._explain(task, state))
+                                advance = True
+                                continue
+                            env = found[0]
+                            add, delete = prim.effects(env)
+                            trail.append((task, "primitive", None, env, item[2], state, step_offset + len(plan)))
+                            plan.append(len(trail) - 1)
+                            state = state._apply(add, delete)
+                            agenda = rest
+                            continue
+                        alternatives = iter(found)
                     else:
-                        alternatives = self._method_alternatives(task, state, item[3])
-            stack.append([alternatives, item, rest, state, len(trail), len(plan), len(undo), 0])
-            advance = True
+                        if name in recursive:
+                            key = (task, state._hash)
+                            seen = active.get(key)
+                            if seen is not None and any(s == state for s in seen):
+                                self.loops += 1
+                                self._dead_end(len(plan), f"{atom_text(task)}: loop (the task recurs below itself "
+                                                          "in the same state)")
+                                advance = True
+                                continue
+                        decl = tasks_decl[name]
+                        if decl.types and not types_hold(decl.types, task[1:], state):
+                            alternatives = iter(())
+                        else:
+                            expander = expanders.get(name) if item[3] is None else None
+                            if expander is not None:
+                                alternatives = expander(state, *task[1:])
+                            else:
+                                alternatives = self._method_alternatives(task, state, item[3])
+                alternative = next(alternatives, None)
+                if alternative is None:
+                    if kind == TASK:
+                        self._dead_end(len(plan), self._explain(item[1], state))
+                    advance = True
+                    continue
+                stack.append([alternatives, item, rest, state, len(trail), len(plan), len(undo)])
+            # take ``alternative`` for ``item``
+            kind = item[0]
+            if kind == TASK:
+                task = item[1]
+                if task[0] in primitives:
+                    prim = primitives[task[0]]
+                    add, delete = prim.effects(alternative)
+                    trail.append((task, "primitive", None, alternative, item[2], state, step_offset + len(plan)))
+                    plan.append(len(trail) - 1)
+                    state = state._apply(add, delete)
+                    agenda = rest
+                else:
+                    method, env, subtasks = alternative
+                    index = len(trail)
+                    trail.append((task, "compound", method.name, env, item[2], state, None))
+                    if task[0] in recursive:
+                        key = (task, state._hash)
+                        active.setdefault(key, []).append(state)
+                        undo.append((True, key))
+                        agenda = ((CLOSE, key, state), rest)
+                    else:
+                        agenda = rest
+                    if method.ordered:
+                        for sub in reversed(subtasks):
+                            agenda = ((TASK, sub, index, None), agenda)
+                    elif subtasks:
+                        agenda = ((UNORDERED, subtasks, index), agenda)
+            else:  # UNORDERED: the alternative is the index of the subtask to do first
+                subs = item[1]
+                remaining = subs[:alternative] + subs[alternative + 1:]
+                agenda = rest
+                if remaining:
+                    agenda = ((UNORDERED, remaining, item[2]), agenda)
+                agenda = ((TASK, subs[alternative], item[2], None), agenda)
 
     def _holds(self, atom: Atom, state: State) -> bool:
         if atom[0] in self.domain.context.derived:
@@ -317,7 +355,7 @@ class Search:
     def node_id(self, index: int) -> str:
         return f"n{self.id_offset + index}"
 
-    def build_nodes(self, trail: list[list]) -> list[DecompositionNode]:
+    def build_nodes(self, trail: list[tuple]) -> list[DecompositionNode]:
         offset = self.id_offset
         ids = [f"n{offset + index}" for index in range(len(trail))]
         node = DecompositionNode
@@ -325,7 +363,7 @@ class Search:
                      step)
                 for index, (task, kind, method, env, parent, state, step) in enumerate(trail)]
 
-    def _success(self, trail: list[list], plan: list[int], state: State) -> PlanResult:
+    def _success(self, trail: list[tuple], plan: list[int], state: State) -> PlanResult:
         nodes = self.build_nodes(trail)
         by_id = {node.id: node for node in nodes}
         roots: list[str] = []
@@ -346,7 +384,7 @@ class Search:
         result.extra["nodes"] = nodes
         return result
 
-    def _failure(self, status: str, trail: list[list], reason: str | None = None) -> PlanResult:
+    def _failure(self, status: str, trail: list[tuple], reason: str | None = None) -> PlanResult:
         stats = self.stats()
         if status == "no_plan":
             message = "no plan: every method and binding failed"

@@ -94,6 +94,7 @@ class _Fn:
         self.count = 0
         self.facts: dict[str, str] = {}
         self.reference_memo = False  # whether the body reads the reference engine's memo (local ``om``)
+        self.uses_index = False  # whether the body reads the state's argument indexes (local ``ib``)
 
     def fresh(self, prefix: str) -> str:
         self.count += 1
@@ -110,6 +111,8 @@ class _Fn:
         out: list[ast.stmt] = []
         if self.reference_memo:
             out.append(_assign("om", _reference_memo()))
+        if self.uses_index:
+            out.append(_assign("ib", ast.Attribute(value=_name("st"), attr="_by_arg", ctx=ast.Load())))
         if not self.facts:
             return out
         out.append(_assign("pr", ast.Attribute(value=_name("st"), attr="_preds", ctx=ast.Load())))
@@ -202,24 +205,23 @@ class Generated:
             arity = len(rules[0].head_args)
             params = [f"a{j}" for j in range(arity)]
             fn = _Fn()
+            recursive = pred in self.axioms.recursive
             proof: list[ast.stmt] = []
             for axiom in rules:
-                proof.extend(self._rule_body(fn, axiom, params))
+                proof.extend(self._rule_body(fn, axiom, params, "dd" if recursive else "d"))
             subscript_k = ast.Subscript(value=_name("m"), slice=_name("k"), ctx=ast.Store())
+            settle = [ast.Assign(targets=[subscript_k], value=_const(False)), ast.Return(value=_const(False))]
+            if not recursive:
+                # no proof of it can meet itself: no in-progress mark, and its depth is its caller's
+                functions.append(_function(f"h{i}", ["st", "m", "d", "k", *params], [*fn.prologue(), *proof, *settle]))
+                continue
             body: list[ast.stmt] = [
                 _if(_cmp(_method("m", "get", _name("k")), ast.Is(), _name("INP")),
                     [ast.Raise(exc=_name("Fallback"), cause=None)]),
-                _assign("e", _call(ast.Attribute(value=ast.Attribute(value=_name("st"), attr="_derived",
-                                                                     ctx=ast.Load()), attr="get", ctx=ast.Load()),
-                                   _name(f"ek{i}"))),
-                _if(_cmp(_name("e"), ast.IsNot(), _const(None)),
-                    [ast.Return(value=_cmp(_name("k"), ast.In(), _name("e")))]),
                 _if(_cmp(_name("d"), ast.GtE(), _name("MAXD")), [ast.Raise(exc=_name("Fallback"), cause=None)]),
                 ast.Assign(targets=[subscript_k], value=_name("INP")),
                 _assign("dd", ast.BinOp(left=_name("d"), op=ast.Add(), right=_const(1))),
-                ast.Try(body=[*fn.prologue(), *proof,
-                              ast.Assign(targets=[subscript_k], value=_const(False)),
-                              ast.Return(value=_const(False))],
+                ast.Try(body=[*fn.prologue(), *proof, *settle],
                         handlers=[ast.ExceptHandler(type=_name("Fallback"), name=None, body=[
                             ast.Delete(targets=[ast.Subscript(value=_name("m"), slice=_name("k"), ctx=ast.Del())]),
                             ast.Raise(exc=None, cause=None)])],
@@ -228,8 +230,8 @@ class Generated:
             functions.append(_function(f"h{i}", ["st", "m", "d", "k", *params], body))
         self._compile("provers", functions)
 
-    def _rule_body(self, fn: _Fn, axiom: Any, params: list[str]) -> list[ast.stmt]:
-        """Statements that store True and return when one rule proves the head ``k`` (inner proofs at ``dd``)."""
+    def _rule_body(self, fn: _Fn, axiom: Any, params: list[str], depth: str) -> list[ast.stmt]:
+        """Statements that store True and return when one rule proves the head ``k`` (inner proofs at ``depth``)."""
         checks: list[ast.expr] = []
         varmap: dict[str, str] = {}
         for term, param in zip(axiom.head_args, params, strict=True):
@@ -247,7 +249,7 @@ class Generated:
             ast.Return(value=_const(True))]
         body: list[ast.stmt] = []
         for clause in axiom.condition.clauses:
-            body.extend(self._clause(fn, list(clause), dict(varmap), "dd", False, lambda _vm: list(proved)))
+            body.extend(self._clause(fn, list(clause), dict(varmap), depth, False, lambda _vm: list(proved)))
         if not checks:
             return body
         return [_if(checks[0] if len(checks) == 1 else ast.BoolOp(op=ast.And(), values=checks), body)]
@@ -456,8 +458,13 @@ class Generated:
                                if not (a.__class__ is Var and a.name not in varmap)]
             if bound_positions:
                 first = bound_positions[0]
-                pool: ast.expr = _method("st", "with_arg", _const(pred), _const(first),
-                                         self._value(args[first - 1], varmap))
+                # (st._by_arg.get((pred, first)) or st.index(pred, first)).get(value, ()): State.with_arg inlined
+                made = ast.BoolOp(op=ast.Or(), values=[
+                    _method("ib", "get", _const((pred, first))),
+                    _method("st", "index", _const(pred), _const(first))])
+                fn.uses_index = True
+                pool: ast.expr = _call(ast.Attribute(value=made, attr="get", ctx=ast.Load()),
+                                       self._value(args[first - 1], varmap), _tuple([]))
                 fixed = bound_positions[1:]
             else:
                 pool = _name(fn.fact(pred))

@@ -51,7 +51,7 @@ class State:
             for atom in atoms_of:
                 total += hash(atom)
         self._hash = total & _MASK
-        self._by_arg: dict[str, dict[int, dict[str, tuple[Atom, ...]]]] = {}
+        self._by_arg: dict[tuple[str, int], dict[str, tuple[Atom, ...]]] = {}
         self._derived: dict[Any, Any] = {}
         self._parent: State | None = None
         self._delta: tuple[Atom, ...] = ()
@@ -62,7 +62,7 @@ class State:
         preds: dict[str, dict[Atom, None]],
         length: int,
         hash_: int,
-        by_arg: dict[str, dict[int, dict[str, tuple[Atom, ...]]]],
+        by_arg: dict[tuple[str, int], dict[str, tuple[Atom, ...]]],
     ) -> State:
         state = cls.__new__(cls)
         state._preds = preds
@@ -91,15 +91,22 @@ class State:
         return self._preds.get(pred, _EMPTY).keys()
 
     def with_arg(self, pred: str, position: int, value: str) -> tuple[Atom, ...]:
-        """Atoms of ``pred`` whose argument ``position`` (1-based, as in the tuple) is ``value``.
+        """Atoms of ``pred`` whose argument ``position`` (1-based, as in the tuple) is ``value``."""
+        index = self._by_arg.get((pred, position))
+        if index is None:
+            index = self.index(pred, position)
+        return index.get(value, ())
+
+    def index(self, pred: str, position: int) -> dict[str, tuple[Atom, ...]]:
+        """The atoms of ``pred`` by their argument ``position`` (do not mutate); generated matchers read it.
 
         The index of a (predicate, position) is made the first time it is asked for in a state: from the nearest
         ancestor that has it, updated with the changes since (:meth:`_index_from_ancestor`), else from scratch.
         Successors share the indexes of the predicates an action leaves alone; the others are only rebuilt when
         asked for, so a state that is only tested for membership never pays for them.
         """
-        by_position = self._by_arg.get(pred)
-        index = by_position.get(position) if by_position is not None else None
+        key = (pred, position)
+        index = self._by_arg.get(key)
         if index is None:
             index = self._index_from_ancestor(pred, position)
             if index is None:
@@ -108,11 +115,8 @@ class State:
                     if len(atom) > position:
                         built.setdefault(atom[position], []).append(atom)
                 index = {k: tuple(v) for k, v in built.items()}
-            if by_position is None:
-                self._by_arg[pred] = {position: index}
-            else:
-                by_position[position] = index
-        return index.get(value, ())
+            self._by_arg[key] = index
+        return index
 
     def _index_from_ancestor(self, pred: str, position: int) -> dict[str, tuple[Atom, ...]] | None:
         """The (pred, position) index of the nearest ancestor that has one, with the changes since applied.
@@ -123,16 +127,15 @@ class State:
         """
         chain: list[State] = []
         cursor = self
+        key = (pred, position)
         for _ in range(INDEX_DEPTH):
             parent = cursor._parent
             if parent is None:
                 return None
             chain.append(cursor)
-            by_position = parent._by_arg.get(pred)
-            if by_position is not None:
-                found = by_position.get(position)
-                if found is not None:
-                    break
+            found = parent._by_arg.get(key)
+            if found is not None:
+                break
             cursor = parent
         else:
             return None
@@ -261,8 +264,7 @@ class State:
                 new_preds.pop(pred, None)
         # indexes of unchanged predicates are shared; the others are remade on demand (see with_arg)
         by_arg = self._by_arg
-        new_by_arg = {pred: by_position for pred, by_position in by_arg.items() if pred not in copies} \
-            if by_arg else {}
+        new_by_arg = {key: index for key, index in by_arg.items() if key[0] not in copies} if by_arg else {}
         successor = State._make(new_preds, length, hash_ & _MASK, new_by_arg)
         # parent and changed atoms let axiom memos be inherited (see AxiomSet.holds)
         successor._parent = self

@@ -212,9 +212,9 @@ problems:
     tasks: [t()]
 '''
 
-_OWN_NAME = re.compile(r"^(st|m|d|dd|k|e|r|v|pr|dv|om|env|res|out|seen|[a-z]\d+(_\d+)*|[a-z]{1,2}\d+(_\d+)*|M\d+_\d+)$")
+_OWN_NAME = re.compile(r"^(st|m|d|dd|k|e|r|v|pr|dv|om|ib|env|res|out|seen|[a-z]{1,2}\d+(_\d+)*|M\d+_\d+)$")
 _RUNTIME_NAMES = {"EMPTY", "INP", "OMK", "OINP", "Fallback", "MAXD", "fb", "holds", "exth", "ext", "GK", "len", "set",
-                  "tuple", "dict", "get", "_preds", "_derived", "with_arg", "add", "append"}
+                  "tuple", "dict", "get", "_preds", "_derived", "_by_arg", "index", "add", "append"}
 
 
 def test_hostile_constants_plan_as_data_and_never_become_identifiers():

@@ -64,6 +64,17 @@ class PlanResult:
         return self.status == "success"
 
 
+_IDS: list[str] = []  # "n0", "n1", ...: made once, shared by every search that starts at id 0
+
+
+def _node_ids(offset: int, count: int) -> list[str]:
+    if offset:
+        return [f"n{offset + index}" for index in range(count)]
+    if len(_IDS) < count:
+        _IDS.extend(f"n{index}" for index in range(len(_IDS), count))
+    return _IDS
+
+
 def _unify_head(method: Method, task: tuple[str, ...]) -> dict[str, str] | None:
     args = method.task_args
     if len(args) != len(task) - 1:
@@ -356,25 +367,28 @@ class Search:
         return f"n{self.id_offset + index}"
 
     def build_nodes(self, trail: list[tuple]) -> list[DecompositionNode]:
-        offset = self.id_offset
-        ids = [f"n{offset + index}" for index in range(len(trail))]
+        """The trail's nodes with their children (in trail order), ids offset by ``id_offset``."""
+        ids = _node_ids(self.id_offset, len(trail))
         node = DecompositionNode
-        return [node(ids[index], task, kind, method, env, ids[parent] if parent.__class__ is int else parent, state,
-                     step)
-                for index, (task, kind, method, env, parent, state, step) in enumerate(trail)]
+        nodes: list[DecompositionNode] = []
+        append = nodes.append
+        for index, (task, kind, method, env, parent, state, step) in enumerate(trail):
+            if parent.__class__ is int:
+                nodes[parent].children.append(ids[index])
+                parent = ids[parent]
+            append(node(ids[index], task, kind, method, env, parent, state, step, []))
+        return nodes
 
     def _success(self, trail: list[tuple], plan: list[int], state: State) -> PlanResult:
         nodes = self.build_nodes(trail)
         by_id = {node.id: node for node in nodes}
         roots: list[str] = []
-        for node in nodes:
-            parent = node.parent
+        for node, entry in zip(nodes, trail, strict=True):
+            parent = entry[4]
             if parent is None:
                 roots.append(node.id)
-            else:
-                found = by_id.get(parent)
-                if found is not None:
-                    found.children.append(node.id)
+            elif parent.__class__ is not int and parent in by_id:  # an existing id that names a new node
+                by_id[parent].children.append(node.id)
         tree = DecompositionTree(by_id, roots)
         actions = [GroundAction(nodes[i].task[0], nodes[i].task[1:], nodes[i].id) for i in plan]
         stats = self.stats(plan_length=len(actions), tree_nodes=len(nodes))

@@ -16,6 +16,7 @@ from typing import Any
 Atom = tuple[str, ...]
 
 _MASK = (1 << 64) - 1
+_new_state = object.__new__
 _EMPTY: dict[Atom, None] = {}
 INDEX_DEPTH = 8  # how far up the parent chain with_arg looks for an index to update instead of rebuilding
 
@@ -55,24 +56,6 @@ class State:
         self._derived: dict[Any, Any] = {}
         self._parent: State | None = None
         self._delta: tuple[Atom, ...] = ()
-
-    @classmethod
-    def _make(
-        cls,
-        preds: dict[str, dict[Atom, None]],
-        length: int,
-        hash_: int,
-        by_arg: dict[tuple[str, int], dict[str, tuple[Atom, ...]]],
-    ) -> State:
-        state = cls.__new__(cls)
-        state._preds = preds
-        state._len = length
-        state._hash = hash_
-        state._by_arg = by_arg
-        state._derived = {}
-        state._parent = None
-        state._delta = ()
-        return state
 
     # -- queries -------------------------------------------------------------------------------------------
     def holds(self, atom: Iterable[str]) -> bool:
@@ -209,64 +192,66 @@ class State:
         return self._apply(add_t, del_t)
 
     def _apply(self, add: list[Atom], delete: list[Atom]) -> State:
+        """:meth:`apply` for lists of atom tuples (the planner's hot path)."""
         preds = self._preds
-        copies: dict[str, dict[Atom, None]] = {}  # predicate -> its successor dict (copied on first change)
+        changed: dict[str, dict[Atom, None]] = {}  # predicate -> its successor dict (copied on first change)
         delta: list[Atom] = []
         hash_ = self._hash
         length = self._len
         for atom in delete:
             pred = atom[0]
-            atoms_of = copies.get(pred)
+            atoms_of = changed.get(pred)
             if atoms_of is None:
                 atoms_of = preds.get(pred)
                 if atoms_of is None or atom not in atoms_of or atom in add:
                     continue
-                atoms_of = copies[pred] = dict(atoms_of)
+                atoms_of = changed[pred] = atoms_of.copy()
             elif atom not in atoms_of or atom in add:
                 continue
             del atoms_of[atom]
             hash_ -= hash(atom)
             length -= 1
             delta.append(atom)
-        new_by: dict[str, list[Atom]] = {}
+        fresh: list[Atom] = []
         for atom in add:
+            atoms_of = changed.get(atom[0])
+            if atoms_of is None:
+                atoms_of = preds.get(atom[0])
+            if (atoms_of is None or atom not in atoms_of) and atom not in fresh:
+                fresh.append(atom)
+        if len(fresh) > 1 and len({atom[0] for atom in fresh}) < len(fresh):
+            # several new atoms of one predicate go in sorted, predicates in the order they first appear
+            grouped: dict[str, list[Atom]] = {}
+            for atom in fresh:
+                grouped.setdefault(atom[0], []).append(atom)
+            fresh = [atom for group in grouped.values() for atom in sorted(group)]
+        for atom in fresh:
             pred = atom[0]
-            atoms_of = copies.get(pred)
+            atoms_of = changed.get(pred)
             if atoms_of is None:
-                atoms_of = preds.get(pred)
-                if atoms_of is not None and atom in atoms_of:
-                    continue
-            elif atom in atoms_of:
-                continue
-            found = new_by.get(pred)
-            if found is None:
-                new_by[pred] = [atom]
-            elif atom not in found:
-                found.append(atom)
-        for pred, new in new_by.items():
-            if len(new) > 1:
-                new.sort()
-            atoms_of = copies.get(pred)
-            if atoms_of is None:
-                atoms_of = copies[pred] = dict(preds.get(pred, _EMPTY))
-            for atom in new:
-                atoms_of[atom] = None
-                hash_ += hash(atom)
-            length += len(new)
-            delta.extend(new)
-        if not delta:
+                found = preds.get(pred)
+                atoms_of = changed[pred] = found.copy() if found is not None else {}
+            atoms_of[atom] = None
+            hash_ += hash(atom)
+        if not fresh and not delta:
             return self
-        new_preds = dict(preds)
-        for pred, atoms_of in copies.items():
+        length += len(fresh)
+        delta.extend(fresh)
+        new_preds = preds.copy()
+        for pred, atoms_of in changed.items():
             if atoms_of:
                 new_preds[pred] = atoms_of
             else:
                 new_preds.pop(pred, None)
-        # indexes of unchanged predicates are shared; the others are remade on demand (see with_arg)
+        successor = _new_state(State)
+        successor._preds = new_preds
+        successor._len = length
+        successor._hash = hash_ & _MASK
+        # indexes of unchanged predicates are shared; the others are remade on demand (see index)
         by_arg = self._by_arg
-        new_by_arg = {key: index for key, index in by_arg.items() if key[0] not in copies} if by_arg else {}
-        successor = State._make(new_preds, length, hash_ & _MASK, new_by_arg)
-        # parent and changed atoms let axiom memos be inherited (see AxiomSet.holds)
+        successor._by_arg = {key: index for key, index in by_arg.items() if key[0] not in changed} if by_arg else {}
+        successor._derived = {}
+        # parent and changed atoms let indexes and axiom memos be inherited (see index, AxiomSet.holds)
         successor._parent = self
         successor._delta = tuple(delta)
         return successor

@@ -35,6 +35,9 @@ from bt_meta.htn.axioms import _IN_PROGRESS as _REFERENCE_IN_PROGRESS
 from bt_meta.htn.conditions import DNEG, DPOS, EQ, EXT, NEG, NEQ, NEXT, POS, Term, Var
 from bt_meta.htn.state import Atom
 
+INLINE_CLAUSES = 3  # a non-recursive derived predicate with more rule clauses than this is called, not inlined
+INLINE_LEVELS = 2  # how deep inlined predicates may nest
+
 
 class Unsupported(Exception):
     """The generator does not handle this condition; the reference matcher is used instead."""
@@ -156,6 +159,7 @@ class Generated:
         self.queries: dict[tuple[str, tuple[int, ...]], str] = {}
         self._provers_built = False
         self._matchers = 0
+        self._inline_level = 0
         for axiom in axioms.axioms:
             for clause in axiom.condition.clauses:
                 if any(step[0] in (EXT, NEXT) for step in clause):
@@ -378,6 +382,147 @@ class Generated:
         return self.ns[name]  # type: ignore[no-any-return]
 
     # -- clause bodies ----------------------------------------------------------------------------------------
+    def _inline_test(self, fn: _Fn, pred: str, values: list[ast.expr], depth: str,
+                     outermost: bool) -> tuple[list[ast.stmt], str] | None:
+        """Statements setting a fresh local to the truth of ground ``pred(values)``, its rules written in place.
+
+        Only for small non-recursive predicates (at most ``INLINE_CLAUSES`` rule clauses, ``INLINE_LEVELS`` deep)
+        whose clauses loop over at most one pattern, so a match can ``break`` out; None otherwise (the caller
+        calls the prover). The truth is the prover's; only its memo entry is not written.
+        """
+        if pred in self.axioms.recursive or self._inline_level >= INLINE_LEVELS:
+            return None
+        rules = self.axioms.rules[pred]
+        if sum(len(axiom.condition.clauses) for axiom in rules) > INLINE_CLAUSES:
+            return None
+        flag = fn.fresh("t")
+        stmts: list[ast.stmt] = [_assign(flag, _const(False))]
+        self._inline_level += 1
+        try:
+            for axiom in rules:
+                checks: list[ast.expr] = []
+                varmap: dict[str, str] = {}
+                for term, value in zip(axiom.head_args, values, strict=True):
+                    if term.__class__ is Var:
+                        prior = varmap.get(term.name)  # type: ignore[union-attr]
+                        if prior is not None:
+                            checks.append(_cmp(value, ast.Eq(), _name(prior)))
+                            continue
+                        if isinstance(value, ast.Name):
+                            varmap[term.name] = value.id  # type: ignore[union-attr]
+                        else:
+                            local = fn.fresh("c")
+                            stmts.append(_assign(local, value))
+                            varmap[term.name] = local  # type: ignore[union-attr]
+                    else:
+                        checks.append(_cmp(value, ast.Eq(), _const(term)))
+                for clause in axiom.condition.clauses:
+                    loops = self._loops(clause, varmap)
+                    if loops is None or loops > 1:
+                        return None
+                    matched: list[ast.stmt] = [_assign(flag, _const(True))]
+                    if loops:
+                        matched.append(ast.Break())
+                    body = self._clause(fn, list(clause), dict(varmap), depth, outermost,
+                                        lambda _vm, matched=matched: list(matched))
+                    if checks:
+                        body = [_if(checks[0] if len(checks) == 1 else ast.BoolOp(op=ast.And(), values=checks), body)]
+                    if len(stmts) > 1:
+                        body = [_if(ast.UnaryOp(op=ast.Not(), operand=_name(flag)), body)]
+                    stmts.extend(body)
+        finally:
+            self._inline_level -= 1
+        return stmts, flag
+
+    def _inline_query(self, fn: _Fn, pred: str, args: Sequence[Term], rest: list[tuple], varmap: dict[str, str],
+                      depth: str, outermost: bool,
+                      on_match: Callable[[dict[str, str]], list[ast.stmt]]) -> list[ast.stmt] | None:
+        """The atoms of ``pred`` matching ``args`` found by its rules written in place, ``rest`` matched per atom.
+
+        Yields what iterating the query function's result does: rules in order, each atom once (a set of the
+        values at the free positions), for small non-recursive predicates only (None otherwise). The code of
+        ``rest`` is repeated once per rule clause, which is why the predicates must be small.
+        """
+        if pred in self.axioms.recursive or self._inline_level >= INLINE_LEVELS:
+            return None
+        rules = self.axioms.rules[pred]
+        if sum(len(axiom.condition.clauses) for axiom in rules) > INLINE_CLAUSES:
+            return None
+        seen = fn.fresh("s")
+        out: list[ast.stmt] = [_assign(seen, _call(_name("set")))]
+        self._inline_level += 1
+        try:
+            for axiom in rules:
+                checks: list[ast.expr] = []
+                rule_vm: dict[str, str] = {}
+                free: list[tuple[str, Term]] = []  # (the caller's unbound variable, the rule head term there)
+                for term, arg in zip(axiom.head_args, args, strict=True):
+                    if arg.__class__ is Var and arg.name not in varmap:  # type: ignore[union-attr]
+                        free.append((arg.name, term))  # type: ignore[union-attr]
+                        continue
+                    value = self._value(arg, varmap)
+                    if term.__class__ is not Var:
+                        checks.append(_cmp(value, ast.Eq(), _const(term)))
+                    elif term.name in rule_vm:  # type: ignore[union-attr]
+                        checks.append(_cmp(value, ast.Eq(), _name(rule_vm[term.name])))  # type: ignore[union-attr]
+                    elif isinstance(value, ast.Name):
+                        rule_vm[term.name] = value.id  # type: ignore[union-attr]
+                    else:
+                        local = fn.fresh("c")
+                        out.append(_assign(local, value))
+                        rule_vm[term.name] = local  # type: ignore[union-attr]
+
+                def emit(vm: dict[str, str], free: list[tuple[str, Term]] = free) -> list[ast.stmt]:
+                    outer = dict(varmap)
+                    binds: list[ast.stmt] = []
+                    same: list[ast.expr] = []
+                    values: list[ast.expr] = []
+                    for name, term in free:
+                        if term.__class__ is Var:
+                            if term.name not in vm:  # type: ignore[union-attr]
+                                raise Unsupported(f"head variable ?{term.name} of {pred} is not bound")  # type: ignore[union-attr]
+                            value: ast.expr = _name(vm[term.name])  # type: ignore[union-attr]
+                        else:
+                            value = _const(term)
+                        values.append(value)
+                        if name in outer:  # the caller repeats a variable: both positions must agree
+                            same.append(_cmp(value, ast.Eq(), _name(outer[name])))
+                        else:
+                            local = fn.fresh("v")
+                            binds.append(_assign(local, value))
+                            outer[name] = local
+                    key = fn.fresh("u")
+                    new_atom = [ast.Expr(value=_method(seen, "add", _name(key))), *binds,
+                                *self._clause(fn, rest, outer, depth, outermost, on_match)]
+                    test: ast.expr = _cmp(_name(key), ast.NotIn(), _name(seen))
+                    if same:
+                        test = ast.BoolOp(op=ast.And(), values=[*same, test])
+                    return [_assign(key, _tuple(values)), _if(test, new_atom)]
+
+                for clause in axiom.condition.clauses:
+                    body = self._clause(fn, list(clause), dict(rule_vm), depth, outermost, emit)
+                    if checks:
+                        body = [_if(checks[0] if len(checks) == 1 else ast.BoolOp(op=ast.And(), values=checks), body)]
+                    out.extend(body)
+        finally:
+            self._inline_level -= 1
+        return out
+
+    @staticmethod
+    def _loops(clause: Sequence[tuple], varmap: dict[str, str]) -> int | None:
+        """How many patterns of the clause bind new variables (loops); None if one is a derived query."""
+        have = set(varmap)
+        loops = 0
+        for step in clause:
+            if step[0] in (POS, DPOS):
+                new = {a.name for a in step[2] if a.__class__ is Var and a.name not in have}
+                if new:
+                    if step[0] == DPOS:
+                        return None
+                    loops += 1
+                    have |= new
+        return loops
+
     def _value(self, term: Term, varmap: dict[str, str]) -> ast.expr:
         return _name(varmap[term.name]) if term.__class__ is Var else _const(term)  # type: ignore[union-attr]
 
@@ -406,6 +551,11 @@ class Generated:
             if kind in (POS, NEG):
                 test = _cmp(atom, ast.In() if kind == POS else ast.NotIn(), _name(fn.fact(pred)))
                 return [_if(test, self._clause(fn, rest, varmap, depth, outermost, on_match))]
+            inlined = self._inline_test(fn, pred, [self._value(a, varmap) for a in args], depth, outermost)
+            if inlined is not None:
+                stmts, flag = inlined
+                test_expr = _name(flag) if kind == DPOS else ast.UnaryOp(op=ast.Not(), operand=_name(flag))
+                return [*stmts, _if(test_expr, self._clause(fn, rest, varmap, depth, outermost, on_match))]
             if self.reference_proofs:
                 # a memo entry of AxiomSet.holds is ``(truth,)``, valid for this state: read it without the call
                 fn.reference_memo = True
@@ -449,6 +599,10 @@ class Generated:
             return [*pre, _if(test_expr, self._clause(fn, rest, varmap, depth, outermost, on_match))]
         if kind not in (POS, DPOS):  # a negation with unbound variables: the loader rejects it
             raise Unsupported("negated atom with unbound variables")
+        if kind == DPOS:
+            inlined = self._inline_query(fn, pred, args, rest, varmap, depth, outermost, on_match)
+            if inlined is not None:
+                return inlined
         loop = fn.fresh("i")
         new_map = dict(varmap)
         guards: list[ast.expr] = []

@@ -6,7 +6,7 @@ Offers:
   of its alternatives ``(method, bindings, subtasks)``, for each primitive a function giving ``(bindings, add,
   delete)`` or None, both as generated Python (:meth:`bt_meta.htn.codegen.Generated.task_expander`,
   :meth:`~bt_meta.htn.codegen.Generated.primitive_stepper`), and :attr:`~CompiledDomain.recursive`, the tasks
-  that can appear below themselves
+  that can appear below themselves, and :attr:`~CompiledDomain.typed_tasks`, those with typed parameters
 * :func:`compiled_domain` -- the compiled form of a domain, remade when its methods change
 
 Why: on small problems the planner's time went into the generic layers between a task and its answer (method
@@ -59,6 +59,8 @@ class CompiledDomain:
         self.domain = domain
         self.methods = tuple(domain.methods)
         self.recursive = _recursive_tasks(domain)
+        self.typed_tasks = frozenset(name for name, decl in domain.tasks.items()
+                                     if any(t is not None for t in decl.types))
         axioms = domain.axiom_set
         # ground derived tests either use the generated provers (a fresh memo per state) or AxiomSet.holds
         # (memos inherited by successor states), as bt_meta.htn.conditions.Condition.satisfiers_of chooses

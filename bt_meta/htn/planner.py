@@ -177,6 +177,7 @@ class Search:
         external = self.external
         compiled = compiled_domain(domain)
         recursive = compiled.recursive
+        typed = compiled.typed_tasks
         fixed_variant = compiled.fixed_variant
         threshold = compiled.threshold
         small = compiled.variant(False) if fixed_variant is not True else compiled.variant(True)
@@ -294,8 +295,7 @@ class Search:
                                                           "in the same state)")
                                 advance = True
                                 continue
-                        decl = tasks_decl[name]
-                        if decl.types and not types_hold(decl.types, task[1:], state):
+                        if name in typed and not types_hold(tasks_decl[name].types, task[1:], state):
                             alternatives = iter(())
                         else:
                             expander = expanders.get(name) if item[3] is None else None

@@ -1,0 +1,269 @@
+"""The planner's generated fast path (bt_meta.htn.compiled) plans exactly as its reference path does."""
+
+from __future__ import annotations
+
+import textwrap
+
+import pytest
+
+from bt_meta.htn import load_task_text, method_from_text, plan
+from bt_meta.htn.compiled import compiled_domain
+
+MODES = {"reference": (False, None), "generated": (True, False), "inherited-proofs": (True, True), "auto": (True, None)}
+
+FEATURES = """
+domain:
+  types: [x, room]
+  predicates:
+    at: [x]
+    door: [x, x]
+    key: [x]
+    holding: [x]
+    visited: [x]
+    goal_at: [x]
+    lit: [x]
+    fragile: [x]
+    mark_a: [x]
+    mark_b: [x]
+    bad: [x]
+    used: [x]
+  axioms:
+    - head: reachable(?a, ?b)
+      when: door(?a, ?b)
+    - head: reachable(?a, ?c)
+      when: reachable(?a, ?b) and door(?b, ?c)
+    - head: safe(?r)
+      when: lit(?r) and not fragile(?r)
+    - head: safe(?r)
+      when: key(?r)
+    - head: exit_of(?r, ?s)
+      when: door(?r, ?s) and safe(?s)
+    - head: exit_of(?r, outside)
+      when: lit(?r)
+  primitives:
+    go:
+      parameters: [?from, ?to]
+      precondition: at(?from) and door(?from, ?to) and not visited(?to)
+      add: [at(?to), visited(?to)]
+      delete: [at(?from)]
+    grab:
+      parameters: [?r]
+      precondition: at(?r) and key(?r)
+      add: [holding(?r)]
+      delete: [key(?r)]
+    light:
+      parameters: [?r]
+      precondition: "at(?r)"
+      add: [lit(?r)]
+    # binds a variable of its own: several satisfiers, so the planner keeps a choice point
+    hop:
+      parameters: [?r]
+      precondition: at(?r) and door(?r, ?s) and not visited(?s)
+      add: [visited(?s)]
+    use:
+      parameters: [?x]
+      precondition: not bad(?x)
+      add: [used(?x)]
+    check:
+      parameters: [?r - room]
+      precondition: visited(?r)
+      add: [lit(?r)]
+  tasks:
+    tour: []
+    reach: [?goal]
+    tidy: [?a, ?b]
+    pair: [?x, ?x2]
+    inspect: [?r - room]
+    choose: []
+  methods:
+    # both clauses give x = a: it is tried once (the reference keeps a binding once across clauses)
+    - name: either
+      task: choose()
+      precondition: mark_a(?x) or mark_b(?x)
+      subtasks: [use(?x)]
+    - name: arrived
+      task: reach(?g)
+      precondition: at(?g)
+    - name: step_safe
+      task: reach(?g)
+      precondition: at(?h) and exit_of(?h, ?n) and reachable(?n, ?g) or at(?h) and door(?h, ?n) and ?n == ?g
+      subtasks: [go(?h, ?n), reach(?g)]
+    - name: step_any
+      task: reach(?g)
+      precondition: at(?h) and door(?h, ?n)
+      subtasks: [go(?h, ?n), reach(?g)]
+    - name: same_twice
+      task: pair(?x, ?x)
+      precondition: "true"
+      subtasks: [light(?x)]
+    - name: to_outside
+      task: pair(?x, outside)
+      precondition: at(?x)
+      subtasks: [light(?x)]
+    - name: different
+      task: pair(?x, ?y)
+      precondition: ?x != ?y
+    - name: either_order
+      task: tidy(?a, ?b)
+      unordered: [grab(?a), light(?b)]
+    - name: look
+      task: inspect(?r)
+      precondition: "true"
+      subtasks: [check(?r)]
+    - name: go_round
+      task: tour()
+      precondition: at(?h) and goal_at(?g)
+      subtasks: [hop(?h), reach(?g), tidy(?g, ?g), pair(?g, ?g), pair(?g, outside), pair(?g, elsewhere)]
+problems:
+  p:
+    objects: {room: [a, b, c, d, e]}
+    init: [at(a), visited(a), door(a, b), door(b, c), door(a, d), door(d, e), door(c, e), key(e), goal_at(e),
+           lit(c), fragile(d), key(b)]
+    tasks: [tour()]
+    goal: [holding(e), lit(e)]
+  dead_end:
+    init: [at(a), visited(a), door(a, b), goal_at(c), key(c)]
+    tasks: [tour()]
+  choose:
+    init: [mark_a(a), mark_b(a), mark_b(c), bad(a)]
+    tasks: [choose()]
+  typed:
+    objects: {room: [a]}
+    init: [visited(a)]
+    tasks: [inspect(a), inspect(z)]
+"""
+
+
+def _set_mode(axiom_set, mode: str) -> None:
+    axiom_set.codegen, axiom_set.reference_proofs = MODES[mode]
+
+
+def _outcome(domain, problem, mode: str):
+    _set_mode(domain.axiom_set, mode)
+    try:
+        result = plan(domain, problem)
+    finally:
+        _set_mode(domain.axiom_set, "auto")
+    nodes = list(result.tree.nodes.values()) if result.tree is not None else []
+    stats = {k: v for k, v in result.stats.items() if k != "seconds"}
+    return (result.status, [str(a) for a in result.plan], stats, result.message,
+            [(n.id, n.task, n.kind, n.method, list(n.bindings.items()), n.parent, n.children, n.step) for n in nodes],
+            [n.state_before for n in nodes])
+
+
+@pytest.mark.parametrize("problem", ["p", "dead_end", "choose", "typed"])
+def test_generated_and_reference_paths_give_the_same_plan_tree_stats_and_message(problem):
+    taskfile = load_task_text(textwrap.dedent(FEATURES))
+    domain = taskfile.domain
+    outcomes = {mode: _outcome(domain, taskfile.problems[problem], mode) for mode in MODES}
+    for mode, outcome in outcomes.items():
+        assert outcome == outcomes["reference"], mode
+
+
+def test_the_features_problem_exercises_what_it_claims():
+    taskfile = load_task_text(textwrap.dedent(FEATURES))
+    domain = taskfile.domain
+    result = plan(domain, taskfile.problems["p"])
+    assert result.status == "success"
+    assert result.stats["backtracks"] >= 1  # hop's choice point and the goal facts force backtracking
+    methods = {node.method for node in result.tree.nodes.values() if node.kind == "compound"}
+    assert {"step_safe", "same_twice", "to_outside", "different", "either_order"} <= methods
+    compiled = compiled_domain(domain)
+    expanders, steppers = compiled.variant(False)
+    assert set(expanders) == {"tour", "reach", "tidy", "pair", "inspect", "choose"}
+    assert set(steppers) == {"go", "grab", "light", "use"}  # hop binds a variable of its own; check is typed
+    chosen = plan(domain, taskfile.problems["choose"])
+    assert [str(a) for a in chosen.plan] == ["use(c)"] and chosen.stats["backtracks"] == 1
+    assert compiled.recursive == {"reach"}
+    assert compiled.typed_tasks == {"inspect"}
+    typed = plan(domain, taskfile.problems["typed"])
+    assert typed.status == "no_plan" and "inspect(z): its argument types do not hold" in typed.message
+
+
+MUTUAL = """
+domain:
+  predicates: {flag: [], done: []}
+  primitives:
+    finish: {add: [done()]}
+    toggle: {precondition: "not flag()", add: [flag()]}
+  tasks: {ping: [], pong: [], top: [], leaf: []}
+  methods:
+    - name: ping_to_pong
+      task: ping()
+      subtasks: [pong()]
+    - name: pong_to_ping
+      task: pong()
+      subtasks: [ping()]
+    - name: pong_done
+      task: pong()
+      subtasks: [finish()]
+    - name: top_first
+      task: top()
+      subtasks: [leaf(), ping()]
+    - name: leaf
+      task: leaf()
+      subtasks: [toggle()]
+problems:
+  p: {tasks: [top()]}
+"""
+
+
+def test_only_tasks_that_reach_themselves_are_watched_for_loops():
+    taskfile = load_task_text(textwrap.dedent(MUTUAL))
+    domain = taskfile.domain
+    assert compiled_domain(domain).recursive == {"ping", "pong"}
+    outcomes = {mode: _outcome(domain, taskfile.problems["p"], mode) for mode in MODES}
+    assert all(outcome == outcomes["reference"] for outcome in outcomes.values())
+    status, steps, stats, *_ = outcomes["auto"]
+    # ping -> pong -> ping recurs in the same state: pruned, and pong's second method finishes
+    assert status == "success" and steps == ["toggle()", "finish()"] and stats["loops_pruned"] == 1
+
+
+def test_a_method_added_later_is_planned_with():
+    taskfile = load_task_text(textwrap.dedent(MUTUAL))
+    domain = taskfile.domain
+    before = compiled_domain(domain)
+    assert [str(a) for a in plan(domain, taskfile.problems["p"]).plan] == ["toggle()", "finish()"]
+    domain.add_method(method_from_text(domain, name="ping_directly", task="ping()",
+                                       subtasks=["finish()", "finish()"]), first=True)
+    after = compiled_domain(domain)
+    assert after is not before
+    assert [str(a) for a in plan(domain, taskfile.problems["p"]).plan] == ["toggle()", "finish()", "finish()"]
+    assert compiled_domain(domain) is after  # made once per change, not per plan
+
+
+EXTERNAL = """
+domain:
+  predicates: {at: [x]}
+  external: {reachable: [x]}
+  primitives:
+    go:
+      parameters: [?x]
+      precondition: reachable(?x)
+      add: [at(?x)]
+  tasks:
+    visit: [?x]
+  methods:
+    - name: when_reachable
+      task: visit(?x)
+      precondition: reachable(?x)
+      subtasks: [go(?x)]
+problems:
+  p: {tasks: [visit(a), visit(b)]}
+"""
+
+
+def test_external_predicates_keep_the_reference_path_and_are_still_asked():
+    taskfile = load_task_text(textwrap.dedent(EXTERNAL))
+    domain = taskfile.domain
+    expanders, steppers = compiled_domain(domain).variant(False)
+    assert "visit" not in expanders and "go" not in steppers
+    asked: list[tuple[str, ...]] = []
+
+    def external(pred, args, state):
+        asked.append((pred, *args))
+        return args[0] == "a"
+
+    result = plan(domain, taskfile.problems["p"], external=external)
+    assert result.status == "no_plan"
+    assert ("reachable", "a") in asked and ("reachable", "b") in asked

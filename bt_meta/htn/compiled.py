@@ -57,7 +57,7 @@ class CompiledDomain:
 
     def __init__(self, domain: Domain) -> None:
         self.domain = domain
-        self.methods = tuple(domain.methods)
+        self.methods_by_task = domain.methods_by_task  # Domain.add_method replaces it: a new one means a change
         self.recursive = _recursive_tasks(domain)
         self.typed_tasks = frozenset(name for name, decl in domain.tasks.items()
                                      if any(t is not None for t in decl.types))
@@ -101,8 +101,7 @@ class CompiledDomain:
 def compiled_domain(domain: Domain) -> CompiledDomain:
     """The domain's :class:`CompiledDomain`, made on first use and again after a method was added."""
     found: CompiledDomain | None = domain.__dict__.get(_ATTRIBUTE)
-    if found is None or len(found.methods) != len(domain.methods) \
-            or any(a is not b for a, b in zip(found.methods, domain.methods, strict=True)) \
+    if found is None or found.methods_by_task is not domain.methods_by_task \
             or found.enabled != bool(domain.axiom_set.codegen) \
             or found.fixed_variant != domain.axiom_set.reference_proofs:
         found = CompiledDomain(domain)

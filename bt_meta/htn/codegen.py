@@ -1,27 +1,32 @@
-"""Generated evaluators for derived predicates and the method preconditions that use them (a planner fast path).
+"""Generated evaluators for derived predicates, preconditions, whole compound tasks and primitives (the planner's
+fast path).
 
 Offers:
 
 * :class:`Generated` -- per :class:`~bt_meta.htn.axioms.AxiomSet`: one plain Python function per derived
-  predicate (truth of a ground atom), per query shape (the derived atoms matching a partly bound pattern) and per
-  precondition clause, with a memo dict per state
-* :class:`Unsupported` -- a condition the generator does not handle (external atoms): the caller keeps the
-  reference matcher
+  predicate (truth of a ground atom), per query shape (the derived atoms matching a partly bound pattern), per
+  precondition clause, per compound task (:meth:`~Generated.task_expander`: its alternatives) and per primitive
+  (:meth:`~Generated.primitive_stepper`: its effects when it applies), with a memo dict per state
+* :class:`Unsupported` -- a condition the generator does not handle (external atoms, a primitive binding
+  variables of its own): the caller keeps the reference matcher
 
 Why: the reference engine (:mod:`bt_meta.htn.conditions`, :mod:`bt_meta.htn.axioms`) interprets match plans and
 spends most of its time in the bookkeeping of that interpretation; straight-line loops over the same state
-indexes answer the same questions several times faster.
+indexes answer the same questions several times faster. Small non-recursive derived predicates are written into
+the code that tests or queries them (``INLINE_CLAUSES``, ``INLINE_LEVELS``), which saves a call, a memo entry and
+a result tuple per question.
 
 Safety: no text is parsed or executed. Each function is built as a Python :mod:`ast` tree in which every value
 that comes from a task file (predicate names, constants) is an ``ast.Constant``; every identifier (``v0``,
-``h3``, ``q7``, ...) is made up here, never taken from a task file. The tree is compiled with
+``h3``, ``q7``, ``M2_0``, ...) is made up here, never taken from a task file. The tree is compiled with
 ``compile(tree, "<bt-meta rule ...>", "exec")``.
 
 Semantics are the reference engine's, exactly: rules in file order, facts in state insertion order, the first
-occurrence of a derived atom kept; a ground derived atom is proved top-down with an in-progress marker and the
-same depth limit, and a proof that meets its own atom or goes deeper than ``MAX_DEPTH`` falls back, at the
-outermost proof, to the bottom-up extension; free queries on recursive predicates and queries on a predicate
-whose extension a state already has are answered from that extension, as the reference does.
+occurrence of a derived atom kept; a ground atom of a recursive derived predicate is proved top-down with an
+in-progress marker and the same depth limit, and a proof that meets its own atom or goes deeper than
+``MAX_DEPTH`` falls back, at the outermost proof, to the bottom-up extension (a truth value is the same either
+way, so where the fallback happens only changes the cost); free queries on recursive predicates and queries on a
+predicate whose extension a state already has are answered from that extension, as the reference does.
 """
 
 from __future__ import annotations

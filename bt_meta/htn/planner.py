@@ -11,11 +11,15 @@ How it searches (docs/task-files.md has the full statement): the task network is
 to right. A primitive applies when its argument types and precondition hold; its effects give the next state.
 A compound task tries its methods in file order; a method applies when its head unifies with the task and its
 precondition has a satisfier; the satisfiers are tried in SHOP2 order (atoms matched left to right, facts in
-state order). Every task expansion pushes a choice point (an iterator over the remaining alternatives) on an
-explicit stack; a dead end resumes the most recent choice point, undoing the agenda, state, tree and plan to
-what they were there. No Python recursion is involved, so plans of any length fit. A compound task that
-reappears below itself in the same state (same ground task, equal state) is a loop and that branch fails.
-Goal facts, when the problem has some, must hold at the end, else the search backtracks.
+state order). Every task expansion with an alternative left pushes a choice point (an iterator over the
+remaining alternatives) on an explicit stack; a dead end resumes the most recent choice point, undoing the
+agenda, state, tree and plan to what they were there. No Python recursion is involved, so plans of any length
+fit. A compound task that reappears below itself in the same state (same ground task, equal state) is a loop
+and that branch fails. Goal facts, when the problem has some, must hold at the end, else the search backtracks.
+
+The alternatives of a task come from the domain's generated code (:mod:`bt_meta.htn.compiled`) where there is
+some, else from the reference path here (:meth:`Search._method_alternatives`, primitives' satisfiers); both give
+the same alternatives in the same order.
 """
 
 from __future__ import annotations

@@ -8,7 +8,8 @@ plan from either planner is checked by an independent simulator of the domain be
 
 Offers:
 
-* :func:`register` -- adds ``bt-meta bench htn [--json] [--repeat N] [--only NAME] [--seed S] [--strategy S]``
+* :func:`register` -- adds ``bt-meta bench htn [--json] [--repeat N] [--min-seconds S] [--only NAME] [--seed S]
+  [--strategy S]``
 * :class:`BenchProblem` and :func:`build_problems` -- the problems, for GTPyhop and for our planner
 * :func:`random_blocks_problem` -- a seeded random blocks-world problem (initial and goal towers)
 * :func:`validate_blocks_plan`, :func:`validate_childsnack_plan` -- simulate a plan and check the goal
@@ -50,6 +51,8 @@ PROBLEMS_DIR = Path(__file__).resolve().parent / "problems"
 STRATEGIES = ("recursive_dfs", "iterative_dfs_backtracking", "iterative_greedy")
 SHORT_STRATEGY = {"recursive_dfs": "rec", "iterative_dfs_backtracking": "iter-bt", "iterative_greedy": "greedy"}
 TARGET_RATIO = 2.0
+MIN_SECONDS = 0.2  # default time each planner runs a problem for (in rounds of one run each), at least --repeat runs
+MAX_ROUNDS = 1000
 _COMMAND = "bt-meta bench htn"
 GENERATED_SIZES = (100, 200)
 
@@ -488,23 +491,35 @@ def select_problems(problems: list[BenchProblem], only: str | None) -> list[Benc
 # Running the planners
 
 
-def _interleaved_best(repeat: int, contenders: dict[str, Callable[[], dict[str, Any]]]) -> dict[str, dict[str, Any]]:
-    """Run every contender once per round, ``repeat`` rounds, and keep each one's fastest run.
+def _interleaved_best(repeat: int, contenders: dict[str, Callable[[], dict[str, Any]]],
+                      min_seconds: float = 0.0) -> dict[str, dict[str, Any]]:
+    """Run every contender once per round, at least ``repeat`` rounds, and keep each one's fastest run.
 
     Interleaving the planners round by round keeps a change in machine load from favouring whichever ran
-    first. A failed run is deterministic, so a contender that fails is not run again.
+    first. A failed run is deterministic, so a contender that fails is not run again. Rounds go on (up to
+    ``MAX_ROUNDS``) until every contender still running has spent ``min_seconds`` in its runs: on problems that
+    take a fraction of a millisecond, three runs measure the machine's noise more than the planners.
     """
     best: dict[str, dict[str, Any]] = {}
     runs: dict[str, int] = {}
-    for _ in range(repeat):
+    spent: dict[str, float] = {}
+    rounds = 0
+    while True:
+        rounds += 1
         for name, run in contenders.items():
             if name in best and best[name]["status"] != "success":
                 continue
             gc.collect()
             outcome = run()
             runs[name] = runs.get(name, 0) + 1
+            spent[name] = spent.get(name, 0.0) + outcome["seconds"]
             if name not in best or outcome["status"] != "success" or outcome["seconds"] < best[name]["seconds"]:
                 best[name] = outcome
+        if rounds >= MAX_ROUNDS:
+            break
+        if rounds >= repeat and all(spent[name] >= min_seconds or best[name]["status"] != "success"
+                                    for name in contenders):
+            break
     for name, outcome in best.items():
         outcome["runs"] = runs[name]
     return best
@@ -609,6 +624,7 @@ def _failure(status: str, seconds: float, message: str) -> dict[str, Any]:
 def run_benchmark(
     *,
     repeat: int = 3,
+    min_seconds: float = MIN_SECONDS,
     only: str | None = None,
     seed: int = 1,
     strategies: Sequence[str] = STRATEGIES,
@@ -630,7 +646,7 @@ def run_benchmark(
             contenders[strategy] = lambda problem=problem, strategy=strategy: _run_gtpyhop_once(
                 gtpyhop, domains[problem.family], problem, strategy
             )
-        best = _interleaved_best(repeat, contenders)
+        best = _interleaved_best(repeat, contenders, min_seconds)
         row["ours"] = best["ours"]
         row["gtpyhop"] = {s: best[s] for s in strategies}
         row["ratio"] = {
@@ -650,6 +666,7 @@ def run_benchmark(
         "python": platform.python_version(),
         "recursion_limit": sys.getrecursionlimit(),
         "repeat": repeat,
+        "min_seconds": min_seconds,
         "seed": seed,
         "strategies": list(strategies),
         "target_ratio": TARGET_RATIO,
@@ -726,8 +743,10 @@ def _print_report(report: dict[str, Any]) -> None:
     names = ", ".join(f"{SHORT_STRATEGY[s]} = {s}" for s in report["strategies"])
     print(
         f"HTN planning: bt-meta vs {report['baseline']} in one process (Python {report['python']}, "
-        f"recursion limit {report['recursion_limit']}), best of {report['repeat']} run(s), blocks seed {report['seed']}"
+        f"recursion limit {report['recursion_limit']}), blocks seed {report['seed']}"
     )
+    print(f"each time is the best of at least {report['repeat']} run(s), more on fast problems: rounds go on until "
+          f"every planner has run for {report['min_seconds']} s (at most {MAX_ROUNDS} rounds)")
     print(f"ratio = GTPyhop time / our time (ours includes building the decomposition tree); {names}")
     print()
     for line in _table_lines(report):
@@ -751,6 +770,8 @@ def _print_report(report: dict[str, Any]) -> None:
 def _handle(args: argparse.Namespace) -> int:
     if args.repeat < 1:
         raise UserInputError(f"--repeat must be at least 1, got {args.repeat}", _COMMAND)
+    if not args.min_seconds >= 0:
+        raise UserInputError(f"--min-seconds must be 0 or more, got {args.min_seconds}", _COMMAND)
     strategies = args.strategy or list(STRATEGIES)
 
     def progress(row: dict[str, Any]) -> None:
@@ -760,6 +781,7 @@ def _handle(args: argparse.Namespace) -> int:
     try:
         report = run_benchmark(
             repeat=args.repeat,
+            min_seconds=args.min_seconds,
             only=args.only,
             seed=args.seed,
             strategies=strategies,
@@ -783,7 +805,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Our HTN planner against GTPyhop on the same problems (GTPyhop's examples), in one process.",
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
-    parser.add_argument("--repeat", type=int, default=3, help="runs per planner and problem; the best counts")
+    parser.add_argument("--repeat", type=int, default=3, help="least runs per planner and problem; the best counts")
+    parser.add_argument("--min-seconds", type=float, default=MIN_SECONDS, metavar="S",
+                        help=f"keep running rounds until each planner has run S seconds on a problem (default "
+                             f"{MIN_SECONDS}; at most {MAX_ROUNDS} rounds)")
     parser.add_argument("--only", metavar="NAME", help="comma-separated problem names or patterns, e.g. sussman")
     parser.add_argument("--seed", type=int, default=1, help="seed of the generated 100- and 200-block problems")
     parser.add_argument(

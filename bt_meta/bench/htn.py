@@ -51,8 +51,8 @@ PROBLEMS_DIR = Path(__file__).resolve().parent / "problems"
 STRATEGIES = ("recursive_dfs", "iterative_dfs_backtracking", "iterative_greedy")
 SHORT_STRATEGY = {"recursive_dfs": "rec", "iterative_dfs_backtracking": "iter-bt", "iterative_greedy": "greedy"}
 TARGET_RATIO = 2.0
-MIN_SECONDS = 0.2  # default time each planner runs a problem for (in rounds of one run each), at least --repeat runs
-MAX_ROUNDS = 1000
+MIN_SECONDS = 0.2  # default time each planner runs a problem for (at least --repeat runs)
+MAX_ROUNDS = 1000  # runs per planner and problem at most
 _COMMAND = "bt-meta bench htn"
 GENERATED_SIZES = (100, 200)
 
@@ -493,33 +493,31 @@ def select_problems(problems: list[BenchProblem], only: str | None) -> list[Benc
 
 def _interleaved_best(repeat: int, contenders: dict[str, Callable[[], dict[str, Any]]],
                       min_seconds: float = 0.0) -> dict[str, dict[str, Any]]:
-    """Run every contender once per round, at least ``repeat`` rounds, and keep each one's fastest run.
+    """Run every contender once per round and keep each one's fastest run.
 
     Interleaving the planners round by round keeps a change in machine load from favouring whichever ran
-    first. A failed run is deterministic, so a contender that fails is not run again. Rounds go on (up to
-    ``MAX_ROUNDS``) until every contender still running has spent ``min_seconds`` in its runs: on problems that
-    take a fraction of a millisecond, three runs measure the machine's noise more than the planners.
+    first. A contender is done after ``repeat`` runs once its runs add up to ``min_seconds`` (or after
+    ``MAX_ROUNDS``): on problems that take a fraction of a millisecond, three runs measure the machine's noise
+    more than the planner. A failed run is deterministic, so a contender that fails is not run again.
     """
     best: dict[str, dict[str, Any]] = {}
     runs: dict[str, int] = {}
     spent: dict[str, float] = {}
-    rounds = 0
-    while True:
-        rounds += 1
-        for name, run in contenders.items():
-            if name in best and best[name]["status"] != "success":
-                continue
-            gc.collect()
-            outcome = run()
+    running = list(contenders)
+    while running:
+        for name in list(running):
+            # a full collection before a contender's first run and after a long one (a clean heap for each);
+            # between the many runs of a fast problem a young-generation one, or collecting would take longer
+            # than the runs
+            gc.collect(2 if name not in best or best[name]["seconds"] >= 0.01 else 0)
+            outcome = contenders[name]()
             runs[name] = runs.get(name, 0) + 1
             spent[name] = spent.get(name, 0.0) + outcome["seconds"]
             if name not in best or outcome["status"] != "success" or outcome["seconds"] < best[name]["seconds"]:
                 best[name] = outcome
-        if rounds >= MAX_ROUNDS:
-            break
-        if rounds >= repeat and all(spent[name] >= min_seconds or best[name]["status"] != "success"
-                                    for name in contenders):
-            break
+            if outcome["status"] != "success" or runs[name] >= MAX_ROUNDS or (
+                    runs[name] >= repeat and spent[name] >= min_seconds):
+                running.remove(name)
     for name, outcome in best.items():
         outcome["runs"] = runs[name]
     return best
@@ -707,7 +705,8 @@ def _cell_ms(outcome: dict[str, Any]) -> str:
     }
     if outcome["status"] != "success":
         return labels.get(outcome["status"], outcome["status"])
-    return f"{outcome['seconds'] * 1000:.1f}"
+    ms = outcome["seconds"] * 1000
+    return f"{ms:.3f}" if ms < 1 else f"{ms:.1f}"  # three decimals below a millisecond, where the ratio lives
 
 
 def _gtpyhop_length(row: dict[str, Any]) -> str:
@@ -745,8 +744,8 @@ def _print_report(report: dict[str, Any]) -> None:
         f"HTN planning: bt-meta vs {report['baseline']} in one process (Python {report['python']}, "
         f"recursion limit {report['recursion_limit']}), blocks seed {report['seed']}"
     )
-    print(f"each time is the best of at least {report['repeat']} run(s), more on fast problems: rounds go on until "
-          f"every planner has run for {report['min_seconds']} s (at most {MAX_ROUNDS} rounds)")
+    print(f"each time is the best of at least {report['repeat']} run(s), more on fast problems: a planner runs a "
+          f"problem until its runs add up to {report['min_seconds']} s (at most {MAX_ROUNDS} runs)")
     print(f"ratio = GTPyhop time / our time (ours includes building the decomposition tree); {names}")
     print()
     for line in _table_lines(report):
@@ -807,8 +806,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     parser.add_argument("--repeat", type=int, default=3, help="least runs per planner and problem; the best counts")
     parser.add_argument("--min-seconds", type=float, default=MIN_SECONDS, metavar="S",
-                        help=f"keep running rounds until each planner has run S seconds on a problem (default "
-                             f"{MIN_SECONDS}; at most {MAX_ROUNDS} rounds)")
+                        help=f"run each planner on a problem until its runs add up to S seconds (default "
+                             f"{MIN_SECONDS}; at most {MAX_ROUNDS} runs)")
     parser.add_argument("--only", metavar="NAME", help="comma-separated problem names or patterns, e.g. sussman")
     parser.add_argument("--seed", type=int, default=1, help="seed of the generated 100- and 200-block problems")
     parser.add_argument(

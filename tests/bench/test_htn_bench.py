@@ -145,3 +145,32 @@ def test_missing_gtpyhop_is_a_clear_error(monkeypatch, capsys):
 def test_repeat_below_one_is_an_input_error(capsys):
     assert main(["bench", "htn", "--only", "sussman", "--repeat", "0"]) == 2
     assert capsys.readouterr().err.strip() == "bt-meta bench htn: --repeat must be at least 1, got 0"
+
+
+def test_negative_min_seconds_is_an_input_error(capsys):
+    assert main(["bench", "htn", "--only", "sussman", "--min-seconds", "-1"]) == 2
+    assert capsys.readouterr().err.strip() == "bt-meta bench htn: --min-seconds must be 0 or more, got -1.0"
+
+
+def test_fast_contenders_run_until_their_time_adds_up_and_slow_ones_stop_after_repeat():
+    """The runner's bookkeeping with contenders that report fixed times (no clock involved)."""
+    calls = {"fast": 0, "slow": 0, "broken": 0}
+
+    def contender(name: str, seconds: list[float], status: str = "success"):
+        def run() -> dict:
+            calls[name] += 1
+            return {"status": status, "seconds": seconds[(calls[name] - 1) % len(seconds)], "message": ""}
+        return run
+
+    best = bench._interleaved_best(3, {
+        "fast": contender("fast", [0.003, 0.001, 0.002]),
+        "slow": contender("slow", [0.5, 0.4]),
+        "broken": contender("broken", [0.001], status="no_plan"),
+    }, min_seconds=0.1)
+    assert calls == {"fast": 50, "slow": 3, "broken": 1}  # 50 runs of 2 ms on average make 0.1 s
+    assert best["fast"]["seconds"] == 0.001 and best["fast"]["runs"] == 50
+    assert best["slow"]["seconds"] == 0.4 and best["slow"]["runs"] == 3
+    assert best["broken"]["status"] == "no_plan" and best["broken"]["runs"] == 1
+    calls.update(fast=0)
+    capped = bench._interleaved_best(1, {"fast": contender("fast", [0.0])}, min_seconds=1.0)
+    assert capped["fast"]["runs"] == bench.MAX_ROUNDS

@@ -241,17 +241,7 @@ class Generated:
 
     def _rule_body(self, fn: _Fn, axiom: Any, params: list[str], depth: str) -> list[ast.stmt]:
         """Statements that store True and return when one rule proves the head ``k`` (inner proofs at ``depth``)."""
-        checks: list[ast.expr] = []
-        varmap: dict[str, str] = {}
-        for term, param in zip(axiom.head_args, params, strict=True):
-            if term.__class__ is Var:
-                prior = varmap.get(term.name)
-                if prior is None:
-                    varmap[term.name] = param
-                else:
-                    checks.append(_cmp(_name(param), ast.Eq(), _name(prior)))
-            else:
-                checks.append(_cmp(_name(param), ast.Eq(), _const(term)))
+        checks, varmap = self._head(axiom.head_args, params)
         proved: list[ast.stmt] = [
             ast.Assign(targets=[ast.Subscript(value=_name("m"), slice=_name("k"), ctx=ast.Store())],
                        value=_const(True)),
@@ -658,8 +648,9 @@ class Generated:
         return [ast.For(target=_store(loop), iter=pool, body=body, orelse=[])]
 
     # -- whole tasks and primitives ---------------------------------------------------------------------------
-    def _head(self, fn: _Fn, head: Sequence[Term], params: Sequence[str]) -> tuple[list[ast.expr], dict[str, str]]:
-        """Tests a task's arguments must pass to unify with a method head, and the head variables' locals."""
+    @staticmethod
+    def _head(head: Sequence[Term], params: Sequence[str]) -> tuple[list[ast.expr], dict[str, str]]:
+        """Tests the arguments in locals ``params`` must pass to unify with a head, and the head variables' locals."""
         checks: list[ast.expr] = []
         varmap: dict[str, str] = {}
         for term, param in zip(head, params, strict=True):
@@ -731,7 +722,7 @@ class Generated:
                 continue  # never unifies (the loader rejects it; a learned method could still be malformed)
             method_ref = f"M{self._matchers}_{k}"
             self.ns[method_ref] = method
-            checks, varmap = self._head(fn, method.task_args, params)
+            checks, varmap = self._head(method.task_args, params)
             head_names = list(varmap)
             clauses = method.precondition.clauses
             seen = fn.fresh("s") if len(clauses) > 1 else None

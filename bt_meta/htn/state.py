@@ -11,12 +11,14 @@ Offers:
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
+from operator import itemgetter
 from typing import Any
 
 Atom = tuple[str, ...]
 
 _MASK = (1 << 64) - 1
 _new_state = object.__new__
+_PREDICATE = itemgetter(0)
 _EMPTY: dict[Atom, None] = {}
 INDEX_DEPTH = 8  # how far up the parent chain with_arg looks for an index to update instead of rebuilding
 
@@ -219,7 +221,7 @@ class State:
                 atoms_of = preds.get(atom[0])
             if (atoms_of is None or atom not in atoms_of) and atom not in fresh:
                 fresh.append(atom)
-        if len(fresh) > 1 and len({atom[0] for atom in fresh}) < len(fresh):
+        if len(fresh) > 1 and len(set(map(_PREDICATE, fresh))) < len(fresh):
             # several new atoms of one predicate go in sorted, predicates in the order they first appear
             grouped: dict[str, list[Atom]] = {}
             for atom in fresh:
@@ -249,7 +251,14 @@ class State:
         successor._hash = hash_ & _MASK
         # indexes of unchanged predicates are shared; the others are remade on demand (see index)
         by_arg = self._by_arg
-        successor._by_arg = {key: index for key, index in by_arg.items() if key[0] not in changed} if by_arg else {}
+        if by_arg:
+            by_arg = by_arg.copy()
+            for key in self._by_arg:
+                if key[0] in changed:
+                    del by_arg[key]
+        else:
+            by_arg = {}
+        successor._by_arg = by_arg
         successor._derived = {}
         # parent and changed atoms let indexes and axiom memos be inherited (see index, AxiomSet.holds)
         successor._parent = self

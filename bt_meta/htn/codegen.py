@@ -32,7 +32,9 @@ predicate whose extension a state already has are answered from that extension, 
 from __future__ import annotations
 
 import ast
+import functools
 import sys
+import threading
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -42,6 +44,17 @@ from bt_meta.htn.state import Atom
 
 INLINE_CLAUSES = 3  # a non-recursive derived predicate with more rule clauses than this is called, not inlined
 INLINE_LEVELS = 2  # how deep inlined predicates may nest
+
+
+def _locked(generate: Callable[..., Any]) -> Callable[..., Any]:
+    """Generation shares a namespace and a name counter: one generation at a time (calls need no lock)."""
+
+    @functools.wraps(generate)
+    def wrapper(self: Generated, *args: Any, **kwargs: Any) -> Any:
+        with self._lock:
+            return generate(self, *args, **kwargs)
+
+    return wrapper
 
 
 class Unsupported(Exception):
@@ -165,6 +178,7 @@ class Generated:
         self._provers_built = False
         self._matchers = 0
         self._inline_level = 0
+        self._lock = threading.RLock()
         for axiom in axioms.axioms:
             for clause in axiom.condition.clauses:
                 if any(step[0] in (EXT, NEXT) for step in clause):
@@ -335,6 +349,7 @@ class Generated:
         return name
 
     # -- preconditions ----------------------------------------------------------------------------------------
+    @_locked
     def clause_matcher(self, clause: Sequence[tuple], bound: Sequence[str], label: str) -> Callable[..., Any]:
         """A generator function ``(state, env)`` yielding what :func:`match_clause` yields, in the same order."""
         if not self.reference_proofs:
@@ -702,6 +717,7 @@ class Generated:
                            value=ast.Dict(keys=[], values=[]))]),
         ]
 
+    @_locked
     def task_expander(self, task: str, arity: int, methods: Sequence[Any]) -> Callable[..., Any]:
         """A generator function ``(state, *args)`` yielding ``(method, bindings, subtasks)`` for a compound task.
 
@@ -757,6 +773,7 @@ class Generated:
         self._compile(f"task {task}", [_function(name, ["st", *params], prologue + body)])
         return self.ns[name]  # type: ignore[no-any-return]
 
+    @_locked
     def primitive_stepper(self, primitive: Any) -> Callable[..., Any]:
         """A function ``(state, *args)`` giving ``(bindings, add, delete)`` when the primitive applies, else None.
 

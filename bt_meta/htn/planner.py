@@ -72,11 +72,15 @@ _IDS: list[str] = []  # "n0", "n1", ...: made once, shared by every search that 
 
 
 def _node_ids(offset: int, count: int) -> list[str]:
+    global _IDS
     if offset:
         return [f"n{offset + index}" for index in range(count)]
-    if len(_IDS) < count:
-        _IDS.extend(f"n{index}" for index in range(len(_IDS), count))
-    return _IDS
+    ids = _IDS
+    if len(ids) < count:
+        # a new list, swapped in whole: a search in another thread keeps reading a complete one
+        ids = ids + [f"n{index}" for index in range(len(ids), count)]
+        _IDS = ids
+    return ids
 
 
 def _unify_head(method: Method, task: tuple[str, ...]) -> dict[str, str] | None:

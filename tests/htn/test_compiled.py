@@ -267,3 +267,36 @@ def test_external_predicates_keep_the_reference_path_and_are_still_asked():
     result = plan(domain, taskfile.problems["p"], external=external)
     assert result.status == "no_plan"
     assert ("reachable", "a") in asked and ("reachable", "b") in asked
+
+
+def test_threads_planning_a_fresh_domain_at_once_get_the_sequential_answers():
+    import threading
+    from pathlib import Path
+
+    blocks = Path(__file__).resolve().parents[2] / "bt_meta" / "bench" / "problems" / "blocks_htn.yaml"
+    expected_file = load_task_text(blocks.read_text())
+    expected = [str(a) for a in plan(expected_file.domain, expected_file.problems["sussman"]).plan]
+    features = load_task_text(textwrap.dedent(FEATURES))
+    expected_features = [str(a) for a in plan(features.domain, features.problems["p"]).plan]
+    for _ in range(3):
+        fresh = load_task_text(blocks.read_text())  # nothing generated yet: the threads generate it together
+        fresh_features = load_task_text(textwrap.dedent(FEATURES))
+        results: list[list[str]] = []
+        errors: list[BaseException] = []
+        barrier = threading.Barrier(6)
+
+        def work(taskfile, problem: str, barrier=barrier, results=results, errors=errors) -> None:
+            try:
+                barrier.wait()
+                results.append([str(a) for a in plan(taskfile.domain, taskfile.problems[problem]).plan])
+            except BaseException as error:  # reported by the assertion below
+                errors.append(error)
+
+        threads = [threading.Thread(target=work, args=(fresh, "sussman")) for _ in range(3)]
+        threads += [threading.Thread(target=work, args=(fresh_features, "p")) for _ in range(3)]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join()
+        assert errors == []
+        assert sorted(results) == sorted([expected] * 3 + [expected_features] * 3)

@@ -165,7 +165,7 @@ class Generated:
         self.reference_proofs = reference_proofs
         self.memo_key = (axioms._key, "generated", reference_proofs)
         self.ns: dict[str, Any] = {
-            "__builtins__": {"len": len, "set": set, "tuple": tuple, "dict": dict},
+            "__builtins__": {"len": len, "set": set, "tuple": tuple, "dict": dict, "hash": hash},
             "EMPTY": {}, "INP": _IN_PROGRESS, "Fallback": _Fallback, "MAXD": max_depth,
             "fb": self._fallback, "holds": axioms.holds,
             "OMK": axioms._memo_key, "OINP": _REFERENCE_IN_PROGRESS,
@@ -775,10 +775,11 @@ class Generated:
 
     @_locked
     def primitive_stepper(self, primitive: Any) -> Callable[..., Any]:
-        """A function ``(state, *args)`` giving ``(bindings, add, delete)`` when the primitive applies, else None.
+        """A function ``(state, *args)`` giving ``(bindings, successor state)`` when the primitive applies, else None.
 
         Only for preconditions that bind nothing beyond the parameters (so there is at most one satisfier);
-        :class:`Unsupported` otherwise.
+        :class:`Unsupported` otherwise. The successor is :meth:`State._apply`'s, built by straight-line code
+        (:meth:`_effects`).
         """
         if not self.reference_proofs:
             self._build_provers()
@@ -795,9 +796,7 @@ class Generated:
                 uses_memo = True
 
             def emit(vm: dict[str, str]) -> list[ast.stmt]:
-                add = ast.List(elts=[self._ground(t[0], t[1:], vm) for t in primitive.add], ctx=ast.Load())
-                delete = ast.List(elts=[self._ground(t[0], t[1:], vm) for t in primitive.delete], ctx=ast.Load())
-                return [ast.Return(value=_tuple([self._bindings(names, vm), add, delete]))]
+                return self._effects(fn, primitive, vm, self._bindings(names, vm))
 
             body.extend(self._clause(fn, list(clause), dict(varmap), "0", True, emit))
         body.append(ast.Return(value=_const(None)))
@@ -806,3 +805,64 @@ class Generated:
         name = f"p{self._matchers}"
         self._compile(f"primitive {primitive.name}", [_function(name, ["st", *params], prologue + body)])
         return self.ns[name]  # type: ignore[no-any-return]
+
+    def _effects(self, fn: _Fn, primitive: Any, vm: dict[str, str], bindings: ast.expr) -> list[ast.stmt]:
+        """Statements returning ``(bindings, successor)``: what ``State._apply(add, delete)`` gives, step by step.
+
+        The same steps in the same order: each delete that is present and not also added leaves a copy of its
+        predicate's atoms (copies made in the order ``_apply`` makes them), then each add that is new (and not a
+        repeat of an earlier add) goes in; the delta lists deletions, then additions. Which atoms can be equal is
+        known here (same predicate and arity), so only those are compared. When two adds share a predicate,
+        ``_apply`` sorts the new ones, and the generated code calls it instead.
+        """
+        deletes = [(t[0], len(t) - 1, fn.fresh("e"), self._ground(t[0], t[1:], vm)) for t in primitive.delete]
+        adds = [(t[0], len(t) - 1, fn.fresh("e"), self._ground(t[0], t[1:], vm)) for t in primitive.add]
+        out: list[ast.stmt] = [_assign(local, atom) for _, _, local, atom in deletes + adds]
+        if len({pred for pred, _, _, _ in adds}) < len(adds):
+            call = _method("st", "_apply", ast.List(elts=[_name(a[2]) for a in adds], ctx=ast.Load()),
+                           ast.List(elts=[_name(d[2]) for d in deletes], ctx=ast.Load()))
+            return [*out, ast.Return(value=_tuple([bindings, call]))]
+        preds = list(dict.fromkeys(pred for pred, _, _, _ in deletes + adds))
+        original = {pred: fn.fresh("o") for pred in preds}
+        copy = {pred: fn.fresh("c") for pred in preds}
+        out.append(_assign("sp", ast.Attribute(value=_name("st"), attr="_preds", ctx=ast.Load())))
+        for pred in preds:
+            out.append(_assign(original[pred], _method("sp", "get", _const(pred), _name("EMPTY"))))
+            out.append(_assign(copy[pred], _const(None)))
+        out += [_assign("hs", ast.Attribute(value=_name("st"), attr="_hash", ctx=ast.Load())),
+                _assign("ln", ast.Attribute(value=_name("st"), attr="_len", ctx=ast.Load())),
+                _assign("dl", ast.List(elts=[], ctx=ast.Load())),
+                _assign("ch", ast.Dict(keys=[], values=[]))]
+
+        def take_copy(pred: str) -> ast.stmt:
+            """``cP = ch[P] = oP.copy()`` when not made yet (``_apply``'s copy on first change)."""
+            target = ast.Subscript(value=_name("ch"), slice=_const(pred), ctx=ast.Store())
+            made = ast.Assign(targets=[_store(copy[pred]), target], value=_method(original[pred], "copy"))
+            return _if(_cmp(_name(copy[pred]), ast.Is(), _const(None)), [made])
+
+        def count(atom: str, sign: ast.operator) -> list[ast.stmt]:
+            return [ast.AugAssign(target=_store("hs"), op=sign, value=_call(_name("hash"), _name(atom))),
+                    ast.AugAssign(target=_store("ln"), op=sign, value=_const(1)),
+                    ast.Expr(value=_method("dl", "append", _name(atom)))]
+
+        for pred, arity, local, _ in deletes:
+            present = _cmp(_name(local), ast.In(), ast.IfExp(
+                test=_cmp(_name(copy[pred]), ast.Is(), _const(None)), body=_name(original[pred]),
+                orelse=_name(copy[pred])))
+            tests = [present] + [_cmp(_name(local), ast.NotEq(), _name(a_local))
+                                 for a_pred, a_arity, a_local, _ in adds if (a_pred, a_arity) == (pred, arity)]
+            deleted = ast.Delete(targets=[ast.Subscript(value=_name(copy[pred]), slice=_name(local), ctx=ast.Del())])
+            out.append(_if(ast.BoolOp(op=ast.And(), values=tests) if len(tests) > 1 else tests[0],
+                           [take_copy(pred), deleted, *count(local, ast.Sub())]))
+        for k, (pred, arity, local, _) in enumerate(adds):
+            tests = [_cmp(_name(local), ast.NotIn(), _name(original[pred]))]
+            tests += [_cmp(_name(local), ast.NotEq(), _name(earlier))
+                      for e_pred, e_arity, earlier, _ in adds[:k] if (e_pred, e_arity) == (pred, arity)]
+            inserted = ast.Assign(targets=[ast.Subscript(value=_name(copy[pred]), slice=_name(local), ctx=ast.Store())],
+                                  value=_const(None))
+            out.append(_if(ast.BoolOp(op=ast.And(), values=tests) if len(tests) > 1 else tests[0],
+                           [take_copy(pred), inserted, *count(local, ast.Add())]))
+        successor = ast.IfExp(test=_name("dl"), body=_method("st", "_successor", _name("ch"), _name("dl"), _name("hs"),
+                                                               _name("ln")), orelse=_name("st"))
+        out.append(ast.Return(value=_tuple([bindings, successor])))
+        return out

@@ -271,10 +271,9 @@ class Search:
                             self._dead_end(len(plan), self._explain(task, state))
                             advance = True
                             continue
-                        env, add, delete = found
-                        trail.append((task, "primitive", None, env, item[2], state, step_offset + len(plan)))
+                        trail.append((task, "primitive", None, found[0], item[2], state, step_offset + len(plan)))
                         plan.append(len(trail) - 1)
-                        state = state._apply(add, delete)
+                        state = found[1]
                         agenda = rest
                         continue
                     if name in primitives:

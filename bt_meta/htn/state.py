@@ -237,9 +237,16 @@ class State:
             hash_ += hash(atom)
         if not fresh and not delta:
             return self
-        length += len(fresh)
         delta.extend(fresh)
-        new_preds = preds.copy()
+        return self._successor(changed, delta, hash_, length + len(fresh))
+
+    def _successor(self, changed: dict[str, dict[Atom, None]], delta: list[Atom], hash_: int, length: int) -> State:
+        """The state whose predicates in ``changed`` are the given dicts (an empty one drops the predicate).
+
+        ``delta`` lists the atoms deleted, then those added; ``hash_`` and ``length`` are the successor's. Shared by
+        :meth:`_apply` and the generated primitive code (:meth:`bt_meta.htn.codegen.Generated.primitive_stepper`).
+        """
+        new_preds = self._preds.copy()
         for pred, atoms_of in changed.items():
             if atoms_of:
                 new_preds[pred] = atoms_of

@@ -212,9 +212,11 @@ problems:
     tasks: [t()]
 '''
 
-_OWN_NAME = re.compile(r"^(st|m|d|dd|k|e|r|v|pr|dv|om|ib|env|res|out|seen|[a-z]{1,2}\d+(_\d+)*|M\d+_\d+)$")
+_OWN_NAME = re.compile(r"^(st|m|d|dd|k|e|r|v|pr|dv|om|ib|sp|hs|ln|dl|ch|env|res|out|seen"
+                       r"|[a-z]{1,2}\d+(_\d+)*|M\d+_\d+)$")
 _RUNTIME_NAMES = {"EMPTY", "INP", "OMK", "OINP", "Fallback", "MAXD", "fb", "holds", "exth", "ext", "GK", "len", "set",
-                  "tuple", "dict", "get", "_preds", "_derived", "_by_arg", "index", "add", "append"}
+                  "tuple", "dict", "get", "_preds", "_derived", "_by_arg", "index", "add", "append", "hash", "copy",
+                  "_hash", "_len", "_successor", "_apply"}
 
 
 def test_hostile_constants_plan_as_data_and_never_become_identifiers():

@@ -300,3 +300,50 @@ def test_threads_planning_a_fresh_domain_at_once_get_the_sequential_answers():
             thread.join()
         assert errors == []
         assert sorted(results) == sorted([expected] * 3 + [expected_features] * 3)
+
+
+EFFECTS = """
+domain:
+  predicates: {a: [x], b: [x], c: [x, x], w: [x], z: [x], flag: []}
+  primitives:
+    swap: {parameters: [?x, ?y], delete: [c(?x, ?y), a(?y)], add: [c(?y, ?x), a(?x)]}
+    twice: {parameters: [?x], delete: [a(?x), a(?x), flag()], add: [b(?x)]}
+    fresh_pred: {parameters: [?x], add: [z(?x), flag()]}
+    drop_last: {parameters: [?x], delete: [w(?x)]}
+    keep: {parameters: [?x], delete: [b(?x)], add: [b(?x)]}
+    same_pred_adds: {parameters: [?x, ?y], delete: [a(?x)], add: [b(?y), b(?x)]}
+  tasks: {}
+"""
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_generated_effects_build_the_successor_apply_builds(seed):
+    import random
+
+    from bt_meta.htn import State
+
+    domain = load_task_text(textwrap.dedent(EFFECTS)).domain
+    _, steppers = compiled_domain(domain).variant(False)
+    assert set(steppers) == set(domain.primitives)
+    rng = random.Random(seed)
+    objects = ["p", "q", "r"]
+    for _ in range(200):
+        atoms = [atom for atom in [("a", o) for o in objects] + [("b", o) for o in objects]
+                 + [("c", x, y) for x in objects for y in objects] + [("w", "p"), ("flag",)] if rng.random() < 0.4]
+        rng.shuffle(atoms)
+        state = State(atoms)
+        if rng.random() < 0.5:
+            state.index("a", 1)  # successors must drop the indexes of changed predicates, keep the others
+            state.index("c", 2)
+        name = rng.choice(sorted(domain.primitives))
+        primitive = domain.primitives[name]
+        args = tuple(rng.choice(objects) for _ in primitive.parameters)
+        bindings, successor = steppers[name](state, *args)
+        assert bindings == dict(zip(primitive.parameters, args, strict=True))
+        expected = state._apply(*primitive.effects(bindings))
+        assert (successor is state) == (expected is state), (name, args)
+        assert [(pred, list(found)) for pred, found in successor._preds.items()] == \
+            [(pred, list(found)) for pred, found in expected._preds.items()], (name, args, atoms)
+        assert (successor._hash, successor._len, successor._delta) == (expected._hash, expected._len, expected._delta)
+        assert list(successor._by_arg) == list(expected._by_arg)
+        assert successor == expected and hash(successor) == hash(State(list(expected)))

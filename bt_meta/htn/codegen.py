@@ -43,7 +43,7 @@ from bt_meta.htn.conditions import DNEG, DPOS, EQ, EXT, NEG, NEQ, NEXT, POS, Ter
 from bt_meta.htn.state import Atom
 
 INLINE_CLAUSES = 3  # a non-recursive derived predicate with more rule clauses than this is called, not inlined
-INLINE_LEVELS = 2  # how deep inlined predicates may nest
+INLINE_LEVELS = 3  # how deep inlined predicates may nest
 
 
 def _locked(generate: Callable[..., Any]) -> Callable[..., Any]:

@@ -188,8 +188,10 @@ class Search:
         typed = compiled.typed_tasks
         fixed_variant = compiled.fixed_variant
         threshold = compiled.threshold
-        small = compiled.variant(False) if fixed_variant is not True else compiled.variant(True)
-        large = compiled.variant(True) if fixed_variant is not False else small
+        # the generated code for small states, and for states of ``threshold`` atoms or more (made when first met)
+        small = compiled.variant(fixed_variant is True)
+        large_flag = fixed_variant is not False
+        variant = compiled.variant
         agenda: tuple | None = None
         for item in reversed(items):
             agenda = (item, agenda)
@@ -262,7 +264,7 @@ class Search:
                 else:
                     task = item[1]
                     name = task[0]
-                    expanders, steppers = large if state._len >= threshold else small
+                    expanders, steppers = small if state._len < threshold else variant(large_flag)
                     stepper = steppers.get(name)
                     if stepper is not None:
                         # a primitive with at most one way to apply: no choice point

@@ -347,3 +347,103 @@ def test_generated_effects_build_the_successor_apply_builds(seed):
         assert (successor._hash, successor._len, successor._delta) == (expected._hash, expected._len, expected._delta)
         assert list(successor._by_arg) == list(expected._by_arg)
         assert successor == expected and hash(successor) == hash(State(list(expected)))
+
+
+def _random_domain(rng) -> str:
+    """A small random domain in the task-file format: facts, derived predicates (one recursive), primitives and
+    methods whose preconditions mix patterns, negations, comparisons, constants, repeated variables and 'or'."""
+    def pick(*options):
+        return rng.choice(options)
+
+    def literals(bound: list[str], count: int) -> tuple[str, list[str]]:
+        bound = list(bound)
+        parts: list[str] = []
+        for _ in range(count):
+            var = pick("?x", "?y", "?z")
+            known = pick(*bound) if bound else "a"
+            kind = rng.random()
+            if kind < 0.35:
+                atom = pick(f"p({var})", f"q({known}, {var})", f"q({var}, {var})", f"d1({var})", f"d2({known}, {var})",
+                            f"d3({var})", f"q({var}, b)", f"d2({var}, c)")
+                parts.append(atom)
+                bound += [v for v in ("?x", "?y", "?z") if v in atom and v not in bound]
+            elif kind < 0.6 and bound:
+                parts.append(pick(f"not p({known})", f"not d1({known})", f"not d3({known})", f"not q({known}, a)",
+                                  f"not d2({known}, {known})"))
+            elif kind < 0.75 and bound:
+                parts.append(pick(f"{known} != a", f"{known} == b", f"{known} != {pick(*bound)}"))
+            else:
+                parts.append(pick("r()", "not r()", "p(a)", "d1(b)"))
+        return " and ".join(parts) or "true", bound
+
+    def condition(bound: list[str]) -> tuple[str, list[str]]:
+        first, have = literals(bound, rng.randint(1, 3))
+        if rng.random() < 0.25:
+            second, other = literals(bound, rng.randint(1, 2))
+            common = [v for v in have if v in other]
+            return f"{first} or {second}", common
+        return first, have
+
+    lines = ["domain:", "  predicates: {p: [x], q: [x, x], r: []}", "  axioms:"]
+    lines += ['    - {head: "d1(?x)", when: "p(?x) and not r()"}',
+              '    - {head: "d1(?x)", when: "q(?x, ?x)"}',
+              '    - {head: "d2(?x, ?y)", when: "q(?x, ?y) and not d1(?y) or p(?x) and q(?y, ?x) and ?y != c"}',
+              '    - {head: "d2(?x, a)", when: "d1(?x)"}',
+              '    - {head: "d3(?x)", when: "p(?x)"}',
+              '    - {head: "d3(?x)", when: "q(?x, ?y) and d3(?y)"}']
+    lines.append("  primitives:")
+    for name, params, effects in (("setp", '["?x"]', 'add: ["p(?x)"]'), ("clearp", '["?x"]', 'delete: ["p(?x)"]'),
+                                  ("link", '["?x", "?y"]', 'add: ["q(?x, ?y)"], delete: ["p(?y)"]'),
+                                  ("unlink", '["?x", "?y"]', 'delete: ["q(?x, ?y)"], add: ["q(?y, ?x)"]'),
+                                  ("flip", "[]", 'add: ["r()"]'), ("flop", "[]", 'delete: ["r()"]')):
+        bound = [v.strip().strip('"') for v in params.strip("[]").split(",") if v.strip()]
+        pre, _ = literals(bound, rng.randint(0, 2)) if rng.random() < 0.7 else ("true", bound)
+        lines.append(f"    {name}: {{parameters: {params}, precondition: \"{pre}\", {effects}}}")
+    lines += ["  tasks: {t0: [], t1: [?x]}", "  methods:"]
+    for k in range(rng.randint(3, 7)):
+        task, bound = pick(("t0()", []), ("t1(?x)", ["?x"]), ("t1(b)", []))
+        pre, have = condition(bound)
+        usable = have or ["a"]
+        subtasks = []
+        for _ in range(rng.randint(0, 3)):
+            v, w = pick(*usable), pick(*usable, "c")
+            subtasks.append(pick(f"setp({v})", f"clearp({v})", f"link({v}, {w})", f"unlink({w}, {v})", "flip()",
+                                 "flop()", f"t1({v})", "t0()"))
+        form = "unordered" if rng.random() < 0.15 else "subtasks"
+        listed = ", ".join(f'"{sub}"' for sub in subtasks)
+        lines.append(f'    - {{name: m{k}, task: "{task}", precondition: "{pre}", {form}: [{listed}]}}')
+    # last resorts, so most searches get somewhere (and backtrack into them)
+    lines.append('    - {name: t0_done, task: "t0()", precondition: "true", subtasks: []}')
+    lines.append('    - {name: t1_done, task: "t1(?x)", precondition: "true", subtasks: []}')
+    init = [f'"{f}"' for f in ("p(a)", "p(b)", "q(a, b)", "q(b, c)", "q(c, c)", "r()", "q(b, a)") if rng.random() < 0.5]
+    goal = pick("", ', goal: ["p(c)"]', ', goal: ["r()"]')
+    lines += ["problems:", f'  p: {{init: [{", ".join(init)}], tasks: ["t0()", "t1(a)"]{goal}}}']
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("seed", range(60))
+def test_random_domains_plan_the_same_on_both_paths(seed):
+    import random
+
+    from bt_meta.errors import TaskFileError
+
+    rng = random.Random(seed)
+    text = _random_domain(rng)
+    try:
+        taskfile = load_task_text(text)
+    except TaskFileError as error:  # a generated condition the loader rejects (e.g. an unbound variable)
+        pytest.skip(f"not a valid domain: {error}")
+    domain, problem = taskfile.domain, taskfile.problems["p"]
+    outcomes = {}
+    for mode in MODES:
+        _set_mode(domain.axiom_set, mode)
+        try:
+            result = plan(domain, problem, max_nodes=3000)
+        finally:
+            _set_mode(domain.axiom_set, "auto")
+        nodes = list(result.tree.nodes.values()) if result.tree is not None else []
+        outcomes[mode] = (result.status, [str(a) for a in result.plan], result.message,
+                          {k: v for k, v in result.stats.items() if k != "seconds"},
+                          [(n.task, n.method, list(n.bindings.items()), n.parent) for n in nodes])
+    for mode, outcome in outcomes.items():
+        assert outcome == outcomes["reference"], (mode, text)

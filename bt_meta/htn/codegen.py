@@ -21,6 +21,10 @@ that comes from a task file (predicate names, constants) is an ``ast.Constant``;
 ``h3``, ``q7``, ``M2_0``, ...) is made up here, never taken from a task file. The tree is compiled with
 ``compile(tree, "<bt-meta rule ...>", "exec")``.
 
+Coupling: the generated code reads :class:`~bt_meta.htn.state.State`'s private layout (``_preds``, ``_by_arg``,
+``_hash``, ``_len``) and repeats the steps of ``State._apply`` (:meth:`Generated._effects`); a change to either
+must be made in both (``tests/htn/test_compiled.py`` compares them on random states).
+
 Semantics are the reference engine's, exactly: rules in file order, facts in state insertion order, the first
 occurrence of a derived atom kept; a ground atom of a recursive derived predicate is proved top-down with an
 in-progress marker and the same depth limit, and a proof that meets its own atom or goes deeper than

@@ -3,9 +3,13 @@
 Offers:
 
 * :class:`State` -- an immutable set of ground atoms ``(pred, arg1, ...)`` indexed by predicate and, lazily,
-  by first argument; :meth:`State.apply` builds a successor that shares every untouched predicate with its
+  by argument position; :meth:`State.apply` builds a successor that shares every untouched predicate with its
   parent, so keeping the state before every decomposition node costs only the delta.
 * :func:`atom_text` -- ``pred(a, b)`` text of an atom, for messages and pretty printing.
+
+The planner's generated code (:mod:`bt_meta.htn.codegen`) reads the private layout directly (``_preds``,
+``_by_arg`` keyed by ``(pred, position)``, ``_hash``, ``_len``) and builds successors through
+:meth:`State._successor` with :meth:`State._apply`'s steps: a change here must be made there too.
 """
 
 from __future__ import annotations

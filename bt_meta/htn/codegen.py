@@ -396,6 +396,15 @@ class Generated:
         return self.ns[name]  # type: ignore[no-any-return]
 
     # -- clause bodies ----------------------------------------------------------------------------------------
+    def _inlinable(self, pred: str) -> list[Any] | None:
+        """The rules of ``pred`` if it may be written in place here: small, non-recursive, not nested too deep."""
+        if pred in self.axioms.recursive or self._inline_level >= INLINE_LEVELS:
+            return None
+        rules = self.axioms.rules[pred]
+        if sum(len(axiom.condition.clauses) for axiom in rules) > INLINE_CLAUSES:
+            return None
+        return rules  # type: ignore[no-any-return]
+
     def _inline_test(self, fn: _Fn, pred: str, values: list[ast.expr], depth: str,
                      outermost: bool) -> tuple[list[ast.stmt], str] | None:
         """Statements setting a fresh local to the truth of ground ``pred(values)``, its rules written in place.
@@ -404,10 +413,8 @@ class Generated:
         whose clauses loop over at most one pattern, so a match can ``break`` out; None otherwise (the caller
         calls the prover). The truth is the prover's; only its memo entry is not written.
         """
-        if pred in self.axioms.recursive or self._inline_level >= INLINE_LEVELS:
-            return None
-        rules = self.axioms.rules[pred]
-        if sum(len(axiom.condition.clauses) for axiom in rules) > INLINE_CLAUSES:
+        rules = self._inlinable(pred)
+        if rules is None:
             return None
         flag = fn.fresh("t")
         stmts: list[ast.stmt] = [_assign(flag, _const(False))]
@@ -457,10 +464,8 @@ class Generated:
         values at the free positions), for small non-recursive predicates only (None otherwise). The code of
         ``rest`` is repeated once per rule clause, which is why the predicates must be small.
         """
-        if pred in self.axioms.recursive or self._inline_level >= INLINE_LEVELS:
-            return None
-        rules = self.axioms.rules[pred]
-        if sum(len(axiom.condition.clauses) for axiom in rules) > INLINE_CLAUSES:
+        rules = self._inlinable(pred)
+        if rules is None:
             return None
         seen = fn.fresh("s")
         out: list[ast.stmt] = [_assign(seen, _call(_name("set")))]

@@ -405,6 +405,22 @@ class Generated:
             return None
         return rules  # type: ignore[no-any-return]
 
+    @staticmethod
+    def _unify_value(fn: _Fn, term: Term, value: ast.expr, varmap: dict[str, str], checks: list[ast.expr],
+                     stmts: list[ast.stmt]) -> None:
+        """Unify a rule-head term with a caller's value: a test in ``checks``, or a binding in ``varmap`` (a
+        constant value gets a local assigned in ``stmts`` first)."""
+        if term.__class__ is not Var:
+            checks.append(_cmp(value, ast.Eq(), _const(term)))
+        elif term.name in varmap:  # type: ignore[union-attr]
+            checks.append(_cmp(value, ast.Eq(), _name(varmap[term.name])))  # type: ignore[union-attr]
+        elif isinstance(value, ast.Name):
+            varmap[term.name] = value.id  # type: ignore[union-attr]
+        else:
+            local = fn.fresh("c")
+            stmts.append(_assign(local, value))
+            varmap[term.name] = local  # type: ignore[union-attr]
+
     def _inline_test(self, fn: _Fn, pred: str, values: list[ast.expr], depth: str,
                      outermost: bool) -> tuple[list[ast.stmt], str] | None:
         """Statements setting a fresh local to the truth of ground ``pred(values)``, its rules written in place.
@@ -424,19 +440,7 @@ class Generated:
                 checks: list[ast.expr] = []
                 varmap: dict[str, str] = {}
                 for term, value in zip(axiom.head_args, values, strict=True):
-                    if term.__class__ is Var:
-                        prior = varmap.get(term.name)  # type: ignore[union-attr]
-                        if prior is not None:
-                            checks.append(_cmp(value, ast.Eq(), _name(prior)))
-                            continue
-                        if isinstance(value, ast.Name):
-                            varmap[term.name] = value.id  # type: ignore[union-attr]
-                        else:
-                            local = fn.fresh("c")
-                            stmts.append(_assign(local, value))
-                            varmap[term.name] = local  # type: ignore[union-attr]
-                    else:
-                        checks.append(_cmp(value, ast.Eq(), _const(term)))
+                    self._unify_value(fn, term, value, varmap, checks, stmts)
                 for clause in axiom.condition.clauses:
                     loops = self._loops(clause, varmap)
                     if loops is None or loops > 1:
@@ -479,17 +483,7 @@ class Generated:
                     if arg.__class__ is Var and arg.name not in varmap:  # type: ignore[union-attr]
                         free.append((arg.name, term))  # type: ignore[union-attr]
                         continue
-                    value = self._value(arg, varmap)
-                    if term.__class__ is not Var:
-                        checks.append(_cmp(value, ast.Eq(), _const(term)))
-                    elif term.name in rule_vm:  # type: ignore[union-attr]
-                        checks.append(_cmp(value, ast.Eq(), _name(rule_vm[term.name])))  # type: ignore[union-attr]
-                    elif isinstance(value, ast.Name):
-                        rule_vm[term.name] = value.id  # type: ignore[union-attr]
-                    else:
-                        local = fn.fresh("c")
-                        out.append(_assign(local, value))
-                        rule_vm[term.name] = local  # type: ignore[union-attr]
+                    self._unify_value(fn, term, self._value(arg, varmap), rule_vm, checks, out)
 
                 def emit(vm: dict[str, str], free: list[tuple[str, Term]] = free) -> list[ast.stmt]:
                     outer = dict(varmap)

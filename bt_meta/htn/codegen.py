@@ -360,7 +360,7 @@ class Generated:
             self._build_provers()
         fn = _Fn()
         varmap = {name: f"b{k}" for k, name in enumerate(bound)}
-        fresh_vars: list[str] = []
+        fresh_vars = self._fresh_variables(clause, bound)
 
         def emit(vm: dict[str, str]) -> list[ast.stmt]:
             out: list[ast.stmt] = [_assign("res", _call(_name("dict"), _name("env")))]
@@ -370,13 +370,6 @@ class Generated:
             out.append(ast.Expr(value=ast.Yield(value=_name("res"))))
             return out
 
-        have = set(bound)
-        for step in clause:
-            if step[0] in (POS, DPOS):
-                for arg in step[2]:
-                    if arg.__class__ is Var and arg.name not in have:
-                        have.add(arg.name)
-                        fresh_vars.append(arg.name)
         matched = self._clause(fn, list(clause), dict(varmap), "0", True, emit)
         used = [ast.Assign(targets=[_store(local)], value=ast.Subscript(value=_name("env"), slice=_const(name),
                                                                          ctx=ast.Load()))

@@ -105,6 +105,13 @@ def _sub(value: ast.expr, index: int) -> ast.Subscript:
     return ast.Subscript(value=value, slice=_const(index), ctx=ast.Load())
 
 
+def _guarded(checks: list[ast.expr], body: list[ast.stmt]) -> list[ast.stmt]:
+    """``body`` under ``if check and ...:``, or as it is when there is nothing to check."""
+    if not checks:
+        return body
+    return [_if(checks[0] if len(checks) == 1 else ast.BoolOp(op=ast.And(), values=checks), body)]
+
+
 def _function(name: str, params: Sequence[str], body: list[ast.stmt]) -> ast.FunctionDef:
     arguments = ast.arguments(posonlyargs=[], args=[ast.arg(arg=p) for p in params], vararg=None, kwonlyargs=[],
                               kw_defaults=[], kwarg=None, defaults=[])
@@ -267,9 +274,7 @@ class Generated:
         body: list[ast.stmt] = []
         for clause in axiom.condition.clauses:
             body.extend(self._clause(fn, list(clause), dict(varmap), depth, False, lambda _vm: list(proved)))
-        if not checks:
-            return body
-        return [_if(checks[0] if len(checks) == 1 else ast.BoolOp(op=ast.And(), values=checks), body)]
+        return _guarded(checks, body)
 
     # -- queries ----------------------------------------------------------------------------------------------
     def query(self, pred: str, mask: tuple[int, ...]) -> str:
@@ -326,11 +331,7 @@ class Generated:
             rule_body: list[ast.stmt] = []
             for clause in axiom.condition.clauses:
                 rule_body.extend(self._clause(fn, list(clause), dict(varmap), "d", True, emit))
-            if checks:
-                test = checks[0] if len(checks) == 1 else ast.BoolOp(op=ast.And(), values=checks)
-                rules_body.append(_if(test, rule_body))
-            else:
-                rules_body.extend(rule_body)
+            rules_body.extend(_guarded(checks, rule_body))
         key = _tuple([_const(i), *[_name(p) for p in params.values()]])
         body = [
             _assign("k", key),
@@ -443,8 +444,7 @@ class Generated:
                         matched.append(ast.Break())
                     body = self._clause(fn, list(clause), dict(varmap), depth, outermost,
                                         lambda _vm, matched=matched: list(matched))
-                    if checks:
-                        body = [_if(checks[0] if len(checks) == 1 else ast.BoolOp(op=ast.And(), values=checks), body)]
+                    body = _guarded(checks, body)
                     if len(stmts) > 1:
                         body = [_if(ast.UnaryOp(op=ast.Not(), operand=_name(flag)), body)]
                     stmts.extend(body)
@@ -507,9 +507,7 @@ class Generated:
 
                 for clause in axiom.condition.clauses:
                     body = self._clause(fn, list(clause), dict(rule_vm), depth, outermost, emit)
-                    if checks:
-                        body = [_if(checks[0] if len(checks) == 1 else ast.BoolOp(op=ast.And(), values=checks), body)]
-                    out.extend(body)
+                    out.extend(_guarded(checks, body))
         finally:
             self._inline_level -= 1
         return out
@@ -759,11 +757,7 @@ class Generated:
                                 ast.Expr(value=ast.Yield(value=out_tuple))])]
 
                 method_body.extend(self._clause(fn, list(clause), dict(varmap), "0", True, emit))
-            if checks:
-                test = checks[0] if len(checks) == 1 else ast.BoolOp(op=ast.And(), values=checks)
-                body.append(_if(test, method_body))
-            else:
-                body.extend(method_body)
+            body.extend(_guarded(checks, method_body))
         body.append(ast.If(test=_const(False), body=[ast.Expr(value=ast.Yield(value=None))], orelse=[]))
         prologue = (self._memo_prologue() if uses_memo else []) + fn.prologue()
         self._compile(f"task {task}", [_function(name, ["st", *params], prologue + body)])

@@ -69,6 +69,11 @@ class CompiledDomain:
         self._variants: dict[bool, tuple[dict[str, Callable[..., Any]], dict[str, Callable[..., Any]]]] = {}
         self.enabled = bool(axioms.codegen)
 
+    def for_size(self, atoms: int) -> tuple[dict[str, Callable[..., Any]], dict[str, Callable[..., Any]]]:
+        """The variant for a state of ``atoms`` atoms: inherited proofs from ``threshold`` atoms on, unless fixed."""
+        fixed = self.fixed_variant
+        return self.variant(atoms >= self.threshold if fixed is None else fixed)
+
     def variant(self, reference_proofs: bool) -> tuple[dict[str, Callable[..., Any]], dict[str, Callable[..., Any]]]:
         """``(expanders, steppers)`` by task / primitive name; a name missing takes the reference path."""
         found = self._variants.get(reference_proofs)

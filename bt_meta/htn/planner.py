@@ -186,12 +186,9 @@ class Search:
         compiled = compiled_domain(domain)
         recursive = compiled.recursive
         typed = compiled.typed_tasks
-        fixed_variant = compiled.fixed_variant
         threshold = compiled.threshold
-        # the generated code for small states, and for states of ``threshold`` atoms or more (made when first met)
-        small = compiled.variant(fixed_variant is True)
-        large_flag = fixed_variant is not False
-        variant = compiled.variant
+        small = compiled.for_size(0)  # the variant for large states is made when one is first met
+        for_size = compiled.for_size
         agenda: tuple | None = None
         for item in reversed(items):
             agenda = (item, agenda)
@@ -260,11 +257,11 @@ class Search:
                     self.expansions = expansions
                     return self._failure("budget_exhausted", trail, f"time budget of {self.max_seconds} s exhausted")
                 if kind == UNORDERED:
-                    alternatives: Iterator[Any] = iter(range(len(item[1])))
+                    alternatives: Iterator[Any] | None = iter(range(len(item[1])))
                 else:
                     task = item[1]
                     name = task[0]
-                    expanders, steppers = small if state._len < threshold else variant(large_flag)
+                    expanders, steppers = small if state._len < threshold else for_size(state._len)
                     stepper = steppers.get(name)
                     if stepper is not None:
                         # a primitive with at most one way to apply: no choice point
@@ -279,21 +276,9 @@ class Search:
                         agenda = rest
                         continue
                     if name in primitives:
-                        prim = primitives[name]
-                        found = prim.fast_satisfiers(state, task[1:], external)
-                        if found.__class__ is tuple and len(found) < 2:
-                            if not found:
-                                self._dead_end(len(plan), self._explain(task, state))
-                                advance = True
-                                continue
-                            env = found[0]
-                            add, delete = prim.effects(env)
-                            trail.append((task, "primitive", None, env, item[2], state, step_offset + len(plan)))
-                            plan.append(len(trail) - 1)
-                            state = state._apply(add, delete)
-                            agenda = rest
-                            continue
-                        alternatives = iter(found)
+                        found = primitives[name].fast_satisfiers(state, task[1:], external)
+                        # at most one way to apply it: no choice point (a dead end resumes the previous one)
+                        alternatives = iter(found) if found.__class__ is not tuple or len(found) > 1 else None
                     else:
                         if name in recursive:
                             key = (task, state._hash)
@@ -312,13 +297,14 @@ class Search:
                                 alternatives = expander(state, *task[1:])
                             else:
                                 alternatives = self._method_alternatives(task, state, item[3])
-                alternative = next(alternatives, None)
+                alternative = next(alternatives if alternatives is not None else iter(found), None)
                 if alternative is None:
                     if kind == TASK:
                         self._dead_end(len(plan), self._explain(item[1], state))
                     advance = True
                     continue
-                stack.append([alternatives, item, rest, state, len(trail), len(plan), len(undo)])
+                if alternatives is not None:
+                    stack.append([alternatives, item, rest, state, len(trail), len(plan), len(undo)])
             # take ``alternative`` for ``item``
             kind = item[0]
             if kind == TASK:

@@ -375,15 +375,7 @@ class Generated:
         used = [ast.Assign(targets=[_store(local)], value=ast.Subscript(value=_name("env"), slice=_const(name),
                                                                          ctx=ast.Load()))
                 for name, local in varmap.items()]
-        body: list[ast.stmt] = [
-            _assign("dv", ast.Attribute(value=_name("st"), attr="_derived", ctx=ast.Load())),
-            _assign("m", _method("dv", "get", _name("GK"))),
-            _if(_cmp(_name("m"), ast.Is(), _const(None)), [
-                ast.Assign(targets=[_store("m"), ast.Subscript(value=_name("dv"), slice=_name("GK"), ctx=ast.Store())],
-                           value=ast.Dict(keys=[], values=[]))]),
-            *fn.prologue(), *used, *matched,
-        ]
-        self.ns["GK"] = self.memo_key
+        body: list[ast.stmt] = [*self._memo_prologue(), *fn.prologue(), *used, *matched]
         self._matchers += 1
         name = f"c{self._matchers}"
         self._compile(label, [_function(name, ["st", "env"], body)])

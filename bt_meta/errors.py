@@ -13,6 +13,7 @@ Offers:
 * :class:`ConfigError` -- a robot description or other configuration file that is wrong
 * :class:`PlanningError` -- the planner could not produce a plan (no plan, budget exhausted)
 * :class:`PluginError` -- a plugin could not be loaded or misbehaved
+* :class:`KinematicsError` -- kinematics used wrongly (a frame, arm or joint the robot does not have)
 """
 
 from __future__ import annotations
@@ -75,3 +76,7 @@ class PlanningError(BtMetaError):
 
 class PluginError(BtMetaError):
     """A plugin could not be loaded, or broke the contract of a hook."""
+
+
+class KinematicsError(BtMetaError):
+    """Kinematics used wrongly: a frame, arm or joint the robot does not have, a malformed configuration."""

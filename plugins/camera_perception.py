@@ -3,7 +3,8 @@
 After every successful primitive, when the world has a top camera, one frame is rendered and analysed: HSV blobs
 become blocks (colour, shape 1x1/1x2, centroid, orientation in table coordinates) and each block gets its 3 lb x
 3 lb grid-map. The world's camera is ``world.top_camera`` when it has one; a world built on the pybullet
-simulator (``world.sim``) gets a :class:`~bt_meta.world.camera.TopViewCamera` of its own, made once. Blocks are
+simulator (``world.sim``) gets a :class:`~bt_meta.world.simulation.camera.TopViewCamera` of its own, made once. Blocks
+are
 named after the simulator's objects they lie on (the nearest object within half a block), so remembered and
 observed grid-maps of the same block can be paired; the geometry itself comes from the image only.
 
@@ -31,7 +32,7 @@ from bt_meta.perception.gridmap import DEFAULT_SPEC, GridSpec
 from bt_meta.perception.hsv import DEFAULT_THRESHOLDS, HSVThresholds
 from bt_meta.perception.topview import TopView, capture
 from bt_meta.plugins import ConfiguredPlugin, hookimpl
-from bt_meta.world.objects import LB
+from bt_meta.world.simulation.objects import LB
 
 
 class CameraPerception:
@@ -67,7 +68,7 @@ class CameraPerception:
             return None
         camera = self._cameras.get(sim)
         if camera is None:
-            from bt_meta.world.camera import TopViewCamera
+            from bt_meta.world.simulation.camera import TopViewCamera
 
             options: dict[str, Any] = {"height": self.camera_height}
             if self.camera_centre is not None:

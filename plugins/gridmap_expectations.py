@@ -33,7 +33,7 @@ from bt_meta.bt.failures import FailureKind
 from bt_meta.perception.gridmap import grid_difference, render
 from bt_meta.perception.recall import memory_for, remember
 from bt_meta.plugins import ConfiguredPlugin, hookimpl
-from bt_meta.world.objects import LB
+from bt_meta.world.simulation.objects import LB
 
 KIND = "gridmap"
 

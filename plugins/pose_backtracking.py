@@ -51,7 +51,7 @@ from bt_meta.bt.failures import Failure, FailureKind, RepairProposal
 from bt_meta.perception.keypoints import KeypointError, expected_relation, judge, keypoints_of, relation
 from bt_meta.perception.recall import memory_for, root_task
 from bt_meta.plugins import ConfiguredPlugin, hookimpl
-from bt_meta.world.objects import matrix_to_pose, pose_to_matrix
+from bt_meta.world.simulation.objects import matrix_to_pose, pose_to_matrix
 
 __all__ = ["PoseBacktracking", "StepRelation", "configure", "good_object_poses", "gripper_pose_for",
            "step_relations"]
@@ -486,7 +486,7 @@ class PoseBacktracking:
         return None
 
     def _symbol(self, world: Any, pose: np.ndarray) -> str | None:
-        from bt_meta.world.sim_world import pose_symbol
+        from bt_meta.world.simulation.sim_world import pose_symbol
 
         symbol = pose_symbol(matrix_to_pose(pose))
         register = getattr(world, "register_pose", None)
@@ -537,7 +537,7 @@ def _current_q(world: Any) -> np.ndarray | None:
 
 def _parse_symbol_pose(pose: np.ndarray) -> np.ndarray:
     """``pose`` as the world will ground its symbol (rounded as :func:`pose_symbol` rounds)."""
-    from bt_meta.world.sim_world import parse_pose_symbol, pose_symbol
+    from bt_meta.world.simulation.sim_world import parse_pose_symbol, pose_symbol
 
     values = parse_pose_symbol(pose_symbol(matrix_to_pose(pose)))
     assert values is not None

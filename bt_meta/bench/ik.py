@@ -4,7 +4,7 @@ Targets are reachable by construction: the forward kinematics of random collisio
 arm (seeded; every other joint at home). Both solvers start from the home pose and must bring the end effector
 within the same tolerance (0.1 mm and 0.001 rad by default), verified with Pinocchio forward kinematics.
 
-* bt-meta: :class:`~bt_meta.world.ik.InverseKinematics` (mink frame task, joint limits, restarts, stall
+* bt-meta: :class:`~bt_meta.world.kinematics.ik.InverseKinematics` (mink frame task, joint limits, restarts, stall
   detection), which rejects colliding solutions; every solution it returns is checked again here for collisions
   (robot against itself, SRDF pairs removed), limits and accuracy.
 * pybullet: ``calculateInverseKinematics`` in a DIRECT client (damped least squares, joint damping 0.01), called
@@ -41,11 +41,11 @@ import pinocchio as pin
 
 from bt_meta.commands._common import print_json
 from bt_meta.errors import UserInputError
-from bt_meta.world.collision import CollisionChecker
-from bt_meta.world.ik import InverseKinematics
-from bt_meta.world.kinematics import Kinematics
-from bt_meta.world.mujoco_model import mujoco_urdf_text
-from bt_meta.world.robot import RobotDescription, load_robot
+from bt_meta.world.kinematics.collision import CollisionChecker
+from bt_meta.world.kinematics.forward import Kinematics
+from bt_meta.world.kinematics.ik import InverseKinematics
+from bt_meta.world.kinematics.mujoco_model import mujoco_urdf_text
+from bt_meta.world.robot.description import RobotDescription, load_robot
 
 GOAL_SUCCESS = 0.999
 GOAL_MEAN_S = 1e-3

@@ -29,7 +29,7 @@ import numpy as np
 
 from bt_meta.commands._common import print_json
 from bt_meta.errors import UserInputError
-from bt_meta.world.objects import LB
+from bt_meta.world.simulation.objects import LB
 
 MATCH_RADIUS = 0.5 * LB
 CLEARANCE = 0.01
@@ -136,10 +136,10 @@ def run(n: int, *, blocks: int = 6, seed: int = 0) -> dict[str, Any]:
     """Run the benchmark over ``n`` scenes of ``blocks`` blocks; returns the figures (see the module docstring)."""
     from bt_meta.perception.hsv import PlaneProjection
     from bt_meta.perception.topview import analyse
-    from bt_meta.world.camera import TopViewCamera
-    from bt_meta.world.objects import megablok
-    from bt_meta.world.sim import Simulation
-    from bt_meta.world.sim_world import quiet_stdout
+    from bt_meta.world.simulation.camera import TopViewCamera
+    from bt_meta.world.simulation.objects import megablok
+    from bt_meta.world.simulation.sim import Simulation
+    from bt_meta.world.simulation.sim_world import quiet_stdout
 
     rng = np.random.default_rng(seed)
     with quiet_stdout():

@@ -11,7 +11,7 @@ Offers:
 * :data:`MEMORY_EXPECTATIONS` -- the shipped expectation plugins a demonstration runs without
 
 The problem is planned and compiled with a Monitor around every primitive and ticked on a
-:class:`~bt_meta.world.sim_world.SimWorld` (headless) with a :class:`~bt_meta.memory.recorder.TraceRecorder`
+:class:`~bt_meta.world.simulation.sim_world.SimWorld` (headless) with a :class:`~bt_meta.memory.recorder.TraceRecorder`
 registered; at the end the trace is written in one transaction and its episode id printed with its steps. A
 demonstration teaches the expectations, so it is not checked against the memory's grid-map and keypoint
 expectations (``--check-expectations`` keeps them); preconditions and skills are checked as in any run. A
@@ -90,7 +90,7 @@ def demonstrate(
     (nothing is stored); input errors are the loaders' :class:`~bt_meta.errors.UserInputError` s."""
     from bt_meta.htn import load_task_file
     from bt_meta.plugins import create_plugin_host
-    from bt_meta.world.sim_world import load_grounding
+    from bt_meta.world.simulation.sim_world import load_grounding
 
     if max_ticks < 1:
         raise UserInputError("--max-ticks must be at least 1")
@@ -118,7 +118,7 @@ def _demonstrate(file: str | Path, chosen: Any, task_file: Any, ground: Any, mem
                  seed: int, max_ticks: int, plugins: Any, check_expectations: bool) -> Demonstration:
     from bt_meta.memory.recorder import TraceRecorder
     from bt_meta.testing import TreeHarness
-    from bt_meta.world.sim_world import SimWorld, quiet_stdout
+    from bt_meta.world.simulation.sim_world import SimWorld, quiet_stdout
 
     started = time.perf_counter()
     with quiet_stdout():
@@ -158,7 +158,7 @@ def _demonstrate(file: str | Path, chosen: Any, task_file: Any, ground: Any, mem
 def record(args: argparse.Namespace) -> int:
     from bt_meta.htn import load_task_file
     from bt_meta.memory import EpisodicMemory
-    from bt_meta.world.sim_world import load_grounding
+    from bt_meta.world.simulation.sim_world import load_grounding
 
     if args.max_ticks < 1:
         raise UserInputError("--max-ticks must be at least 1")

@@ -8,7 +8,7 @@ Offers:
 * :func:`run` -- the handler
 
 The problem is planned and compiled with a Monitor around every primitive, then ticked on a
-:class:`~bt_meta.world.sim_world.SimWorld` built from the grounding file (``poses/<domain>.yaml``) and the
+:class:`~bt_meta.world.simulation.sim_world.SimWorld` built from the grounding file (``poses/<domain>.yaml``) and the
 problem's scene with the chosen variant, headless unless ``--gui``. The tick log prints one line per tick in which
 some primitive changed status. ``--json`` prints ``{status, ticks, failures: [{kind, step, node_id, action, args,
 evidence, message}], objects (final object states), ...}``. Exit status: 0 SUCCESS, 1 FAILURE (a failed step, no
@@ -68,7 +68,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from bt_meta.htn import load_task_file
-    from bt_meta.world.sim_world import SimWorld, load_grounding, quiet_stdout
+    from bt_meta.world.simulation.sim_world import SimWorld, load_grounding, quiet_stdout
 
     if args.max_ticks < 1:
         raise UserInputError("--max-ticks must be at least 1")

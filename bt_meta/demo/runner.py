@@ -203,7 +203,7 @@ JITTER_YAW = math.radians(2.0)
 
 def _world(task_path: Path, problem: str, variant: str | None, seed: int) -> tuple[Any, Any, Any]:
     from bt_meta.htn import load_task_file
-    from bt_meta.world.sim_world import SimWorld, load_grounding, quiet_stdout
+    from bt_meta.world.simulation.sim_world import SimWorld, load_grounding, quiet_stdout
 
     task_file = load_task_file(task_path)
     chosen = task_file.problem(problem)
@@ -478,7 +478,7 @@ def run_demo(
     """The whole scenario into ``out`` (see the module docstring); writes ``summary.json`` and ``report.html``."""
     from bt_meta.memory import EpisodicMemory
     from bt_meta.meta import RefinementStore
-    from bt_meta.world.sim_world import quiet_stdout
+    from bt_meta.world.simulation.sim_world import quiet_stdout
 
     progress = progress or Progress()
     started = time.perf_counter()

@@ -21,7 +21,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-from bt_meta.world.objects import LB
+from bt_meta.world.simulation.objects import LB
 
 __all__ = ["achieved", "unit_centres"]
 

@@ -129,7 +129,7 @@ def run(*, seeds: int = 3, seed: int = 0, families: Sequence[str] = ("letters", 
     from bt_meta.demo.runner import memory_environment, record_demonstration, run_variant
     from bt_meta.demo.scenario import FAMILIES, VariantRun, demonstrations, variants
     from bt_meta.memory import EpisodicMemory
-    from bt_meta.world.sim_world import quiet_stdout
+    from bt_meta.world.simulation.sim_world import quiet_stdout
 
     with quiet_stdout():
         import pybullet  # noqa: F401  (prints its build time on import)

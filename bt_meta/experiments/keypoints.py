@@ -2,7 +2,8 @@
 
 The MagneticAttach plan (``trees/magnetic_attach.yaml``, problem ``attach_only``: pick the active part from
 above, carry it onto the reference part, release) is run tick by tick with its real skills (IK, joint
-trajectories, grasp by constraint, the simulator's magnetic attach rule) on :class:`~bt_meta.world.sim_world.SimWorld`.
+trajectories, grasp by constraint, the simulator's magnetic attach rule) on
+:class:`~bt_meta.world.simulation.sim_world.SimWorld`.
 The keypoint relations of the two parts are read from the simulator's object states (AP and AN in the robot base
 frame) at two moments: before any motion (``start``) and after the attach motion (``end``):
 ``R_p = |AP(active) - AP(reference)|``, ``R_n = arccos(AN(active) . AN(reference))``.
@@ -37,7 +38,7 @@ import numpy as np
 
 from bt_meta.commands._common import print_json
 from bt_meta.errors import UserInputError
-from bt_meta.world.objects import AttachmentFeature, Box, ObjectModel
+from bt_meta.world.simulation.objects import AttachmentFeature, Box, ObjectModel
 
 POSITION_TOLERANCE = 0.01
 ANGLE_TOLERANCE = math.radians(15.0)
@@ -98,7 +99,7 @@ def attach_case(*, model: ObjectModel | None = None, rpy: tuple[float, float, fl
     from bt_meta.plugins import create_plugin_host
     from bt_meta.resources import trees_dir
     from bt_meta.testing import TreeHarness
-    from bt_meta.world.sim_world import SimWorld, quiet_stdout
+    from bt_meta.world.simulation.sim_world import SimWorld, quiet_stdout
 
     path = trees_dir() / "magnetic_attach.yaml"
     with quiet_stdout():

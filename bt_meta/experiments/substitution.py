@@ -1,7 +1,8 @@
 """``bt-meta experiment substitution``: Table 1 of the paper (section 6.4) in the pybullet simulator.
 
 The nominal plans for the letters A and H (``trees/letters.yaml``; H draws its crossbar with two 1x1 blocks) are
-run on :class:`~bt_meta.world.sim_world.SimWorld` and recorded by :class:`~bt_meta.memory.recorder.TraceRecorder`
+run on :class:`~bt_meta.world.simulation.sim_world.SimWorld` and recorded by
+:class:`~bt_meta.memory.recorder.TraceRecorder`
 (P_a, E_db with the placed blocks' grid-maps). Then A's plan is run in the three variant scenes where its blue
 1x2 crossbar block is replaced: by a 1x2 of another colour (red); by two 1x1 of the same colour (red); by two 1x1
 of different colours (red and blue). For each variant the output gives:
@@ -98,7 +99,7 @@ def record_nominal(memory: Any, path: Path, problem: str, *, seed: int = 0, sim:
     from bt_meta.memory.recorder import TraceRecorder
     from bt_meta.plugins import create_plugin_host
     from bt_meta.testing import TreeHarness
-    from bt_meta.world.sim_world import SimWorld, quiet_stdout
+    from bt_meta.world.simulation.sim_world import SimWorld, quiet_stdout
 
     with quiet_stdout():
         world = SimWorld.from_task_file(path, problem, seed=seed, sim=sim)
@@ -237,7 +238,7 @@ def _run_variant(task_file: Any, variant: str, memory: Any, matcher: str, expect
 
     from bt_meta.meta import Limits, MetaExecutor
     from bt_meta.plugins import create_plugin_host
-    from bt_meta.world.sim_world import SimWorld, load_grounding, quiet_stdout
+    from bt_meta.world.simulation.sim_world import SimWorld, load_grounding, quiet_stdout
 
     problem = task_file.problem("A")
     grounding = load_grounding(task_file.domain.name, task_file.path)
@@ -279,7 +280,7 @@ def run(*, matchers: Sequence[str] = MATCHERS, seed: int = 0, memory_path: str |
     from bt_meta.htn import load_task_file
     from bt_meta.memory import EpisodicMemory
     from bt_meta.resources import trees_dir
-    from bt_meta.world.sim_world import SimWorld, quiet_stdout
+    from bt_meta.world.simulation.sim_world import SimWorld, quiet_stdout
 
     path = trees_dir() / "letters.yaml"
     task_file = load_task_file(path)
@@ -288,7 +289,7 @@ def run(*, matchers: Sequence[str] = MATCHERS, seed: int = 0, memory_path: str |
         file = Path(memory_path) if memory_path is not None else Path(temporary) / "memory.sqlite"
         started = time.perf_counter()
         with quiet_stdout():  # pybullet prints its build time on import
-            from bt_meta.world.sim import Simulation
+            from bt_meta.world.simulation.sim import Simulation
 
             sim = Simulation(seed=seed, visuals="light")
         try:
@@ -321,7 +322,7 @@ def run(*, matchers: Sequence[str] = MATCHERS, seed: int = 0, memory_path: str |
 
 
 def _grounding(task_file: Any) -> Any:
-    from bt_meta.world.sim_world import load_grounding
+    from bt_meta.world.simulation.sim_world import load_grounding
 
     return load_grounding(task_file.domain.name, task_file.path)
 

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from bt_meta.errors import BtMetaError
-from bt_meta.world.objects import rpy_to_matrix
+from bt_meta.world.simulation.objects import rpy_to_matrix
 
 #: Outcomes an episode or a step may have.
 OUTCOMES = ("success", "failure", "aborted")

@@ -4,7 +4,7 @@ A cell is occupied when a block colour covers at least ``fill`` of it on the uni
 is the colour's code (1 + the colour's position in the thresholds, 0 = empty), so the binary occupancy the
 memory's nearest-neighbour search compares is ``grid != 0`` and the colour is still there for whoever wants it.
 The window is axis-aligned with the table (row 0 = the far edge, +x; column 0 = the robot's left, +y), like
-:meth:`bt_meta.world.camera.TopViewCamera.table_patch`, and is resampled from the image through the camera's
+:meth:`bt_meta.world.simulation.camera.TopViewCamera.table_patch`, and is resampled from the image through the camera's
 pinhole model, so it is metric and exact under perspective. The crop image is kept with it (BGR, as OpenCV
 writes PNGs), as the paper's visual expectation.
 
@@ -37,7 +37,7 @@ from bt_meta.perception.hsv import (
     PlaneProjection,
     colour_masks,
 )
-from bt_meta.world.objects import LB
+from bt_meta.world.simulation.objects import LB
 
 __all__ = [
     "DEFAULT_SPEC",

@@ -17,7 +17,8 @@ Offers:
   H 0..179, S and V 0..255); :meth:`HSVThresholds.from_mapping` reads them from a YAML/JSON mapping
 * :func:`colour_masks` -- one boolean mask per colour
 * :class:`PlaneProjection` -- vectorised pixel <-> table-plane conversion of a pinhole camera (the maths of
-  :meth:`bt_meta.world.camera.Camera.pixel_to_plane`), from a captured image or a synthetic straight-down view
+  :meth:`bt_meta.world.simulation.camera.Camera.pixel_to_plane`), from a captured image or a synthetic straight-down
+  view
 * :class:`Block` -- one detected block; :func:`detect_blocks` -- all blocks of an RGB(-D) image
 * :func:`classify_shape` -- ``"1x1"``, ``"1x2"`` or ``"unknown"`` from metric axis lengths
 * :func:`nearest_block` -- the detected block nearest a table point
@@ -35,7 +36,7 @@ import cv2
 import numpy as np
 
 from bt_meta.errors import ConfigError
-from bt_meta.world.objects import LB
+from bt_meta.world.simulation.objects import LB
 
 __all__ = [
     "DEFAULT_THRESHOLDS",
@@ -181,7 +182,7 @@ def colour_masks(rgb: np.ndarray, thresholds: HSVThresholds = DEFAULT_THRESHOLDS
 class PlaneProjection:
     """A pinhole camera (``fx, fy, cx, cy``; optical frame x right, y down, z forward) at ``pose`` (4x4, robot base
     frame) and the horizontal plane ``z = plane_z`` it looks at. Pixel ``[row, col]`` has centre
-    ``(col + 0.5, row + 0.5)``, like :mod:`bt_meta.world.camera`."""
+    ``(col + 0.5, row + 0.5)``, like :mod:`bt_meta.world.simulation.camera`."""
 
     fx: float
     fy: float
@@ -194,7 +195,7 @@ class PlaneProjection:
 
     @classmethod
     def from_image(cls, image: Any, plane_z: float) -> PlaneProjection:
-        """For a :class:`~bt_meta.world.camera.CameraImage` (its intrinsics and the pose it was taken at)."""
+        """For a :class:`~bt_meta.world.simulation.camera.CameraImage` (its intrinsics and the pose it was taken at)."""
         k = image.intrinsics
         return cls(k.fx, k.fy, k.cx, k.cy, np.asarray(image.pose, float), float(plane_z), k.width, k.height)
 
@@ -210,7 +211,8 @@ class PlaneProjection:
         camera_height: float = 1.0,
     ) -> PlaneProjection:
         """A camera ``camera_height`` above the plane looking straight down with ``metres_per_pixel`` on the plane,
-        oriented like :class:`~bt_meta.world.camera.TopViewCamera` (image up = +x, image right = -y). For drawing
+        oriented like :class:`~bt_meta.world.simulation.camera.TopViewCamera` (image up = +x, image right = -y). For
+        drawing
         synthetic images with exact answers."""
         if metres_per_pixel <= 0 or camera_height <= 0:
             raise PerceptionConfigError("a top-down projection needs positive metres per pixel and camera height")

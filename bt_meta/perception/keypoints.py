@@ -10,7 +10,8 @@ with a tolerance per relation (a relation can be switched off by giving no toler
 
 Object states come in three forms and :func:`keypoints_of` reads all of them: the memory's
 :class:`~bt_meta.memory.ObjectState` (AN in the object frame, turned into the base frame by its pose), the
-simulator's :class:`~bt_meta.world.sim.SimObjectState` (``an`` in the base frame) and the dict the simulator's
+simulator's :class:`~bt_meta.world.simulation.sim.SimObjectState` (``an`` in the base frame) and the dict the
+simulator's
 ``observe()`` gives (``SimObjectState.as_dict()``: ``an`` in the base frame; ``an_object`` when present wins and
 is turned by the pose).
 
@@ -33,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from bt_meta.errors import BtMetaError
-from bt_meta.world.objects import rpy_to_matrix
+from bt_meta.world.simulation.objects import rpy_to_matrix
 
 __all__ = [
     "KeypointError",

@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 from bt_meta.perception.hsv import PlaneProjection
-from bt_meta.world.objects import LB
+from bt_meta.world.simulation.objects import LB
 
 __all__ = ["BLOCK_RGB", "TABLE_RGB", "blank", "draw_block", "top_view_projection"]
 

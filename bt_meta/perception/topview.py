@@ -6,7 +6,8 @@ Offers:
   list, one grid-map per block, and :meth:`TopView.grid_map_at` for a window anywhere (what the grid-map
   expectation plugin compares a remembered crop with)
 * :func:`analyse` -- a :class:`TopView` of an image array (synthetic images, recorded frames)
-* :func:`capture` -- a :class:`TopView` from a :class:`bt_meta.world.camera.TopViewCamera` (or any camera with
+* :func:`capture` -- a :class:`TopView` from a :class:`bt_meta.world.simulation.camera.TopViewCamera` (or any camera
+  with
   ``capture()`` and the simulator's table)
 """
 

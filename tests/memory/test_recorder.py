@@ -172,7 +172,7 @@ def test_a_run_that_never_started_records_nothing(memory):
 
 
 def sim_run(path, problem: str, *, variant: str | None = None, plugins=(), memory=None, limit: int = 3000):
-    from bt_meta.world.sim_world import SimWorld, quiet_stdout
+    from bt_meta.world.simulation.sim_world import SimWorld, quiet_stdout
 
     with quiet_stdout():
         world = SimWorld.from_task_file(path, problem, variant=variant, seed=0)

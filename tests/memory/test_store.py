@@ -203,7 +203,7 @@ def test_foreign_key_cascade_is_declared(memory, make_trace):
 
 
 def test_attachment_normal_frames_agree_with_the_world_convention():
-    from bt_meta.world.objects import rpy_to_matrix
+    from bt_meta.world.simulation.objects import rpy_to_matrix
 
     pose = (0.6, -0.2, 0.05, 0.3, -1.1, 2.4)
     state = ObjectState("housing", pose, (0.61, -0.2, 0.08), (0.0, 0.0, 1.0))

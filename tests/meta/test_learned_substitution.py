@@ -41,7 +41,7 @@ def run_a(memory_file: Any, variant: str | None) -> tuple[Any, list[tuple[float,
     from bt_meta.htn import load_task_file
     from bt_meta.memory import EpisodicMemory
     from bt_meta.plugins import create_plugin_host
-    from bt_meta.world.sim_world import SimWorld, load_grounding, quiet_stdout
+    from bt_meta.world.simulation.sim_world import SimWorld, load_grounding, quiet_stdout
 
     task_file = load_task_file(LETTERS)
     problem = task_file.problem("A")

@@ -55,7 +55,7 @@ def memory_file(demonstrations, tmp_path):
 
 def fence_in_the_reference(world: Any, half: float = 0.075, height: float = 0.12) -> None:
     """Four static posts around the reference part: a top-down approach still fits, a hand beside the part does not."""
-    from bt_meta.world.objects import AttachmentFeature, Box, ObjectModel
+    from bt_meta.world.simulation.objects import AttachmentFeature, Box, ObjectModel
 
     x, y = world.sim.object_transform("reference")[:2, 3]
     for k, (dx, dy, sx, sy) in enumerate([(half, 0, 0.02, 0.18), (-half, 0, 0.02, 0.18), (0, half, 0.18, 0.02),
@@ -69,7 +69,7 @@ def fence_in_the_reference(world: Any, half: float = 0.075, height: float = 0.12
 def run_variant(memory_file, variant: str, *, attempts: int = 4, prepare: Any = None, **settings: Any):
     from bt_meta.htn import load_task_file
     from bt_meta.memory import EpisodicMemory
-    from bt_meta.world.sim_world import SimWorld, load_grounding, quiet_stdout
+    from bt_meta.world.simulation.sim_world import SimWorld, load_grounding, quiet_stdout
 
     task_file = load_task_file(TASK_FILE)
     problem = task_file.problem("nominal")
@@ -133,7 +133,7 @@ def test_each_further_attempt_backtracks_one_pose_further(memory_file):
     from bt_meta.memory import EpisodicMemory
     from bt_meta.meta import Attempt
     from bt_meta.testing import TreeHarness
-    from bt_meta.world.sim_world import SimWorld, load_grounding, quiet_stdout
+    from bt_meta.world.simulation.sim_world import SimWorld, load_grounding, quiet_stdout
 
     task_file = load_task_file(TASK_FILE)
     problem = task_file.problem("nominal")
@@ -202,7 +202,7 @@ def test_a_keypoint_mismatch_mid_plan_is_repaired_but_not_kept_when_the_repair_w
 
     from bt_meta.htn import load_task_file
     from bt_meta.memory import EpisodicMemory
-    from bt_meta.world.sim_world import SimWorld, load_grounding, quiet_stdout
+    from bt_meta.world.simulation.sim_world import SimWorld, load_grounding, quiet_stdout
 
     task_file = load_task_file(TASK_FILE)
     problem = task_file.problem("nominal")

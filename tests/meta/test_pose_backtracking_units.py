@@ -16,8 +16,8 @@ from bt_meta.memory import Episode, ObjectState, State, Step, Trace
 from bt_meta.meta import MetaExecutor
 from bt_meta.plugins import hookimpl
 from bt_meta.world.fake import FakeWorld, Fault
-from bt_meta.world.objects import matrix_to_pose, pose_to_matrix
-from bt_meta.world.sim_world import parse_pose_symbol, pose_symbol
+from bt_meta.world.simulation.objects import matrix_to_pose, pose_to_matrix
+from bt_meta.world.simulation.sim_world import parse_pose_symbol, pose_symbol
 
 from .conftest import make_host
 

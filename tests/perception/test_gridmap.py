@@ -21,7 +21,7 @@ from bt_meta.perception.gridmap import (
 from bt_meta.perception.hsv import PerceptionConfigError, PlaneProjection, detect_blocks
 from bt_meta.perception.synthetic import blank, draw_block, top_view_projection
 from bt_meta.perception.topview import analyse
-from bt_meta.world.objects import LB
+from bt_meta.world.simulation.objects import LB
 
 CENTRE = (0.70, -0.20)
 
@@ -129,9 +129,9 @@ def test_crop_outside_the_image_is_empty_and_shape_errors():
 @pytest.mark.slow
 def test_simulator_grid_maps_of_a_1x2_and_two_1x1():
     from bt_meta.perception.topview import capture
-    from bt_meta.world.camera import TopViewCamera
-    from bt_meta.world.objects import megablok
-    from bt_meta.world.sim import Simulation
+    from bt_meta.world.simulation.camera import TopViewCamera
+    from bt_meta.world.simulation.objects import megablok
+    from bt_meta.world.simulation.sim import Simulation
 
     with Simulation(seed=0) as sim:
         sim.spawn("bar", megablok("1x2", "blue"), (0.60, -0.35, 0, 0, 0, 0), on_table=True)

@@ -18,7 +18,7 @@ from bt_meta.perception.hsv import (
     detect_blocks,
 )
 from bt_meta.perception.synthetic import BLOCK_RGB, blank, draw_block, top_view_projection
-from bt_meta.world.objects import LB
+from bt_meta.world.simulation.objects import LB
 
 MPP = 0.0025
 
@@ -144,9 +144,9 @@ SIM_BLOCKS = {
 
 @pytest.fixture(scope="module")
 def sim_view():
-    from bt_meta.world.camera import TopViewCamera
-    from bt_meta.world.objects import megablok
-    from bt_meta.world.sim import Simulation
+    from bt_meta.world.simulation.camera import TopViewCamera
+    from bt_meta.world.simulation.objects import megablok
+    from bt_meta.world.simulation.sim import Simulation
 
     with Simulation(seed=0) as sim:
         for name, (shape, colour, (x, y, yaw)) in SIM_BLOCKS.items():

@@ -82,8 +82,8 @@ def test_errors_name_what_is_missing():
 
 @pytest.mark.slow
 def test_simulator_states_separate_upright_from_on_side():
-    from bt_meta.world.objects import magnetic_part
-    from bt_meta.world.sim import Simulation
+    from bt_meta.world.simulation.objects import magnetic_part
+    from bt_meta.world.simulation.sim import Simulation
 
     with Simulation(seed=0) as sim:
         sim.spawn("reference", magnetic_part("reference"), (0.62, -0.10, 0, 0, 0, 0), on_table=True)

@@ -23,7 +23,7 @@ from bt_meta.memory import Episode, EpisodicMemory, ObjectState, State, Step, Tr
 from bt_meta.perception.synthetic import blank, draw_block, top_view_projection
 from bt_meta.perception.topview import analyse
 from bt_meta.plugins import PluginHost
-from bt_meta.world.objects import LB
+from bt_meta.world.simulation.objects import LB
 
 # -- letter A, drawn step by step ----------------------------------------------------------------------------------
 
@@ -323,7 +323,7 @@ def _record_nominal(path, problem: str, observe_state) -> tuple[Step, ...]:
     (a :class:`State`) after each step; the steps of the trace a nominal run leaves in memory."""
     from bt_meta.plugins import create_plugin_host, hookimpl
     from bt_meta.testing import TreeHarness
-    from bt_meta.world.sim_world import SimWorld, quiet_stdout
+    from bt_meta.world.simulation.sim_world import SimWorld, quiet_stdout
 
     recorded: dict[int, tuple[StepContext, State]] = {}
 
@@ -357,7 +357,7 @@ def test_recorded_nominal_a_then_substituted_bar_raises_gridmap_mismatch_at_the_
     from bt_meta.plugins import create_plugin_host
     from bt_meta.resources import trees_dir
     from bt_meta.testing import TreeHarness
-    from bt_meta.world.sim_world import SimWorld, quiet_stdout
+    from bt_meta.world.simulation.sim_world import SimWorld, quiet_stdout
 
     path = trees_dir() / "letters.yaml"
     camera = camera_plugin.CameraPerception()
@@ -403,7 +403,7 @@ def test_recorded_nominal_attach_then_part_on_its_side_raises_keypoint_mismatch(
     from bt_meta.plugins import create_plugin_host
     from bt_meta.resources import trees_dir
     from bt_meta.testing import TreeHarness
-    from bt_meta.world.sim_world import SimWorld, quiet_stdout
+    from bt_meta.world.simulation.sim_world import SimWorld, quiet_stdout
 
     path = trees_dir() / "magnetic_attach.yaml"
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from bt_meta.world.collision import CollisionChecker
-from bt_meta.world.kinematics import Kinematics
-from bt_meta.world.robot import load_robot
+from bt_meta.world.kinematics.collision import CollisionChecker
+from bt_meta.world.kinematics.forward import Kinematics
+from bt_meta.world.robot.description import load_robot
 
 
 @pytest.fixture(scope="module")

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bt_meta.world.camera import HandCamera, Intrinsics, TopViewCamera
-from bt_meta.world.objects import make_model
-from bt_meta.world.sim import Simulation, SimulationError
+from bt_meta.world.simulation.camera import HandCamera, Intrinsics, TopViewCamera
+from bt_meta.world.simulation.objects import make_model
+from bt_meta.world.simulation.sim import Simulation, SimulationError
 
 pytestmark = pytest.mark.slow
 
@@ -113,7 +113,7 @@ def test_camera_arguments_are_checked(sim):
 
 
 def test_table_patch_is_a_metric_crop_centred_on_the_block(sim):
-    from bt_meta.world.objects import LB
+    from bt_meta.world.simulation.objects import LB
 
     cam = TopViewCamera(sim)
     image = cam.capture()

@@ -6,8 +6,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from bt_meta.world.collision import as_se3, pose_from_xyz_rpy
-from bt_meta.world.kinematics import KinematicsError
+from bt_meta.errors import KinematicsError
+from bt_meta.world.kinematics.collision import as_se3, pose_from_xyz_rpy
 
 # Right shoulder swung in and raised, elbow bent: the elbow goes into the head's collision sphere.
 ELBOW_IN_HEAD = {"right_s0": 1.0, "right_s1": -1.5, "right_e0": 0.0, "right_e1": 1.5, "right_w0": 0.0, "right_w1": 0.0}

@@ -8,10 +8,10 @@ import mink
 import numpy as np
 import pytest
 
-from bt_meta.world.collision import pose_from_xyz_rpy
-from bt_meta.world.ik import COLLISION, REACHABILITY, InverseKinematics, _Run
-from bt_meta.world.kinematics import KinematicsError
-from bt_meta.world.robot import load_robot
+from bt_meta.errors import KinematicsError
+from bt_meta.world.kinematics.collision import pose_from_xyz_rpy
+from bt_meta.world.kinematics.ik import COLLISION, REACHABILITY, InverseKinematics, _Run
+from bt_meta.world.robot.description import load_robot
 
 
 @pytest.fixture(scope="module")

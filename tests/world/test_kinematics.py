@@ -6,9 +6,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from bt_meta.world.kinematics import Kinematics, KinematicsError, pose_matrix, se3_from_matrix
-from bt_meta.world.mujoco_model import build_mujoco_model, mujoco_urdf_text
-from bt_meta.world.robot import load_robot
+from bt_meta.errors import KinematicsError
+from bt_meta.world.kinematics.forward import Kinematics, pose_matrix, se3_from_matrix
+from bt_meta.world.kinematics.mujoco_model import build_mujoco_model, mujoco_urdf_text
+from bt_meta.world.robot.description import load_robot
 
 FRAMES = ("right_gripper", "left_gripper", "right_hand_camera_link", "head_camera_link", "l_gripper_r_finger_tip")
 

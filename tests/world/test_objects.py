@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from bt_meta.world.objects import (
+from bt_meta.world.simulation.objects import (
     LB,
     OBJECT_TYPES,
     AttachmentFeature,

@@ -6,10 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from bt_meta.errors import ConfigError
+from bt_meta.errors import ConfigError, KinematicsError
 from bt_meta.resources import robots_dir
-from bt_meta.world.kinematics import KinematicsError
-from bt_meta.world.robot import IKSettings, load_robot, read_urdf_summary
+from bt_meta.world.robot.description import IKSettings, load_robot, read_urdf_summary
 
 BAXTER_TEXT = (robots_dir() / "baxter.yaml").read_text(encoding="utf-8")
 

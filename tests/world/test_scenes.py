@@ -12,9 +12,9 @@ import pytest
 from bt_meta.errors import ConfigError
 from bt_meta.htn.loader import load_task_file
 from bt_meta.resources import trees_dir
-from bt_meta.world.objects import LB
-from bt_meta.world.scenes import load_scene, scene_names
-from bt_meta.world.sim import Simulation
+from bt_meta.world.simulation.objects import LB
+from bt_meta.world.simulation.scenes import load_scene, scene_names
+from bt_meta.world.simulation.sim import Simulation
 
 SHIPPED = ["housing_insertion", "letters_A", "letters_H", "magnetic_attach"]
 

@@ -8,10 +8,10 @@ import numpy as np
 import pybullet
 import pytest
 
-from bt_meta.world.kinematics import Kinematics, pose_matrix
-from bt_meta.world.objects import OBJECT_TYPES, make_model, pose_to_matrix
-from bt_meta.world.scenes import load_scene
-from bt_meta.world.sim import Simulation, SimulationError
+from bt_meta.world.kinematics.forward import Kinematics, pose_matrix
+from bt_meta.world.simulation.objects import OBJECT_TYPES, make_model, pose_to_matrix
+from bt_meta.world.simulation.scenes import load_scene
+from bt_meta.world.simulation.sim import Simulation, SimulationError
 
 pytestmark = pytest.mark.slow
 

@@ -17,15 +17,15 @@ from bt_meta.htn import load_task_file
 from bt_meta.resources import trees_dir
 from bt_meta.testing import TreeHarness, clear_blackboard
 from bt_meta.world.base import World
-from bt_meta.world.objects import LB
-from bt_meta.world.sim_world import SimWorld, load_grounding, quiet_stdout
+from bt_meta.world.simulation.objects import LB
+from bt_meta.world.simulation.sim_world import SimWorld, load_grounding, quiet_stdout
 
 slow = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")
 def sim():
-    from bt_meta.world.sim import Simulation
+    from bt_meta.world.simulation.sim import Simulation
 
     with quiet_stdout():
         s = Simulation(seed=0)
@@ -172,7 +172,7 @@ def test_grounding_errors_are_located(tmp_path):
 
 @slow
 def test_make_world_hook_builds_a_sim_world_only_for_sim():
-    from bt_meta.world.sim_world import bt_meta_make_world
+    from bt_meta.world.simulation.sim_world import bt_meta_make_world
 
     task_file = load_task_file(trees_dir() / "housing_insertion.yaml")
     problem = task_file.problem("nominal")

@@ -11,8 +11,8 @@ import pytest
 from bt_meta.htn import load_task_file
 from bt_meta.resources import trees_dir
 from bt_meta.world.base import FAILURE, RUNNING, SUCCESS
-from bt_meta.world.objects import pose_to_matrix
-from bt_meta.world.sim_world import SimWorld, load_grounding, quiet_stdout
+from bt_meta.world.simulation.objects import pose_to_matrix
+from bt_meta.world.simulation.sim_world import SimWorld, load_grounding, quiet_stdout
 from bt_meta.world.skills import Grasp, Insert, MoveTo, Place
 
 pytestmark = pytest.mark.slow

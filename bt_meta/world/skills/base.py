@@ -24,7 +24,7 @@ from bt_meta.errors import BtMetaError
 from bt_meta.world.base import FAILURE, RUNNING, SUCCESS, SkillFailure
 
 if TYPE_CHECKING:
-    from bt_meta.world.sim_world import SimWorld
+    from bt_meta.world.simulation.sim_world import SimWorld
 
 __all__ = ["PhasedSkill", "SimSkill", "SkillAbort", "rounded"]
 
@@ -47,7 +47,7 @@ def rounded(values: Iterable[float] | float, digits: int = 4) -> Any:
 
 
 class SimSkill:
-    """One execution of a skill on a :class:`~bt_meta.world.sim_world.SimWorld`, advanced tick by tick."""
+    """One execution of a skill on a :class:`~bt_meta.world.simulation.sim_world.SimWorld`, advanced tick by tick."""
 
     name = "skill"
     spec: dict[str, Any] = {}

@@ -33,7 +33,8 @@ import numpy as np
 import pybullet
 
 from bt_meta.errors import BtMetaError
-from bt_meta.world.objects import (
+from bt_meta.world.robot.description import RobotDescription, load_robot
+from bt_meta.world.simulation.objects import (
     COLOURS,
     AttachmentRelation,
     Box,
@@ -43,7 +44,6 @@ from bt_meta.world.objects import (
     attachment_relation,
     matrix_to_pose,
 )
-from bt_meta.world.robot import RobotDescription, load_robot
 
 __all__ = ["SimObjectState", "Simulation", "SimulationError", "Table"]
 

@@ -1,6 +1,7 @@
 """SimWorld: the :class:`~bt_meta.world.base.World` of a task file's problem in the pybullet simulator.
 
-A SimWorld owns a :class:`~bt_meta.world.sim.Simulation` with the problem's scene (and variant) built in it, the
+A SimWorld owns a :class:`~bt_meta.world.simulation.sim.Simulation` with the problem's scene (and variant) built in
+it, the
 Baxter's kinematics, a collision checker whose scene mirrors the simulator's objects, and mink IK. HTN primitives
 map onto skills (:mod:`bt_meta.world.skills`) through a **grounding file** -- data, not code: ``poses/<domain>.yaml``
 next to the task file or in the shipped ``trees/poses/``. It says, per problem, which scene and variant to build;
@@ -43,7 +44,7 @@ from bt_meta.hookspecs import hookimpl
 from bt_meta.htn.state import State
 from bt_meta.resources import trees_dir
 from bt_meta.world.base import FAILURE, SUCCESS, Atom, SkillFailure, ground_effects
-from bt_meta.world.objects import Box, Cylinder, ObjectModel, pose_to_matrix, rpy_to_matrix
+from bt_meta.world.simulation.objects import Box, Cylinder, ObjectModel, pose_to_matrix, rpy_to_matrix
 from bt_meta.world.skills import SKILLS
 from bt_meta.world.skills.base import SimSkill, SkillAbort
 
@@ -254,11 +255,11 @@ class SimWorld:
         sim: Any = None,
         realtime: bool | None = None,
     ) -> None:
-        from bt_meta.world.collision import CollisionChecker
         from bt_meta.world.fake import initial_state
-        from bt_meta.world.ik import InverseKinematics
-        from bt_meta.world.kinematics import Kinematics
-        from bt_meta.world.scenes import load_scene
+        from bt_meta.world.kinematics.collision import CollisionChecker
+        from bt_meta.world.kinematics.forward import Kinematics
+        from bt_meta.world.kinematics.ik import InverseKinematics
+        from bt_meta.world.simulation.scenes import load_scene
 
         self.domain = domain
         self.problem = problem
@@ -285,7 +286,7 @@ class SimWorld:
         self.variant = variant or "nominal"
         self._own_sim = sim is None
         if sim is None:
-            from bt_meta.world.sim import Simulation
+            from bt_meta.world.simulation.sim import Simulation
 
             with quiet_stdout():
                 sim = Simulation(gui=gui, seed=seed, visuals="full" if gui else "light")

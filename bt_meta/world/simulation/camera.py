@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet
 
-from bt_meta.world.sim import Simulation, SimulationError
+from bt_meta.world.simulation.sim import Simulation, SimulationError
 
 __all__ = ["Camera", "CameraImage", "HandCamera", "Intrinsics", "TopViewCamera"]
 
@@ -80,7 +80,7 @@ class CameraImage:
 
 
 class Camera:
-    """A pinhole camera in a :class:`~bt_meta.world.sim.Simulation`; subclasses say where it is."""
+    """A pinhole camera in a :class:`~bt_meta.world.simulation.sim.Simulation`; subclasses say where it is."""
 
     def __init__(
         self, sim: Simulation, intrinsics: Intrinsics, *, near: float = 0.02, far: float = 3.0, hide_robot: bool

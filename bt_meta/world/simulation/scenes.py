@@ -29,7 +29,7 @@ import yaml
 from bt_meta.errors import ConfigError
 from bt_meta.resources import trees_dir
 from bt_meta.world._yaml_nodes import YamlNodeReader, shipped_yaml_path
-from bt_meta.world.objects import COLOURS, OBJECT_TYPES, ObjectModel, make_model, pose_to_matrix
+from bt_meta.world.simulation.objects import COLOURS, OBJECT_TYPES, ObjectModel, make_model, pose_to_matrix
 
 __all__ = ["Scene", "SceneObject", "Variant", "load_scene", "scene_names", "scenes_dir"]
 
@@ -121,7 +121,7 @@ class Scene:
             raise ConfigError(f"scene {self.name!r} has no variant {variant!r}; variants: {known}", self.path) from None
 
     def build(self, sim: Any, variant: str | None = None, *, seed: int | None = None, settle_steps: int = 120) -> None:
-        """Spawn the (variant's) objects into a :class:`~bt_meta.world.sim.Simulation` and let them settle.
+        """Spawn the (variant's) objects into a :class:`~bt_meta.world.simulation.sim.Simulation` and let them settle.
 
         With ``seed`` (default: the simulation's) and a ``jitter`` in the file, poses get seeded noise. An object
         off the table top raises :class:`ConfigError` at its line in the file.

@@ -28,7 +28,8 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from bt_meta.world.kinematics import Kinematics, KinematicsError, se3_from_matrix
+from bt_meta.errors import KinematicsError
+from bt_meta.world.kinematics.forward import Kinematics, se3_from_matrix
 
 __all__ = ["CollisionChecker", "Contact", "SceneObject", "pose_from_xyz_rpy"]
 

@@ -20,7 +20,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from bt_meta.world.kinematics import Kinematics, KinematicsError
+from bt_meta.errors import KinematicsError
+from bt_meta.world.kinematics.forward import Kinematics
 
 __all__ = ["MujocoModel", "build_mujoco_model", "mujoco_urdf_text"]
 

@@ -2,14 +2,15 @@
 
 Offers:
 
-* :class:`Kinematics` -- the Pinocchio model of a :class:`~bt_meta.world.robot.RobotDescription`: joint order,
+* :class:`Kinematics` -- the Pinocchio model of a :class:`~bt_meta.world.robot.description.RobotDescription`: joint
+  order,
   arm-joint index maps, home and SRDF reference configurations, frame poses (FK) and Jacobians
-* :class:`KinematicsError` -- misuse: an unknown frame, arm or joint, a configuration of the wrong size
 * :func:`pose_matrix` / :func:`se3_from_matrix` -- 4x4 homogeneous matrices to and from ``pinocchio.SE3``
 
 Configurations ``q`` are numpy vectors in Pinocchio's joint order (``Kinematics.joint_names``); every movable
 joint of Baxter is revolute or prismatic, so ``nq == nv`` and index ``i`` of ``q`` is joint ``joint_names[i]``.
-Poses are in the robot's base frame.
+Poses are in the robot's base frame. Misuse (an unknown frame, arm or joint, a configuration of the wrong size)
+raises :class:`bt_meta.errors.KinematicsError`.
 """
 
 from __future__ import annotations
@@ -20,14 +21,10 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 import pinocchio as pin
 
-from bt_meta.errors import BtMetaError
-from bt_meta.world.robot import RobotDescription
+from bt_meta.errors import KinematicsError
+from bt_meta.world.robot.description import RobotDescription
 
-__all__ = ["Kinematics", "KinematicsError", "pose_matrix", "se3_from_matrix"]
-
-
-class KinematicsError(BtMetaError):
-    """Kinematics used wrongly: a frame, arm or joint the robot does not have, a malformed configuration."""
+__all__ = ["Kinematics", "pose_matrix", "se3_from_matrix"]
 
 
 _REFERENCE = {

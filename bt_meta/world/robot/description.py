@@ -22,7 +22,7 @@ from typing import Any
 
 import yaml
 
-from bt_meta.errors import ConfigError
+from bt_meta.errors import ConfigError, KinematicsError
 from bt_meta.resources import robots_dir
 from bt_meta.world._yaml_nodes import YamlNodeReader, shipped_yaml_path
 
@@ -120,8 +120,6 @@ class RobotDescription:
     def arm(self, name: str) -> ArmDescription:
         arm = self.arms.get(name)
         if arm is None:
-            from bt_meta.world.kinematics import KinematicsError  # kinematics imports this module
-
             raise KinematicsError(f"robot {self.name!r} has no arm {name!r}; arms: {', '.join(self.arms)}")
         return arm
 

@@ -32,10 +32,11 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 
-from bt_meta.world.collision import CollisionChecker, Contact, Pose, as_se3
-from bt_meta.world.kinematics import Kinematics, KinematicsError
-from bt_meta.world.mujoco_model import MujocoModel, build_mujoco_model
-from bt_meta.world.robot import IKSettings
+from bt_meta.errors import KinematicsError
+from bt_meta.world.kinematics.collision import CollisionChecker, Contact, Pose, as_se3
+from bt_meta.world.kinematics.forward import Kinematics
+from bt_meta.world.kinematics.mujoco_model import MujocoModel, build_mujoco_model
+from bt_meta.world.robot.description import IKSettings
 
 __all__ = ["COLLISION", "REACHABILITY", "IKResult", "InverseKinematics"]
 

@@ -38,6 +38,7 @@ from py_trees.common import Status
 
 from bt_meta.commands._common import print_json, shown_in_trace
 from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
+from bt_meta.commands._world_args import add_world_arguments, world_options
 from bt_meta.errors import PlanningError, UserInputError
 from bt_meta.memory import ENV_VAR, add_memory_argument, resolve_memory_path
 from bt_meta.plugins import hookimpl
@@ -61,6 +62,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="diagnose and repair failures with the meta-reasoner (memory, refinements, repairs)")
     parser.add_argument("--max-attempts", type=int, default=5,
                         help="with --repair: at most this many applied repairs (default 5)")
+    add_world_arguments(parser)
     add_memory_argument(parser)
     add_plugin_arguments(parser)
     parser.set_defaults(func=run)
@@ -78,6 +80,7 @@ def run(args: argparse.Namespace) -> int:
     problem = task_file.problem(args.problem)  # unknown names list the known ones (exit 2)
     grounding = load_grounding(task_file.domain.name, args.file, args.grounding)
     grounding.problem(problem.name)
+    options = world_options(args)
     plugins = plugin_host_from_args(args, args.file)
     with _memory(args) as memory:
         recorder = None
@@ -89,10 +92,11 @@ def run(args: argparse.Namespace) -> int:
             plugins.register(recorder, "recorder", source="bt-meta run --record")
         started = time.perf_counter()
         with quiet_stdout():
-            world = SimWorld(task_file.domain, problem, grounding, variant=args.variant, seed=args.seed, gui=args.gui)
+            world = SimWorld(task_file.domain, problem, grounding, variant=args.variant, seed=args.seed, gui=args.gui,
+                             **options)
         built = time.perf_counter()
         out: dict[str, Any] = {"file": str(args.file), "problem": problem.name, "variant": world.variant,
-                               "scene": world.scene.name, "seed": args.seed}
+                               "scene": world.scene.name, "seed": args.seed, "robot": world.sim.robot.name}
         try:
             if args.repair:
                 return _run_repaired(args, task_file, problem, world, plugins, memory, recorder, out, started, built)

@@ -44,7 +44,7 @@ def fresh(world):
     """The module's world with the arm back home and nothing held."""
     for arm in world.sim.robot.arms:
         world.release(arm)
-    world.sim.set_joint_positions({**world.sim.robot.home, **world.grounding.robot_pose})
+    world.sim.set_joint_positions({**world.sim.robot.home, **world.grounding.start_pose(world.sim.robot.name)})
     world.advance()
     return world
 

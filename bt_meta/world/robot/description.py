@@ -116,6 +116,15 @@ class RobotDescription:
     joint_limits: dict[str, tuple[float, float]]
     ik: IKSettings
     urdf: UrdfSummary = field(repr=False)
+    scene_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Where the shared scene frame (scene files, grounding poses: the Baxter's torso frame) lies in this robot's
+    base frame: scene coordinates + this = base-frame coordinates. Placement as data, so one scene serves robots
+    of different sizes and mounting heights."""
+
+    @property
+    def default_arm(self) -> str:
+        """The arm skills use when a grounding file names none: the first one the description lists."""
+        return next(iter(self.arms))
 
     def arm(self, name: str) -> ArmDescription:
         arm = self.arms.get(name)
@@ -232,7 +241,9 @@ class _RobotFile(YamlNodeReader):
             raise ConfigError("the robot description is empty", self.path, 1, 1)
         top = self.mapping(root, "robot description")
         self.check_keys(
-            top, {"name", "files", "base_frame", "arms", "head", "home", "joint_limits", "ik"}, "robot description"
+            top,
+            {"name", "files", "base_frame", "arms", "head", "home", "joint_limits", "ik", "workcell"},
+            "robot description",
         )
         name = self.string(self.require(top, "name", root, "robot description"), "name")
 
@@ -295,6 +306,9 @@ class _RobotFile(YamlNodeReader):
         ik = IKSettings()
         if "ik" in top:
             ik = self.ik(top["ik"][1])
+        scene_offset = (0.0, 0.0, 0.0)
+        if "workcell" in top:
+            scene_offset = self.workcell(top["workcell"][1])
 
         return RobotDescription(
             name=name,
@@ -311,7 +325,20 @@ class _RobotFile(YamlNodeReader):
             joint_limits=limits,
             ik=ik,
             urdf=urdf,
+            scene_offset=scene_offset,
         )
+
+    def workcell(self, node: yaml.Node) -> tuple[float, float, float]:
+        entries = self.mapping(node, "workcell")
+        self.check_keys(entries, {"scene_offset"}, "workcell")
+        if "scene_offset" not in entries:
+            return (0.0, 0.0, 0.0)
+        offset_node = entries["scene_offset"][1]
+        items = self.sequence(offset_node, "workcell.scene_offset")
+        if len(items) != 3:
+            raise self.error("workcell.scene_offset must be [x, y, z] (metres)", offset_node)
+        x, y, z = (self.number(item, "workcell.scene_offset") for item in items)
+        return (x, y, z)
 
     def files(self, node: yaml.Node) -> tuple[Path, Path | None, tuple[Path, ...], str]:
         entries = self.mapping(node, "files")

@@ -220,7 +220,7 @@ class TopViewCamera(Camera):
         self,
         sim: Simulation,
         *,
-        centre: tuple[float, float] = (0.70, -0.20),
+        centre: tuple[float, float] | None = None,
         height: float = 1.0,
         intrinsics: Intrinsics | None = None,
         hide_robot: bool = True,
@@ -229,6 +229,9 @@ class TopViewCamera(Camera):
         if height <= 0.0:
             raise SimulationError(f"top-view camera height must be positive, got {height}")
         super().__init__(sim, intrinsics, near=0.05, far=height + 0.5, hide_robot=hide_robot)
+        if centre is None:  # (0.70, -0.20) in the scene frame: the shipped scenes' objects
+            dx, dy, _ = sim.robot.scene_offset
+            centre = (0.70 + dx, -0.20 + dy)
         self.centre = centre
         self.height = height
         pose = np.eye(4)

@@ -129,8 +129,10 @@ class Scene:
         objects = self.objects_for(variant)
         rng = np.random.default_rng(sim.seed if seed is None else seed)
         (x_lo, x_hi), (y_lo, y_hi) = sim.table.bounds
+        dx, dy, dz = sim.robot.scene_offset  # scene frame -> robot base frame
         for obj in objects:
             x, y, z = obj.position
+            x, y, z = x + dx, y + dy, None if z is None else z + dz
             roll, pitch, yaw = obj.rpy
             if self.jitter_position > 0.0 or self.jitter_yaw > 0.0:
                 dx, dy = rng.uniform(-self.jitter_position, self.jitter_position, size=2)

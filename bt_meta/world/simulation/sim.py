@@ -25,7 +25,7 @@ import math
 import tempfile
 import xml.etree.ElementTree as ElementTree
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -68,6 +68,12 @@ class Table:
     top_z: float = -0.20
     thickness: float = 0.04
     colour: tuple[float, float, float, float] = (0.93, 0.9, 0.83, 1.0)
+
+    def shifted(self, offset: Sequence[float]) -> Table:
+        """The same table moved by ``offset`` (x, y, z): the defaults are in the scene frame, a robot's
+        ``workcell.scene_offset`` puts them in its base frame."""
+        dx, dy, dz = (float(v) for v in offset)
+        return replace(self, center_x=self.center_x + dx, center_y=self.center_y + dy, top_z=self.top_z + dz)
 
     @property
     def bounds(self) -> tuple[tuple[float, float], tuple[float, float]]:
@@ -203,7 +209,7 @@ class Simulation:
         if visuals not in ("light", "full"):
             raise SimulationError(f"visuals must be 'light' or 'full', not {visuals!r}")
         self.robot = robot or load_robot()
-        self.table = table or Table()
+        self.table = table or Table().shifted(self.robot.scene_offset)
         self.seed = seed
         self.rng = np.random.default_rng(seed)
         self.time_step = time_step

@@ -128,12 +128,20 @@ class Grounding:
     skills: dict[str, dict[str, Any]]
     frames: dict[str, dict[str, Any]] = field(default_factory=dict)
     poses: dict[str, dict[str, Any]] = field(default_factory=dict)
-    robot_pose: dict[str, float] = field(default_factory=dict)
-    """Joint values (radians) that replace the robot's home pose at the start, e.g. the idle arm parked."""
+    robot_pose: dict[str, dict[str, float]] = field(default_factory=dict)
+    """Robot name (``"*"``: any robot) -> joint values (radians) that replace its home pose at the start, e.g. the
+    idle arm parked. See :meth:`start_pose`."""
     objects: dict[str, str] = field(default_factory=dict)
     """Task-file object symbol -> simulator object name, where they differ."""
     features: dict[str, dict[str, str]] = field(default_factory=dict)
     """Task-file feature symbol -> ``{object, feature}`` (an attachment feature of a simulator object)."""
+    robot: str | None = None
+    """The robot the problems run on unless the caller chooses one: a shipped name or a path (resolved against
+    the grounding file's folder)."""
+
+    def start_pose(self, robot: str) -> dict[str, float]:
+        """Joint values replacing ``robot``'s home pose at the start: the file's ``robot_pose`` for that robot."""
+        return {**self.robot_pose.get("*", {}), **self.robot_pose.get(robot, {})}
 
     def problem(self, name: str) -> dict[str, Any]:
         try:
@@ -143,7 +151,8 @@ class Grounding:
             raise ConfigError(f"the grounding file has no problem {name!r}; problems: {known}", self.path) from None
 
 
-_TOP_KEYS = {"domain", "problems", "skills", "frames", "poses", "robot_pose", "objects", "features", "description"}
+_TOP_KEYS = {"domain", "problems", "skills", "frames", "poses", "robot_pose", "objects", "features", "description",
+             "robot"}
 
 
 def grounding_paths(domain: str, task_file: str | Path | None = None) -> list[Path]:
@@ -182,11 +191,36 @@ def load_grounding(domain: str, task_file: str | Path | None = None, path: str |
     for primitive, spec in data["skills"].items():
         if not isinstance(spec, dict) or spec.get("skill") not in SKILLS:
             raise ConfigError(f"skills.{primitive}: give `skill:` one of {', '.join(SKILLS)}", path)
+    robot = data.get("robot")
+    if robot is not None:
+        if not isinstance(robot, str) or not robot:
+            raise ConfigError("`robot:` names a shipped robot (baxter, panda) or a robot description file", path)
+        if robot.endswith((".yaml", ".yml")):
+            robot = str(path.parent / robot)
     return Grounding(path, str(data.get("domain", domain)), dict(data["problems"]), dict(data["skills"]),
                      dict(data.get("frames") or {}), dict(data.get("poses") or {}),
-                     {str(k): float(v) for k, v in (data.get("robot_pose") or {}).items()},
+                     _robot_poses(data.get("robot_pose"), path),
                      {str(k): str(v) for k, v in (data.get("objects") or {}).items()},
-                     {str(k): dict(v) for k, v in (data.get("features") or {}).items()})
+                     {str(k): dict(v) for k, v in (data.get("features") or {}).items()}, robot)
+
+
+def _robot_poses(value: Any, path: Path) -> dict[str, dict[str, float]]:
+    """``robot_pose:`` is joint -> value (any robot) or robot name -> {joint: value} (joints differ per robot)."""
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise ConfigError("robot_pose is a mapping: joint -> value, or robot name -> {joint: value}", path)
+    per_robot = [isinstance(v, dict) for v in value.values()]
+    if any(per_robot) and not all(per_robot):
+        raise ConfigError("robot_pose mixes joint values and per-robot mappings: use one form", path)
+    blocks = value if all(per_robot) and per_robot else {"*": value}
+    out: dict[str, dict[str, float]] = {}
+    for robot, joints in blocks.items():
+        try:
+            out[str(robot)] = {str(k): float(v) for k, v in joints.items()}
+        except (TypeError, ValueError):
+            raise ConfigError(f"robot_pose of {robot}: joint values are numbers (radians or metres)", path) from None
+    return out
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -254,6 +288,7 @@ class SimWorld:
         joint_speed: float = 1.5,
         sim: Any = None,
         realtime: bool | None = None,
+        robot: Any = None,
     ) -> None:
         from bt_meta.world.fake import initial_state
         from bt_meta.world.kinematics.collision import CollisionChecker
@@ -286,10 +321,13 @@ class SimWorld:
         self.variant = variant or "nominal"
         self._own_sim = sim is None
         if sim is None:
+            from bt_meta.world.robot.description import RobotDescription, load_robot
             from bt_meta.world.simulation.sim import Simulation
 
+            chosen = robot if robot is not None else grounding.robot or "baxter"
+            description = chosen if isinstance(chosen, RobotDescription) else load_robot(chosen)
             with quiet_stdout():
-                sim = Simulation(gui=gui, seed=seed, visuals="full" if gui else "light")
+                sim = Simulation(gui=gui, seed=seed, visuals="full" if gui else "light", robot=description)
         else:
             sim.clear_objects()
             for arm in sim.robot.arms:
@@ -298,7 +336,7 @@ class SimWorld:
         self.realtime = gui if realtime is None else realtime
         self.tick_seconds = steps_per_tick * sim.time_step
         try:
-            sim.set_joint_positions({**sim.robot.home, **grounding.robot_pose})
+            sim.set_joint_positions({**sim.robot.home, **self._start_pose(sim.robot, grounding)})
             self.scene.build(sim, None if self.variant == "nominal" else self.variant, seed=seed)
             self._check_objects(problem_name)
         except BaseException:
@@ -316,6 +354,18 @@ class SimWorld:
         self._state = initial_state(problem)
         self.executed: list[dict[str, Any]] = []
         self.total_ticks = 0
+
+    @staticmethod
+    def _start_pose(robot: Any, grounding: Grounding) -> dict[str, float]:
+        pose = grounding.start_pose(robot.name)
+        unknown = sorted(set(pose) - set(robot.home))
+        if unknown:
+            raise ConfigError(f"robot_pose: robot {robot.name!r} has no joints {', '.join(unknown)}", grounding.path)
+        return pose
+
+    @property
+    def default_arm(self) -> str:
+        return str(self.sim.robot.default_arm)
 
     @classmethod
     def from_task_file(cls, path: str | Path, problem: str | None = None, *, variant: str | None = None,
@@ -345,7 +395,7 @@ class SimWorld:
         if spec is None:
             raise BtMetaError(f"the simulator has no skill for {action!r}; grounded primitives: "
                               f"{', '.join(self.grounding.skills)} ({self.grounding.path})")
-        skill = SKILLS[spec["skill"]](self, spec.get("arm", "right"))
+        skill = SKILLS[spec["skill"]](self, spec.get("arm", self.default_arm))
         skill.spec = spec
         return PrimitiveSkill(self, self.domain.primitives.get(action), skill)
 
@@ -495,14 +545,14 @@ class SimWorld:
     def pose_spec(self, symbol: str) -> dict[str, Any]:
         spec = self.grounding.poses.get(symbol)
         if spec is None and (values := parse_pose_symbol(symbol)) is not None:
-            return {"pose": [*values[:3], *(math.degrees(v) for v in values[3:])]}
+            return {"pose": [*values[:3], *(math.degrees(v) for v in values[3:])], "frame": "base"}
         if spec is None:
             known = ", ".join(self.grounding.poses) or "none"
             raise SkillAbort(FailureKind.INTERNAL, f"no pose symbol {symbol!r} in {self.grounding.path}; "
                                                    f"known: {known}", {"symbol": symbol})
         return spec
 
-    def ground_pose(self, symbol: str, arm: str = "right") -> np.ndarray:
+    def ground_pose(self, symbol: str, arm: str | None = None) -> np.ndarray:
         """The gripper pose (4x4, base frame) a pose symbol of the task file stands for, now.
 
         Kinds of entries (``rpy`` in degrees, default pointing down with yaw 180):
@@ -514,6 +564,7 @@ class SimWorld:
           its centroid over it (the gripper itself when nothing is held);
         * ``anchor: NAME, offset: [dx, dy, dz]`` -- a scene anchor plus an offset.
         """
+        arm = arm or self.default_arm
         spec = self.pose_spec(symbol)
         down = spec.get("rpy", [180.0, 0.0, 180.0])
         out = np.eye(4)
@@ -521,6 +572,9 @@ class SimWorld:
         height = float(spec.get("height", 0.0))
         if "pose" in spec:
             x, y, z, roll, pitch, yaw = (float(v) for v in spec["pose"])
+            if spec.get("frame") != "base":  # the grounding file's poses are in the scene frame
+                dx, dy, dz = self.sim.robot.scene_offset
+                x, y, z = x + dx, y + dy, z + dz
             return pose_to_matrix((x, y, z, math.radians(roll), math.radians(pitch), math.radians(yaw)))
         if "above" in spec:
             name = self.object_name(str(spec["above"]))
@@ -555,7 +609,8 @@ class SimWorld:
             raise SkillAbort(FailureKind.INTERNAL, f"scene {self.scene.name!r} has no anchor {name!r}; "
                                                    f"anchors: {', '.join(anchors) or 'none'}")
         (x, y, z), rpy = anchors[name]
-        return (x, y, self.sim.table.top_z if z is None else z), tuple(rpy)
+        dx, dy, dz = self.sim.robot.scene_offset
+        return (x + dx, y + dy, self.sim.table.top_z if z is None else z + dz), tuple(rpy)
 
     def ground_cell(self, frame: str, x: str, y: str) -> tuple[float, float, float]:
         """A point (x, y) of a task-file frame (e.g. letter cells in lb) -> (X, Y, yaw) on the table."""
@@ -666,5 +721,5 @@ def bt_meta_make_world(name: str, domain: Any, problem: Any, options: dict[str, 
         return None
     grounding = load_grounding(domain.name, options.get("task_file"), options.get("grounding"))
     return SimWorld(domain, problem, grounding, variant=options.get("variant"), seed=int(options.get("seed", 0)),
-                    gui=bool(options.get("gui", False)))
+                    gui=bool(options.get("gui", False)), robot=options.get("robot"))
 

@@ -143,9 +143,11 @@ class MoveTo(SimSkill):
             q[indices] = start + (goal - start) * (k / count)
             waypoints.append(q)
         if self.check_path:
-            for k, q in enumerate(waypoints[:-1]):
-                contact = world.collision.check(q, arm=self.arm)
-                if contact is not None:
+            collision = self._first_collision(waypoints)
+            if collision is not None:
+                straight = self._straight_line(q_now, count)
+                if straight is None or self._first_collision(straight) is not None:
+                    k, contact = collision
                     raise SkillAbort(
                         FailureKind.COLLISION,
                         f"move_to {self.label}: the joint-space path collides at {100 * (k + 1) // count}%: {contact}",
@@ -153,9 +155,43 @@ class MoveTo(SimSkill):
                          "collision_kind": contact.kind, "penetration": contact.penetration,
                          "waypoint": k + 1, "waypoints": count, "target": self.info["target"]},
                     )
+                waypoints = straight
+                self.info["path"] = "cartesian"
         self._waypoints = [q[indices] for q in waypoints]
         self.info["waypoints"] = count
         self.info["q_goal"] = rounded(goal)
+
+    def _first_collision(self, waypoints: list[np.ndarray]) -> tuple[int, Any] | None:
+        for k, q in enumerate(waypoints[:-1]):
+            contact = self.world.collision.check(q, arm=self.arm)
+            if contact is not None:
+                return k, contact
+        return None
+
+    def _straight_line(self, q_now: np.ndarray, count: int) -> list[np.ndarray] | None:
+        """Waypoints moving the gripper frame along the straight line (and the shortest rotation) to the target,
+        each solved by IK from the one before: the fallback when the joint-space path sweeps into something (an
+        arm whose joint-space straight line bends sideways while a block goes down between two others). ``None``
+        when a waypoint has no solution."""
+        world = self.world
+        assert self.target is not None
+        start = world.sim.link_transform(world.end_effector(self.arm))
+        rotation = pin.log3(start[:3, :3].T @ self.target[:3, :3])
+        steps = max(count, math.ceil(float(np.linalg.norm(self.target[:3, 3] - start[:3, 3])) / 0.01))
+        indices = world.kin.arm_indices(self.arm)
+        out, q = [], q_now.copy()
+        for k in range(1, steps + 1):
+            fraction = k / steps
+            pose = pin.SE3(start[:3, :3] @ pin.exp3(rotation * fraction),
+                           start[:3, 3] + (self.target[:3, 3] - start[:3, 3]) * fraction)
+            result = world.ik.solve(self.arm, pose, q, seed=world.seed, check_collisions=False)
+            if not result.success or result.q is None:
+                return None
+            if float(np.max(np.abs(result.q[indices] - q[indices]))) > 0.5:  # jumped to another arm configuration
+                return None
+            q = result.q
+            out.append(q.copy())
+        return out
 
     def _error(self) -> tuple[float, float]:
         assert self.target is not None

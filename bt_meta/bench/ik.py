@@ -17,7 +17,8 @@ Beeson and Ames, 2015). It is quoted, not measured.
 
 Offers:
 
-* :func:`register` -- adds ``bt-meta bench ik [--n N] [--seed S] [--arm A] [--json] [--pybullet-calls K]``
+* :func:`register` -- adds ``bt-meta bench ik [--n N] [--seed S] [--robot R] [--arm A] [--json]
+  [--pybullet-calls K]``
 * :func:`make_targets` -- seeded reachable targets
 * :func:`run_benchmark` -- the JSON-able report ``--json`` prints
 """
@@ -282,8 +283,11 @@ def _run_pybullet(
     }
 
 
-def run_benchmark(n: int, seed: int, arm: str, pybullet_calls: int) -> dict[str, Any]:
-    robot = load_robot("baxter")
+def run_benchmark(
+    n: int, seed: int, arm: str | None, pybullet_calls: int, robot_name: str = "baxter"
+) -> dict[str, Any]:
+    robot = load_robot(robot_name)
+    arm = arm or robot.default_arm
     if arm not in robot.arms:
         raise UserInputError(f"--arm: robot {robot.name!r} has no arm {arm!r}; arms: {', '.join(robot.arms)}")
     kinematics = Kinematics(robot)
@@ -371,7 +375,7 @@ def _main(args: argparse.Namespace) -> int:
         raise UserInputError("--n must be at least 1")
     if args.pybullet_calls < 1:
         raise UserInputError("--pybullet-calls must be at least 1")
-    report = run_benchmark(args.n, args.seed, args.arm, args.pybullet_calls)
+    report = run_benchmark(args.n, args.seed, args.arm, args.pybullet_calls, args.robot)
     if args.json:
         print_json(report)
     else:
@@ -383,7 +387,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("ik", help="collision-aware mink IK against pybullet IK on random reachable targets")
     parser.add_argument("--n", type=int, default=10_000, help="number of targets (default 10000)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the targets and of the IK restarts")
-    parser.add_argument("--arm", default="right", help="arm to solve for (default right)")
+    parser.add_argument("--robot", default="baxter",
+                        help="robot: a shipped name (baxter, panda) or a robot description YAML file (default baxter)")
+    parser.add_argument("--arm", help="arm to solve for (default: the robot's first, the Baxter's right)")
     parser.add_argument(
         "--pybullet-calls", type=int, default=50, help="cap on repeated pybullet IK calls per target (default 50)"
     )

@@ -4,7 +4,7 @@ store its trace in the episodic memory.
 Offers:
 
 * :func:`register` -- adds ``record FILE [--problem P] [--variant V] [--seed S] [--memory PATH] [--json]
-  [--max-ticks N] [--grounding FILE] [--check-expectations] [--plugins DIR] [--no-entry-points]``
+  [--max-ticks N] [--grounding FILE] [--robot R] [--check-expectations] [--plugins DIR] [--no-entry-points]``
 * :func:`record` -- the handler
 * :func:`demonstrate` -- the same from Python: run and store one demonstration, return a :class:`Demonstration`
 * :class:`DemonstrationFailed` -- a demonstration that did not succeed (nothing stored; the CLI exits 1)
@@ -32,6 +32,7 @@ from py_trees.common import Status
 
 from bt_meta.commands._common import print_json
 from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
+from bt_meta.commands._world_args import add_world_arguments, world_options
 from bt_meta.errors import BtMetaError, PlanningError, UserInputError
 from bt_meta.memory import add_memory_argument, resolve_memory_path
 
@@ -56,6 +57,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--check-expectations", action="store_true",
                         help="keep the memory's grid-map and keypoint expectations switched on while demonstrating")
     parser.add_argument("--json", action="store_true", help="print one JSON object with the stored episode")
+    add_world_arguments(parser)
     add_memory_argument(parser)
     add_plugin_arguments(parser)
     parser.set_defaults(func=record)
@@ -83,6 +85,7 @@ def demonstrate(
     grounding: str | Path | None = None,
     plugins: Any = None,
     check_expectations: bool = False,
+    robot: Any = None,
 ) -> Demonstration:
     """Run ``problem`` of task file ``file`` in the simulator as a demonstration and store it in ``memory`` (an open
     writable :class:`~bt_meta.memory.EpisodicMemory`). ``plugins``: a plugin host (default: built-ins, entry
@@ -108,21 +111,22 @@ def demonstrate(
                 plugins.unregister(name)
     try:
         return _demonstrate(file, chosen, task_file, ground, memory, variant, seed, max_ticks, plugins,
-                            check_expectations)
+                            check_expectations, robot)
     finally:  # the caller's host is as it was
         for name, plugin, source in removed:
             plugins.register(plugin, name, source=source)
 
 
 def _demonstrate(file: str | Path, chosen: Any, task_file: Any, ground: Any, memory: Any, variant: str | None,
-                 seed: int, max_ticks: int, plugins: Any, check_expectations: bool) -> Demonstration:
+                 seed: int, max_ticks: int, plugins: Any, check_expectations: bool,
+                 robot: Any = None) -> Demonstration:
     from bt_meta.memory.recorder import TraceRecorder
     from bt_meta.testing import TreeHarness
     from bt_meta.world.simulation.sim_world import SimWorld, quiet_stdout
 
     started = time.perf_counter()
     with quiet_stdout():
-        world = SimWorld(task_file.domain, chosen, ground, variant=variant, seed=seed)
+        world = SimWorld(task_file.domain, chosen, ground, variant=variant, seed=seed, robot=robot)
     try:
         recorder = TraceRecorder(memory, variant=world.variant, seed=seed,
                                  config={"demonstration": True, "scene": world.scene.name})
@@ -166,11 +170,12 @@ def record(args: argparse.Namespace) -> int:
     task_file = load_task_file(args.file)
     problem = task_file.problem(args.problem)
     load_grounding(task_file.domain.name, args.file, args.grounding).problem(problem.name)
+    options = world_options(args)
     plugins = plugin_host_from_args(args, args.file)
     with EpisodicMemory.open(resolve_memory_path(args)) as memory:
         shown = demonstrate(args.file, args.problem, memory, variant=args.variant, seed=args.seed,
                             max_ticks=args.max_ticks, grounding=args.grounding, plugins=plugins,
-                            check_expectations=args.check_expectations)
+                            check_expectations=args.check_expectations, **options)
         return _report(args, memory, shown.trace, shown.ticks, shown.seconds, shown.recording_seconds)
 
 

@@ -202,7 +202,7 @@ GOOD_OBJECT = "  - {name: b0, type: megablok_1x1, colour: red, pose: [0.6, -0.3,
             """,
             6,
             5,
-            "unknown key 'recolour'; expected one of add, description, override, remove, replace",
+            "unknown key 'recolour'; expected one of add, description, obstacles, override, remove, replace",
         ),
         (
             f"""

@@ -2,9 +2,11 @@
 
 A scene file names the scene, lists its objects (name, type, colour, pose) and its variants; a variant changes
 the nominal object list by ``override`` (new colour/type/pose for a named object), ``remove``, ``replace`` (one
-object by others, e.g. a 1x2 block by two 1x1s) and ``add``. Poses are ``[x, y, z, roll, pitch, yaw]`` in the
-robot base frame, metres and **degrees** (people write 90, not 1.5708); ``z`` may be ``table``: resting on the
-table top in that orientation. Every mistake is a :class:`~bt_meta.errors.ConfigError` at ``path:line:column``.
+object by others, e.g. a 1x2 block by two 1x1s), ``add`` and ``obstacles`` (static obstacles added: see
+:mod:`~bt_meta.world.simulation.obstacles`; a scene lists its own under ``obstacles:``). Poses are
+``[x, y, z, roll, pitch, yaw]`` in the scene frame (the robot base frame moved by the robot's
+``workcell.scene_offset``), metres and **degrees** (people write 90, not 1.5708); ``z`` may be ``table``: resting on
+the table top in that orientation. Every mistake is a :class:`~bt_meta.errors.ConfigError` at ``path:line:column``.
 
 Offers:
 
@@ -12,7 +14,8 @@ Offers:
 * :func:`scene_names` / :func:`scenes_dir` -- the shipped scenes
 * :class:`Scene` -- ``objects_for(variant)``, ``build(sim, variant, seed)``, ``variant_names``
 * :class:`SceneObject` -- one object's name, type, colour, pose, and where the file says so
-* :class:`Variant` -- a variant's name, description and resolved object list
+* :class:`Variant` -- a variant's name, description and resolved object and obstacle lists
+* :class:`SceneObstacle` -- one static obstacle: name, shape, model, pose, and where the file says so
 """
 
 from __future__ import annotations
@@ -30,12 +33,14 @@ from bt_meta.errors import ConfigError
 from bt_meta.resources import trees_dir
 from bt_meta.world._yaml_nodes import YamlNodeReader, shipped_yaml_path
 from bt_meta.world.simulation.objects import COLOURS, OBJECT_TYPES, ObjectModel, make_model, pose_to_matrix
+from bt_meta.world.simulation.obstacles import OBSTACLE_SHAPES, ObstacleError, obstacle_model
 
-__all__ = ["Scene", "SceneObject", "Variant", "load_scene", "scene_names", "scenes_dir"]
+__all__ = ["Scene", "SceneObject", "SceneObstacle", "Variant", "load_scene", "scene_names", "scenes_dir"]
 
-_SCENE_KEYS = {"scene", "description", "objects", "variants", "jitter", "anchors"}
+_SCENE_KEYS = {"scene", "description", "objects", "variants", "jitter", "anchors", "obstacles"}
+_OBSTACLE_KEYS = {"name", "shape", "pose", "colour", "description", "size", "radius", "height", "thickness"}
 _OBJECT_KEYS = {"name", "type", "colour", "pose", "description"}
-_VARIANT_KEYS = {"description", "override", "remove", "replace", "add"}
+_VARIANT_KEYS = {"description", "override", "remove", "replace", "add", "obstacles"}
 _OVERRIDE_KEYS = {"type", "colour", "pose"}
 _JITTER_KEYS = {"position", "yaw"}
 
@@ -75,10 +80,24 @@ class SceneObject:
 
 
 @dataclass(frozen=True)
+class SceneObstacle:
+    """A static obstacle of a scene (see :mod:`~bt_meta.world.simulation.obstacles`); ``z`` ``None``: on the table."""
+
+    name: str
+    shape: str
+    model: ObjectModel
+    position: tuple[float, float, float | None]
+    rpy: tuple[float, float, float]
+    location: Location | None = field(default=None, compare=False)
+
+
+@dataclass(frozen=True)
 class Variant:
     name: str
     description: str
     objects: tuple[SceneObject, ...]
+    obstacles: tuple[SceneObstacle, ...] = ()
+    """The scene's obstacles and the ones the variant adds."""
 
 
 @dataclass(frozen=True)
@@ -97,6 +116,15 @@ class Scene:
     )
     """Named frames on the table (position with ``z`` None = table top, rpy in radians), e.g. where a letter's
     origin cell is and which way its axes point."""
+    obstacles: tuple[SceneObstacle, ...] = ()
+    """Static obstacles of the nominal scene."""
+
+    def obstacles_for(self, variant: str | None = None) -> tuple[SceneObstacle, ...]:
+        """The nominal obstacles, or those of a named variant (the nominal ones plus what it adds)."""
+        if variant is None or variant == "nominal":
+            return self.obstacles
+        self.objects_for(variant)  # an unknown variant is reported the same way
+        return self.variants[variant].obstacles
 
     def anchor_transform(self, name: str, table_top_z: float) -> np.ndarray:
         """4x4 pose of a named anchor in the robot base frame."""
@@ -146,6 +174,10 @@ class Scene:
                 raise obj.location.error(message) if obj.location else ConfigError(message, self.path)
             pose = (x, y, 0.0 if z is None else z, roll, pitch, yaw)
             sim.spawn(obj.name, obj.model(), pose, on_table=z is None)
+        for obstacle in self.obstacles_for(variant):
+            x, y, z = obstacle.position
+            z = sim.table.top_z if z is None else z + dz
+            sim.add_obstacle(obstacle.name, obstacle.model, (x + dx, y + dy, z, *obstacle.rpy))
         if settle_steps:
             sim.step(settle_steps)
 
@@ -199,17 +231,21 @@ class _SceneFile(YamlNodeReader):
                 jitter_position = self.number(jitter["position"][1], "jitter position (m)", minimum=0.0)
             if "yaw" in jitter:
                 jitter_yaw = math.radians(self.number(jitter["yaw"][1], "jitter yaw (degrees)", minimum=0.0))
+        obstacles: tuple[SceneObstacle, ...] = ()
+        if "obstacles" in top:
+            obstacles = self.obstacle_list(top["obstacles"][1], "obstacles")
+            self.check_unique([*objects, *obstacles], top["obstacles"][1])
         variants: dict[str, Variant] = {}
         if "variants" in top:
             for key, (key_node, value) in self.mapping(top["variants"][1], "variants", None).items():
                 if key == "nominal":
                     raise self.error("a variant cannot be called 'nominal' (that is the scene itself)", key_node)
-                variants[key] = self.variant(key, value, objects)
+                variants[key] = self.variant(key, value, objects, obstacles)
         anchors = {}
         if "anchors" in top:
             for key, (_, value) in self.mapping(top["anchors"][1], "anchors", None).items():
                 anchors[key] = self.pose(value, key, what=f"anchor {key!r}")
-        return Scene(name, description, self.path, objects, variants, jitter_position, jitter_yaw, anchors)
+        return Scene(name, description, self.path, objects, variants, jitter_position, jitter_yaw, anchors, obstacles)
 
     # -- parts -----------------------------------------------------------------------------------------------
 
@@ -261,11 +297,48 @@ class _SceneFile(YamlNodeReader):
         assert x is not None and y is not None and roll is not None and pitch is not None and yaw is not None
         return (x, y, z), (math.radians(roll), math.radians(pitch), math.radians(yaw))
 
-    def variant(self, name: str, node: yaml.Node, nominal: tuple[SceneObject, ...]) -> Variant:
+    def obstacle_list(self, node: yaml.Node, what: str) -> tuple[SceneObstacle, ...]:
+        if not isinstance(node, yaml.SequenceNode):
+            raise self.error(f"{what} must be a list of obstacles", node)
+        return tuple(self.obstacle(item, f"{what}[{i}]") for i, item in enumerate(node.value))
+
+    def obstacle(self, node: yaml.Node, what: str) -> SceneObstacle:
+        entries = self.mapping(node, what, _OBSTACLE_KEYS)
+        name = self.string(self.require(entries, "name", node, what), f"{what} name")
+        shape_node = self.require(entries, "shape", node, f"obstacle {name!r}")
+        shape = self.string(shape_node, f"obstacle {name!r} shape")
+        if shape not in OBSTACLE_SHAPES:
+            raise self.error(f"obstacle {name!r}: unknown shape {shape!r}; known: {', '.join(OBSTACLE_SHAPES)}",
+                             shape_node)
+        colour = self.colour(entries["colour"][1], name) if "colour" in entries else "grey"
+        keys = set(OBSTACLE_SHAPES[shape])
+        for key, (key_node, _) in entries.items():
+            if key in {"size", "radius", "height", "thickness"} and key not in keys:
+                raise self.error(f"obstacle {name!r}: a {shape} takes {', '.join(sorted(keys))}, not {key}", key_node)
+        dimensions: dict[str, object] = {}
+        for key in keys:
+            if key not in entries:
+                continue
+            value_node = entries[key][1]
+            if isinstance(value_node, yaml.SequenceNode):
+                dimensions[key] = [self.number(v, f"obstacle {name!r} {key}") for v in value_node.value]
+            else:
+                dimensions[key] = self.number(value_node, f"obstacle {name!r} {key}")
+        try:
+            model = obstacle_model(shape, dimensions, colour)
+        except ObstacleError as error:
+            raise self.error(f"obstacle {name!r}: {error}", node) from None
+        position, rpy = self.pose(self.require(entries, "pose", node, f"obstacle {name!r}"), name,
+                                  what=f"obstacle {name!r} pose")
+        return SceneObstacle(name, shape, model, position, rpy, self.at(node))
+
+    def variant(self, name: str, node: yaml.Node, nominal: tuple[SceneObject, ...],
+                nominal_obstacles: tuple[SceneObstacle, ...] = ()) -> Variant:
         entries = self.mapping(node, f"variant {name!r}", _VARIANT_KEYS)
         description = self.string(entries["description"][1], "description") if "description" in entries else ""
-        if not any(k in entries for k in ("override", "remove", "replace", "add")):
-            raise self.error(f"variant {name!r} changes nothing: give override, remove, replace or add", node)
+        if not any(k in entries for k in ("override", "remove", "replace", "add", "obstacles")):
+            raise self.error(f"variant {name!r} changes nothing: give override, remove, replace, add or obstacles",
+                             node)
         objects = list(nominal)
 
         def index(obj_name: str, at: yaml.Node) -> int:
@@ -315,8 +388,11 @@ class _SceneFile(YamlNodeReader):
                 objects[i : i + 1] = list(new)
         if "add" in entries:
             objects += list(self.object_list(entries["add"][1], "add", require_pose=True))
-        self.check_unique(objects, node)
-        return Variant(name, description, tuple(objects))
+        obstacles = list(nominal_obstacles)
+        if "obstacles" in entries:
+            obstacles += list(self.obstacle_list(entries["obstacles"][1], "obstacles"))
+        self.check_unique([*objects, *obstacles], node)
+        return Variant(name, description, tuple(objects), tuple(obstacles))
 
     def check_unique(self, objects: Sequence[SceneObject], node: yaml.Node) -> None:
         seen: dict[str, SceneObject] = {}

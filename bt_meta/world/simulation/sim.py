@@ -8,7 +8,7 @@ Offers:
 * :class:`Simulation` -- own physics client (``gui=True`` for a person at a screen), context manager; robot
   joints (teleport or drive targets and step), objects by name (spawn, move, remove, pose), grasp by fixed
   constraint and release, the magnetic attach rule (checked at every step, joins by fixed constraint),
-  :meth:`Simulation.object_states` with AP/AN in the base frame
+  :meth:`Simulation.object_states` with AP/AN in the base frame, static obstacles (:meth:`Simulation.add_obstacle`)
 * :class:`SimObjectState` -- ground truth of one object: pose, AP/AN (base and object frame), all features
 * :class:`Table` -- where the table is (defaults: top 0.2 m below the base frame, front edge 0.45 m ahead)
 * :class:`SimulationError` -- unknown object or link names, duplicate names, impossible requests
@@ -263,6 +263,7 @@ class Simulation:
         self.movable_joints: tuple[str, ...] = tuple(self._joint_index)
         self._targets: dict[str, float] = {}
         self._bodies: dict[str, _Body] = {}
+        self._obstacles: dict[str, _Body] = {}
         self._by_id: dict[int, str] = {}
         self._grasps: dict[str, _Grasp] = {}
         self._joins: dict[frozenset[str], int] = {}
@@ -470,11 +471,40 @@ class Simulation:
         """Create an object at ``pose`` (x, y, z, roll, pitch, yaw); ``on_table`` replaces z by the height at
         which the geometry, so turned, rests on the table top (loose objects 0.5 mm higher: they start out of contact
         and drop)."""
-        if name in self._bodies:
+        if name in self._bodies or name in self._obstacles:
             raise SimulationError(f"an object named {name!r} already exists")
         pose = self._checked_pose(pose, name)
         if on_table:
             pose = self.resting_pose(model, pose)
+        body = self._create_body(model, pose)
+        self._bodies[name] = _Body(name, model, body)
+        self._by_id[body] = name
+        return body
+
+    def add_obstacle(self, name: str, model: ObjectModel, pose: Sequence[float]) -> int:
+        """A static obstacle (see :mod:`~bt_meta.world.simulation.obstacles`) at ``pose``: a body the cameras
+        see and the physics collides with, but not an object of the task (not in :meth:`object_names`)."""
+        if name in self._bodies or name in self._obstacles:
+            raise SimulationError(f"an object named {name!r} already exists")
+        if model.mass != 0.0:
+            raise SimulationError(f"obstacle {name!r} must be static (mass 0), not {model.mass} kg")
+        pose = self._checked_pose(pose, name)
+        body = self._create_body(model, pose)
+        self._obstacles[name] = _Body(name, model, body)
+        return body
+
+    def obstacles(self) -> dict[str, tuple[ObjectModel, np.ndarray]]:
+        """Every static obstacle: name -> (model, 4x4 pose in the base frame)."""
+        out = {}
+        for name, body in self._obstacles.items():
+            pos, quat = pybullet.getBasePositionAndOrientation(body.body_id, physicsClientId=self.client)
+            out[name] = (body.model, _transform(pos, quat))
+        return out
+
+    def obstacle_name_of(self, body_id: int) -> str | None:
+        return next((name for name, body in self._obstacles.items() if body.body_id == body_id), None)
+
+    def _create_body(self, model: ObjectModel, pose: Sequence[float]) -> int:
         c = self.client
         kinds, halves, radii, lengths, positions, orientations = [], [], [], [], [], []
         for part in model.parts:
@@ -523,8 +553,6 @@ class Simulation:
         pybullet.changeDynamics(
             body, -1, lateralFriction=model.lateral_friction, spinningFriction=0.001, physicsClientId=c
         )
-        self._bodies[name] = _Body(name, model, body)
-        self._by_id[body] = name
         return body
 
     def resting_pose(self, model: ObjectModel, pose: Sequence[float]) -> Pose6:
@@ -556,8 +584,12 @@ class Simulation:
         del self._by_id[body.body_id]
 
     def clear_objects(self) -> None:
+        """Remove every object and obstacle (an empty table, to build another scene on)."""
         for name in list(self._bodies):
             self.remove(name)
+        for body in self._obstacles.values():
+            pybullet.removeBody(body.body_id, physicsClientId=self.client)
+        self._obstacles.clear()
 
     def move_object(self, name: str, pose: Sequence[float]) -> None:
         """Teleport an object (velocity zeroed)."""
@@ -636,6 +668,8 @@ class Simulation:
                 out.add("robot")
             elif other in self._by_id:
                 out.add(self._by_id[other])
+            elif (obstacle := self.obstacle_name_of(other)) is not None:
+                out.add(obstacle)
         return out
 
     # -- grasp -----------------------------------------------------------------------------------------------
@@ -701,7 +735,7 @@ class Simulation:
             other = contact[2]
             if other == self.robot_id:
                 continue
-            what = "table" if other == self.table_id else self._by_id.get(other)
+            what = "table" if other == self.table_id else self._by_id.get(other) or self.obstacle_name_of(other)
             if what is not None:
                 out.add((names.get(contact[3], str(contact[3])), what))
         return sorted(out)

@@ -350,6 +350,13 @@ class SimWorld:
         t = sim.table
         self.collision.add_box("table", (t.size_x, t.size_y, t.thickness),
                                pose_to_matrix((t.center_x, t.center_y, t.top_z - t.thickness / 2.0, 0, 0, 0)))
+        for name, (model, transform) in sim.obstacles().items():  # static: added once, never moved
+            for k, (kind, dims, local) in enumerate(_collision_shapes(model)):
+                part = name if k == 0 else f"{name}{_PART}{k}"
+                if kind == "box":
+                    self.collision.add_box(part, dims, transform @ local)
+                else:
+                    self.collision.add_cylinder(part, dims[0], dims[1], transform @ local)
         self.sync_collision()
         self._state = initial_state(problem)
         self.executed: list[dict[str, Any]] = []
@@ -478,7 +485,7 @@ class SimWorld:
             if other == sim.table_id:
                 out.add("table")
             else:
-                name = sim.object_name_of(other)
+                name = sim.object_name_of(other) or sim.obstacle_name_of(other)
                 if name is not None and name not in held:
                     out.add(name)
         return sorted(out)

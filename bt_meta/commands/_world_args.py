@@ -2,7 +2,7 @@
 
 Offers:
 
-* :func:`add_world_arguments` -- ``--robot NAME|FILE``
+* :func:`add_world_arguments` -- ``--robot NAME|FILE`` and ``--scene FILE``
 * :func:`world_options` -- the keyword arguments those options give
   :class:`~bt_meta.world.simulation.sim_world.SimWorld`
 """
@@ -16,11 +16,18 @@ from typing import Any
 def add_world_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--robot", help="robot to run on: a shipped name (baxter, panda) or a robot description "
                                         "YAML file (default: the grounding file's `robot:`, else baxter)")
+    parser.add_argument("--scene", help="scene file (or shipped scene name) to build instead of the one the "
+                                        "grounding file names for the problem")
 
 
 def world_options(args: argparse.Namespace) -> dict[str, Any]:
-    """``robot`` for the SimWorld (loaded here so a bad name or file is reported before anything is built)."""
+    """``robot`` and ``scene`` for the SimWorld, loaded here so a bad name or file is reported before anything is
+    built."""
     from bt_meta.world.robot.description import load_robot
+    from bt_meta.world.simulation.scenes import load_scene
 
     robot = getattr(args, "robot", None)
-    return {"robot": load_robot(robot) if robot else None}
+    scene = getattr(args, "scene", None)
+    if scene:
+        load_scene(scene)
+    return {"robot": load_robot(robot) if robot else None, "scene": scene or None}

@@ -4,7 +4,8 @@ store its trace in the episodic memory.
 Offers:
 
 * :func:`register` -- adds ``record FILE [--problem P] [--variant V] [--seed S] [--memory PATH] [--json]
-  [--max-ticks N] [--grounding FILE] [--robot R] [--check-expectations] [--plugins DIR] [--no-entry-points]``
+  [--max-ticks N] [--grounding FILE] [--robot R] [--scene FILE] [--check-expectations] [--plugins DIR]
+  [--no-entry-points]``
 * :func:`record` -- the handler
 * :func:`demonstrate` -- the same from Python: run and store one demonstration, return a :class:`Demonstration`
 * :class:`DemonstrationFailed` -- a demonstration that did not succeed (nothing stored; the CLI exits 1)
@@ -86,6 +87,7 @@ def demonstrate(
     plugins: Any = None,
     check_expectations: bool = False,
     robot: Any = None,
+    scene: str | Path | None = None,
 ) -> Demonstration:
     """Run ``problem`` of task file ``file`` in the simulator as a demonstration and store it in ``memory`` (an open
     writable :class:`~bt_meta.memory.EpisodicMemory`). ``plugins``: a plugin host (default: built-ins, entry
@@ -111,7 +113,7 @@ def demonstrate(
                 plugins.unregister(name)
     try:
         return _demonstrate(file, chosen, task_file, ground, memory, variant, seed, max_ticks, plugins,
-                            check_expectations, robot)
+                            check_expectations, robot, scene)
     finally:  # the caller's host is as it was
         for name, plugin, source in removed:
             plugins.register(plugin, name, source=source)
@@ -119,14 +121,14 @@ def demonstrate(
 
 def _demonstrate(file: str | Path, chosen: Any, task_file: Any, ground: Any, memory: Any, variant: str | None,
                  seed: int, max_ticks: int, plugins: Any, check_expectations: bool,
-                 robot: Any = None) -> Demonstration:
+                 robot: Any = None, scene: str | Path | None = None) -> Demonstration:
     from bt_meta.memory.recorder import TraceRecorder
     from bt_meta.testing import TreeHarness
     from bt_meta.world.simulation.sim_world import SimWorld, quiet_stdout
 
     started = time.perf_counter()
     with quiet_stdout():
-        world = SimWorld(task_file.domain, chosen, ground, variant=variant, seed=seed, robot=robot)
+        world = SimWorld(task_file.domain, chosen, ground, variant=variant, seed=seed, robot=robot, scene=scene)
     try:
         recorder = TraceRecorder(memory, variant=world.variant, seed=seed,
                                  config={"demonstration": True, "scene": world.scene.name})

@@ -3,7 +3,8 @@
 Offers:
 
 * :func:`register` -- adds ``run FILE [--problem P] [--variant V] [--seed S] [--json] [--plugins DIR]
-  [--max-ticks N] [--gui] [--grounding FILE] [--robot R] [--memory PATH] [--record] [--record-failed] [--repair]
+  [--max-ticks N] [--gui] [--grounding FILE] [--robot R] [--scene FILE] [--memory PATH] [--record] [--record-failed]
+  [--repair]
   [--max-attempts N]``
 * :func:`run` -- the handler
 

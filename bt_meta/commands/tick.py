@@ -4,12 +4,20 @@ Offers:
 
 * :func:`register` -- adds ``tick FILE [--problem P] [--task-file T] [--policy] [--world fake] [--ticks N]
   [--ticks-per-skill K] [--fault SPEC ...] [--seed N] [--world-option K=V ...] [--keep-ticking] [--plugins DIR]
-  [--json]``
+  [--repair [--max-attempts N] [--memory PATH]] [--json]``
 
 FILE is a YAML task file (planned, then compiled) or a tree XML (its primitives come from ``--task-file``, by default
 the ``.yaml`` next to it). Ticking stops when the root finishes unless ``--keep-ticking``. Each tick prints the root
 status and the status of every primitive and guard ticked; failures are printed with kind, node and evidence.
 Exit status 0 when the root succeeded or is still running, 1 when it failed, 2 on bad input.
+
+``--repair`` (task files only) runs the problem through the
+:class:`~bt_meta.meta.executor.MetaExecutor` on the chosen world instead: every failure (e.g. one injected with
+``--fault``) is classified, the repair plugins propose fixes, the best one is applied and the run goes on, at most
+``--max-attempts`` times. It prints one line per finished step, failure and repair decision, then the outcome
+(JSON: ``status``, ``attempts``, ``repairs``, ``stop_reason``, ``plan``, ``initial_plan``, ``failures``). A
+``--memory`` file gives the repairs their episodic memory and keeps learned refinements; without it the run uses
+none and saves none.
 """
 
 from __future__ import annotations
@@ -40,6 +48,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="extra option for the world plugin, e.g. variant=rotated (repeatable)")
     parser.add_argument("--keep-ticking", action="store_true", help="keep ticking after the root finished")
     parser.add_argument("--json", action="store_true", help="print one JSON object with every tick")
+    parser.add_argument("--repair", action="store_true",
+                        help="task files: diagnose and repair failures with the meta-reasoner while ticking")
+    parser.add_argument("--max-attempts", type=int, default=5,
+                        help="with --repair: at most this many applied repairs (default 5)")
+    parser.add_argument("--memory", help="with --repair: episodic memory file (SQLite) for the repairs")
     add_plugin_arguments(parser)
     parser.set_defaults(func=run)
 
@@ -60,6 +73,8 @@ def run(args: argparse.Namespace) -> int:
             raise UserInputError(f"bad --world-option {item!r}: expected KEY=VALUE")
         world_options[key.strip()] = value.strip()
     plugins = plugin_host_from_args(args, args.file)
+    if args.repair:
+        return _run_repaired(args, faults, world_options, plugins)
     harness = TreeHarness.from_file(args.file, args.problem, task_file=args.task_file, policy=args.policy,
                                     world=args.world, faults=faults, ticks_per_skill=args.ticks_per_skill,
                                     world_options=world_options, plugins=plugins)
@@ -101,3 +116,68 @@ def run(args: argparse.Namespace) -> int:
               f"belief state: {len(final_state)} atoms")
     harness.close()
     return 1 if status is Status.FAILURE else 0
+
+
+def _run_repaired(args: argparse.Namespace, faults: list[Any], world_options: dict[str, Any], plugins: Any) -> int:
+    from bt_meta.commands.run import _Progress
+    from bt_meta.errors import PluginError
+    from bt_meta.htn import load_task_file
+    from bt_meta.meta.executor import MetaExecutor
+    from bt_meta.meta.reasoner import Limits
+
+    if args.max_attempts < 0:
+        raise UserInputError("--max-attempts must be at least 0")
+    if args.policy or not str(args.file).endswith((".yaml", ".yml")):
+        raise UserInputError("--repair needs a YAML task file (it replans from the task file's methods)", args.file)
+    task_file = load_task_file(args.file)
+    problem = task_file.problem(args.problem)
+    options = {"faults": faults, "ticks_per_skill": args.ticks_per_skill, "task_file": str(args.file),
+               **world_options}
+    made = plugins.call("bt_meta_make_world", name=args.world, domain=task_file.domain, problem=problem,
+                        options=options)
+    if made.errors:
+        error = made.errors[0]
+        raise error.error if isinstance(error.error, UserInputError) else PluginError(error.message)
+    if not made.results:
+        raise UserInputError(f"no plugin provides a world named {args.world!r}")
+    world = made.first
+    if not args.json:
+        print(f"{problem.name} on the {args.world} world: ticking with repairs (at most {args.max_attempts} attempts)")
+        plugins.register(_Progress(), "tick_progress", source="bt-meta tick --repair")
+    memory = refinements = None
+    try:
+        if args.memory:
+            from bt_meta.memory import EpisodicMemory
+            from bt_meta.meta.refinements import RefinementStore
+
+            memory = EpisodicMemory.open(args.memory)
+            refinements = RefinementStore.open(memory.path)
+        report = MetaExecutor(task_file.domain, problem, world, plugins, task_file=task_file, memory=memory,
+                              refinements=refinements, save_refinements=refinements is not None,
+                              limits=Limits(max_attempts=args.max_attempts, max_ticks=args.ticks)).run()
+    finally:
+        if refinements is not None:
+            refinements.close()
+        if memory is not None:
+            memory.close()
+        close = getattr(world, "close", None)
+        if callable(close):
+            close()
+    status = "SUCCESS" if report.ok else "FAILURE"
+    if args.json:
+        print_json({
+            "file": str(args.file), "problem": problem.name, "world": args.world, "status": status,
+            "ticks": report.ticks, "attempts": [a.to_dict() for a in report.attempts], "repairs": report.repairs,
+            "stop_reason": report.stop_reason, "plan": [" ".join(step) for step in report.plan],
+            "initial_plan": [" ".join(step) for step in report.initial_plan], "failures": report.failures,
+        })
+    else:
+        for attempt in report.attempts:
+            proposal = attempt.proposal
+            print(f"  attempt {attempt.number}: {attempt.kind} at step {attempt.step} -> {proposal.get('action')} "
+                  f"by {proposal.get('plugin')}: {attempt.change} [{attempt.outcome}]")
+        if report.stop_reason:
+            print(f"  stopped: {report.stop_reason}")
+        print(f"{status} after {report.ticks} ticks, {len(report.attempts)} repair attempt(s); "
+              f"plan: {'; '.join(' '.join(step) for step in report.plan)}")
+    return 0 if report.ok else 1

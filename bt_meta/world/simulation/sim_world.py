@@ -289,6 +289,7 @@ class SimWorld:
         sim: Any = None,
         realtime: bool | None = None,
         robot: Any = None,
+        scene: str | Path | None = None,
     ) -> None:
         from bt_meta.world.fake import initial_state
         from bt_meta.world.kinematics.collision import CollisionChecker
@@ -308,9 +309,11 @@ class SimWorld:
         if missing:
             raise ConfigError(f"primitives without a skill in the grounding file: {', '.join(missing)}",
                               grounding.path)
-        scene_name = setup.get("scene")
+        scene_name = scene if scene is not None else setup.get("scene")
         if not scene_name:
             raise ConfigError(f"problems.{problem_name}: give the `scene:` to build", grounding.path)
+        if scene is None and str(scene_name).endswith((".yaml", ".yml")):
+            scene_name = grounding.path.parent / str(scene_name)  # a path in the grounding file: beside it
         self.scene = load_scene(scene_name)
         if variant is None:
             variant = setup.get("variant")
@@ -728,5 +731,5 @@ def bt_meta_make_world(name: str, domain: Any, problem: Any, options: dict[str, 
         return None
     grounding = load_grounding(domain.name, options.get("task_file"), options.get("grounding"))
     return SimWorld(domain, problem, grounding, variant=options.get("variant"), seed=int(options.get("seed", 0)),
-                    gui=bool(options.get("gui", False)), robot=options.get("robot"))
+                    gui=bool(options.get("gui", False)), robot=options.get("robot"), scene=options.get("scene"))
 

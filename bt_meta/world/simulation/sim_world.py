@@ -695,6 +695,9 @@ class SimWorld:
             elif name not in held:
                 for part, (_, _, local) in zip(self._geometry[name], shapes, strict=True):
                     checker.move(part, transform @ local)
+        for a, b in sim.attachments():  # magnetically joined parts touch by construction: not a collision
+            for part in self._geometry.get(a, []):
+                checker.allow(part, self._geometry.get(b, []))
 
 
 SHRINK = 0.0015

@@ -147,6 +147,8 @@ class MoveTo(SimSkill):
             if collision is not None:
                 straight = self._straight_line(q_now, count)
                 if straight is None or self._first_collision(straight) is not None:
+                    straight = self._lift_first(q_now)
+                if straight is None or self._first_collision(straight) is not None:
                     k, contact = collision
                     raise SkillAbort(
                         FailureKind.COLLISION,
@@ -167,6 +169,36 @@ class MoveTo(SimSkill):
             if contact is not None:
                 return k, contact
         return None
+
+    def _lift_first(self, q_now: np.ndarray, clearance: float = 0.06) -> list[np.ndarray] | None:
+        """Waypoints rising straight up with the gripper's orientation kept (by ``clearance``, or to the target's
+        height when that is higher), then along the joint-space line to the target: the second fallback, for a
+        hand that would sweep its fingers through what it just let go of when it turns on the spot. ``None`` when
+        the lift or the target has no IK solution."""
+        world = self.world
+        assert self.target is not None
+        start = world.sim.link_transform(world.end_effector(self.arm))
+        height = max(clearance, float(self.target[2, 3] - start[2, 3]))
+        indices = world.kin.arm_indices(self.arm)
+        out, q = [], q_now.copy()
+        steps = max(1, math.ceil(height / 0.01))
+        for k in range(1, steps + 1):
+            pose = pin.SE3(start[:3, :3], start[:3, 3] + np.array([0.0, 0.0, height * k / steps]))
+            result = world.ik.solve(self.arm, pose, q, seed=world.seed, check_collisions=False)
+            if not result.success or result.q is None or float(np.max(np.abs(result.q[indices] - q[indices]))) > 0.5:
+                return None
+            q = result.q
+            out.append(q.copy())
+        result = world.ik.solve(self.arm, pin.SE3(self.target[:3, :3], self.target[:3, 3]), q, seed=world.seed)
+        if not result.success or result.q is None:
+            return None
+        start_q, goal = q[indices], result.q[indices]
+        count = max(1, math.ceil(float(np.max(np.abs(goal - start_q))) / (world.joint_speed * world.tick_seconds)))
+        for k in range(1, count + 1):
+            step = q.copy()
+            step[indices] = start_q + (goal - start_q) * (k / count)
+            out.append(step)
+        return out
 
     def _straight_line(self, q_now: np.ndarray, count: int) -> list[np.ndarray] | None:
         """Waypoints moving the gripper frame along the straight line (and the shortest rotation) to the target,

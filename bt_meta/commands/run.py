@@ -3,9 +3,8 @@
 Offers:
 
 * :func:`register` -- adds ``run FILE [--problem P] [--variant V] [--seed S] [--json] [--plugins DIR]
-  [--max-ticks N] [--gui] [--grounding FILE] [--robot R] [--scene FILE] [--memory PATH] [--record] [--record-failed]
-  [--repair]
-  [--max-attempts N]``
+  [--max-ticks N] [--gui] [--grounding FILE] [--robot R] [--scene FILE] [--record-rrd FILE.rrd] [--memory PATH]
+  [--record] [--record-failed] [--repair] [--max-attempts N]``
 * :func:`run` -- the handler
 
 The problem is planned and compiled with a Monitor around every primitive, then ticked on a
@@ -14,6 +13,11 @@ problem's scene with the chosen variant, headless unless ``--gui``. The tick log
 some primitive changed status. ``--json`` prints ``{status, ticks, failures: [{kind, step, node_id, action, args,
 evidence, message}], objects (final object states), ...}``. Exit status: 0 SUCCESS, 1 FAILURE (a failed step, no
 plan, or still running after ``--max-ticks``), 2 bad input (unknown problem or variant: the known ones are listed).
+
+``--robot NAME|FILE`` runs on another robot description (default: the grounding file's ``robot:``, else the
+Baxter), ``--scene FILE`` builds another scene than the grounding file's for the problem. ``--record-rrd FILE.rrd``
+records the episode for the Rerun viewer (:mod:`~bt_meta.world.simulation.rerun_log`; the optional extra
+``rerun``): per tick without ``--repair``, per step, failure and repair with it.
 
 Memory: the expectation plugins read the run's ``memory`` (``--memory PATH``, else ``$BT_META_MEMORY``, else
 ``./.bt-meta/memory.sqlite``; an explicit ``--memory`` file must exist unless the run writes to it). ``--record``
@@ -63,6 +67,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="diagnose and repair failures with the meta-reasoner (memory, refinements, repairs)")
     parser.add_argument("--max-attempts", type=int, default=5,
                         help="with --repair: at most this many applied repairs (default 5)")
+    parser.add_argument("--record-rrd", metavar="FILE.rrd",
+                        help="record the episode for the Rerun viewer (needs the extra: pip install 'bt-meta[rerun]')")
     add_world_arguments(parser)
     add_memory_argument(parser)
     add_plugin_arguments(parser)
@@ -96,13 +102,28 @@ def run(args: argparse.Namespace) -> int:
             world = SimWorld(task_file.domain, problem, grounding, variant=args.variant, seed=args.seed, gui=args.gui,
                              **options)
         built = time.perf_counter()
+        rrd = None
+        if args.record_rrd:
+            from bt_meta.world.simulation.rerun_log import RerunRecorder
+
+            try:
+                rrd = RerunRecorder(args.record_rrd, world)
+            except BaseException:
+                world.close()
+                raise
+            if args.repair:
+                plugins.register(rrd, "rerun_recorder", source="bt-meta run --record-rrd")
         out: dict[str, Any] = {"file": str(args.file), "problem": problem.name, "variant": world.variant,
                                "scene": world.scene.name, "seed": args.seed, "robot": world.sim.robot.name}
+        if rrd is not None:
+            out["rrd"] = str(rrd.path)
         try:
             if args.repair:
                 return _run_repaired(args, task_file, problem, world, plugins, memory, recorder, out, started, built)
-            return _run_plain(args, problem, world, plugins, memory, recorder, out, started, built)
+            return _run_plain(args, problem, world, plugins, memory, recorder, out, started, built, rrd)
         finally:
+            if rrd is not None:
+                rrd.close()
             world.close()
 
 
@@ -136,7 +157,7 @@ def _memory(args: argparse.Namespace) -> Iterator[Any]:
 
 
 def _run_plain(args: argparse.Namespace, problem: Any, world: Any, plugins: Any, memory: Any, recorder: Any,
-               out: dict[str, Any], started: float, built: float) -> int:
+               out: dict[str, Any], started: float, built: float, rrd: Any = None) -> int:
     from bt_meta.bt.failures import Failure, FailureKind
     from bt_meta.testing import TreeHarness
 
@@ -165,6 +186,8 @@ def _run_plain(args: argparse.Namespace, problem: Any, world: Any, plugins: Any,
         last.update(nodes)
         new_failures = harness.failures[reported:]
         reported = len(harness.failures)
+        if rrd is not None:
+            rrd.log_tick(harness.run.tick_count, status.value, nodes, [f.summary() for f in new_failures])
         if not args.json and (changed or new_failures or status is not Status.RUNNING):
             listed = "  ".join(f"{name}={value}" for name, value in changed.items())
             print(f"tick {harness.run.tick_count:>4}  {status.value:<8} {listed}")

@@ -141,3 +141,15 @@ def test_magnetic_attach_nominal_on_the_panda(capsys):
     assert code == 0 and result["status"] == "SUCCESS"
     assert result["attachments"] == [["active", "reference"]]  # the magnets met in the simulator
     assert result["objects"]["reference"]["pose"][2] > 0.1  # the subassembly went to the staging pose
+
+
+@pytest.mark.slow
+def test_a_robot_placed_too_far_from_the_objects_reports_reachability(tmp_path, capsys):
+    far = tmp_path / "far_panda.yaml"
+    far.write_text(PANDA_TEXT.replace("scene_offset: [-0.33, 0.20, 0.20]", "scene_offset: [0.45, 0.20, 0.20]"))
+    code, result = run_json(capsys, str(trees_dir() / "letters.yaml"), "--problem", "A", "--robot", str(far))
+    assert code == 1 and result["status"] == "FAILURE"
+    (failure,) = result["failures"]
+    assert failure["kind"] == "reachability" and failure["args"] == ["b0", "0", "0"]
+    assert failure["evidence"]["target_xyz"][0] == pytest.approx(0.55 + 0.45, abs=0.01)  # the block, moved away
+    assert failure["evidence"]["label"] == "above b0"

@@ -24,7 +24,8 @@ setup(
     package_dir=package_dir,
     package_data={
         "bt_meta.data.robots": ["*.yaml"],
-        "bt_meta.data.trees": ["*.yaml", "*.xml", "*.md", "scenes/*.yaml", "poses/*.yaml", "poses/*.md"],
+        "bt_meta.data.trees": ["*.yaml", "*.xml", "*.md", "scenes/*.yaml", "poses/*.yaml", "poses/*.md",
+                             "objects/*.yaml"],
         "bt_meta_plugins": ["*.yaml"],
         "bt_meta.bench": ["problems/*.yaml"],
     },

@@ -26,6 +26,16 @@ def test_the_scene_example_loads(tmp_path):
     assert [o.name for o in scene.obstacles_for("blocked")] == ["wall", "post", "shelf"]
 
 
+def test_the_catalogue_example_loads(tmp_path):
+    from bt_meta.world.simulation.catalogue import load_catalogue
+
+    (block,) = [b for b in yaml_blocks() if b.startswith("types:")]
+    path = tmp_path / "my_objects.yaml"
+    path.write_text(block)
+    entry = load_catalogue(path)["block_long"]
+    assert entry.primary == "bottom" and entry.role == "active" and set(entry.grasp_frames) == {"middle"}
+
+
 def test_the_robot_example_loads(tmp_path):
     (block,) = [b for b in yaml_blocks() if b.startswith("name:")]
     path = tmp_path / "my_panda.yaml"

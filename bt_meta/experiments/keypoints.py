@@ -38,7 +38,7 @@ import numpy as np
 
 from bt_meta.commands._common import print_json
 from bt_meta.errors import UserInputError
-from bt_meta.world.simulation.objects import AttachmentFeature, Box, ObjectModel
+from bt_meta.world.simulation.objects import ObjectModel
 
 POSITION_TOLERANCE = 0.01
 ANGLE_TOLERANCE = math.radians(15.0)
@@ -68,18 +68,11 @@ def _main(args: argparse.Namespace) -> int:
 
 
 def side_magnet_part(colour: str = "orange") -> ObjectModel:
-    """Object 2: a 6 x 4 x 4 cm active part whose magnet is on its -x face (normal -x in its own frame)."""
-    size = (0.06, 0.04, 0.04)
-    return ObjectModel(
-        type="magnet_active_side",
-        colour=colour,
-        parts=(Box(size),),
-        mass=0.05,
-        features=(AttachmentFeature("magnet", (-size[0] / 2.0, 0.0, 0.0), (-1.0, 0.0, 0.0)),),
-        primary="magnet",
-        role="active",
-        info={"size_x": size[0], "size_y": size[1], "size_z": size[2]},
-    )
+    """Object 2: a 6 x 4 x 4 cm active part whose magnet is on its -x face (normal -x in its own frame), the
+    object catalogue's ``magnet_active_side``."""
+    from bt_meta.world.simulation.catalogue import shipped_catalogue
+
+    return shipped_catalogue()["magnet_active_side"].model(colour)
 
 
 def _relation(sim: Any) -> dict[str, float]:

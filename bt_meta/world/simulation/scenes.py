@@ -1,9 +1,11 @@
 """Scenes and their variants as data: which objects lie where on the table, read from ``trees/scenes/*.yaml``.
 
-A scene file names the scene, lists its objects (name, type, colour, pose) and its variants; a variant changes
-the nominal object list by ``override`` (new colour/type/pose for a named object), ``remove``, ``replace`` (one
-object by others, e.g. a 1x2 block by two 1x1s), ``add`` and ``obstacles`` (static obstacles added: see
-:mod:`~bt_meta.world.simulation.obstacles`; a scene lists its own under ``obstacles:``). Poses are
+A scene file names the scene, lists its objects (name, type, colour, pose; types from the built-in ones and the
+object catalogue, :mod:`~bt_meta.world.simulation.catalogue`, which ``catalogue: [FILE]`` extends) and its
+variants; a variant changes the nominal object list by ``override`` (new colour/type/pose for a named object),
+``remove``, ``replace`` (one object by others, e.g. a 1x2 block by two 1x1s), ``add`` and ``obstacles`` (static
+obstacles added: see :mod:`~bt_meta.world.simulation.obstacles`; a scene lists its own under ``obstacles:``). Poses
+are
 ``[x, y, z, roll, pitch, yaw]`` in the scene frame (the robot base frame moved by the robot's
 ``workcell.scene_offset``), metres and **degrees** (people write 90, not 1.5708); ``z`` may be ``table``: resting on
 the table top in that orientation. Every mistake is a :class:`~bt_meta.errors.ConfigError` at ``path:line:column``.
@@ -21,7 +23,7 @@ Offers:
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -32,12 +34,13 @@ import yaml
 from bt_meta.errors import ConfigError
 from bt_meta.resources import trees_dir
 from bt_meta.world._yaml_nodes import YamlNodeReader, shipped_yaml_path
-from bt_meta.world.simulation.objects import COLOURS, OBJECT_TYPES, ObjectModel, make_model, pose_to_matrix
+from bt_meta.world.simulation.catalogue import object_types
+from bt_meta.world.simulation.objects import COLOURS, ObjectModel, make_model, pose_to_matrix
 from bt_meta.world.simulation.obstacles import OBSTACLE_SHAPES, ObstacleError, obstacle_model
 
 __all__ = ["Scene", "SceneObject", "SceneObstacle", "Variant", "load_scene", "scene_names", "scenes_dir"]
 
-_SCENE_KEYS = {"scene", "description", "objects", "variants", "jitter", "anchors", "obstacles"}
+_SCENE_KEYS = {"scene", "description", "objects", "variants", "jitter", "anchors", "obstacles", "catalogue"}
 _OBSTACLE_KEYS = {"name", "shape", "pose", "colour", "description", "size", "radius", "height", "thickness"}
 _OBJECT_KEYS = {"name", "type", "colour", "pose", "description"}
 _VARIANT_KEYS = {"description", "override", "remove", "replace", "add", "obstacles"}
@@ -65,8 +68,12 @@ class SceneObject:
     position: tuple[float, float, float | None]
     rpy: tuple[float, float, float]
     location: Location | None = field(default=None, compare=False)
+    factory: Callable[[str | None], ObjectModel] | None = field(default=None, compare=False, repr=False)
+    """What builds the model: the type's entry in the scene's catalogue (built-in types when ``None``)."""
 
     def model(self) -> ObjectModel:
+        if self.factory is not None:
+            return self.factory(self.colour)
         return make_model(self.type, self.colour)
 
     @property
@@ -218,6 +225,13 @@ class _SceneFile(YamlNodeReader):
             raise ConfigError("the scene file is empty", self.path, 1, 1)
         top = self.mapping(root, "a scene file", _SCENE_KEYS)
         name = self.string(self.require(top, "scene", root, "a scene file"), "scene")
+        extra: list[Path] = []
+        if "catalogue" in top:
+            for item in self.sequence(top["catalogue"][1], "catalogue"):
+                extra.append(self.path.parent / self.string(item, "a catalogue file"))  # beside the scene file
+                if not extra[-1].is_file():
+                    raise self.error(f"catalogue file {extra[-1]} does not exist", item)
+        self.types = object_types(extra)
         description = self.string(top["description"][1], "description") if "description" in top else ""
         objects_node = self.require(top, "objects", root, "a scene file")
         objects = self.object_list(objects_node, "objects", require_pose=True)
@@ -259,9 +273,9 @@ class _SceneFile(YamlNodeReader):
         name = self.string(self.require(entries, "name", node, what), f"{what} name")
         type_node = self.require(entries, "type", node, f"object {name!r}")
         type_name = self.string(type_node, f"object {name!r} type")
-        if type_name not in OBJECT_TYPES:
+        if type_name not in self.types:
             raise self.error(
-                f"object {name!r}: unknown type {type_name!r}; known: {', '.join(OBJECT_TYPES)}", type_node
+                f"object {name!r}: unknown type {type_name!r}; known: {', '.join(self.types)}", type_node
             )
         colour = self.colour(entries["colour"][1], name) if "colour" in entries else None
         if "pose" in entries:
@@ -270,7 +284,7 @@ class _SceneFile(YamlNodeReader):
             raise self.error(f"object {name!r}: missing key 'pose'", node)
         else:
             position, rpy = (math.nan, math.nan, None), (0.0, 0.0, 0.0)  # inherited by replace
-        return SceneObject(name, type_name, colour, position, rpy, self.at(node))
+        return SceneObject(name, type_name, colour, position, rpy, self.at(node), self.types[type_name])
 
     def colour(self, node: yaml.Node, name: str) -> str:
         colour = self.string(node, f"object {name!r} colour")
@@ -356,9 +370,9 @@ class _SceneFile(YamlNodeReader):
                 if "type" in changes:
                     type_node = changes["type"][1]
                     type_name = self.string(type_node, "type")
-                    if type_name not in OBJECT_TYPES:
-                        raise self.error(f"unknown type {type_name!r}; known: {', '.join(OBJECT_TYPES)}", type_node)
-                    obj = replace(obj, type=type_name)
+                    if type_name not in self.types:
+                        raise self.error(f"unknown type {type_name!r}; known: {', '.join(self.types)}", type_node)
+                    obj = replace(obj, type=type_name, factory=self.types[type_name])
                 if "colour" in changes:
                     obj = replace(obj, colour=self.colour(changes["colour"][1], obj_name))
                 if "pose" in changes:

@@ -4,6 +4,7 @@ on the Panda from the command line."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,7 @@ def test_panda_description_names_its_arm_hand_and_camera_frames():
     arm = panda.arm("arm")
     assert arm.joints == tuple(f"panda_joint{i}" for i in range(1, 8))
     assert arm.end_effector == "panda_hand_tcp" and arm.camera == "panda_hand"
+    assert arm.top_down_yaw == 0.0 and load_robot("baxter").arm("right").top_down_yaw == pytest.approx(math.pi)
     assert arm.gripper is not None and arm.gripper.opening == pytest.approx(0.08)
     assert arm.gripper.opening > 0.061  # wider than a Mega Blok, unlike the Baxter's
     assert panda.home["panda_joint4"] == pytest.approx(-2.35619)

@@ -54,6 +54,9 @@ class ArmDescription:
     end_effector: str
     camera: str | None
     gripper: GripperDescription | None
+    top_down_yaw: float = math.pi
+    """Yaw (rad, base frame) of the end effector pointing straight down that the arm reaches most comfortably:
+    skills grasping top-down pick, of an object's symmetric grasps, the one nearest to it."""
 
 
 @dataclass(frozen=True)
@@ -375,7 +378,7 @@ class _RobotFile(YamlNodeReader):
     def arm(self, arm_name: str, node: yaml.Node, urdf: UrdfSummary) -> ArmDescription:
         what = f"arms.{arm_name}"
         entries = self.mapping(node, what)
-        self.check_keys(entries, {"joints", "end_effector", "camera", "gripper"}, what)
+        self.check_keys(entries, {"joints", "end_effector", "camera", "gripper", "top_down_yaw"}, what)
         joints_node = self.require(entries, "joints", node, what)
         joints = tuple(self.joint(n, f"{what}.joints", urdf) for n in self.sequence(joints_node, f"{what}.joints"))
         if not joints:
@@ -387,7 +390,10 @@ class _RobotFile(YamlNodeReader):
         gripper = None
         if "gripper" in entries:
             gripper = self.gripper(what + ".gripper", entries["gripper"][1], urdf)
-        return ArmDescription(arm_name, joints, end_effector, camera, gripper)
+        top_down_yaw = math.pi
+        if "top_down_yaw" in entries:
+            top_down_yaw = math.radians(self.number(entries["top_down_yaw"][1], f"{what}.top_down_yaw (degrees)"))
+        return ArmDescription(arm_name, joints, end_effector, camera, gripper, top_down_yaw)
 
     def gripper(self, what: str, node: yaml.Node, urdf: UrdfSummary) -> GripperDescription:
         entries = self.mapping(node, what)

@@ -28,7 +28,7 @@ from bt_meta.world.simulation.objects import matrix_to_pose
 from bt_meta.world.skills.base import PhasedSkill, SkillAbort, rounded
 from bt_meta.world.skills.grasp import Grasp
 from bt_meta.world.skills.move_to import MoveTo
-from bt_meta.world.skills.place import GRIPPER_YAW, top_down
+from bt_meta.world.skills.place import top_down
 
 __all__ = ["Insert"]
 
@@ -96,7 +96,8 @@ class Insert(PhasedSkill):
 
     def _over_part(self, height: float) -> np.ndarray:
         centre = self.world.sim.object_transform(self.part)[:3, 3]
-        return top_down(centre[0], centre[1], self.world.object_top(self.part) + height, GRIPPER_YAW)
+        return top_down(centre[0], centre[1], self.world.object_top(self.part) + height,
+                        self.world.sim.robot.arm(self.arm).top_down_yaw)
 
     def _descend(self) -> MoveTo:
         self.world.allow_hand(self.part, self.arm)

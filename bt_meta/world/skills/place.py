@@ -112,7 +112,7 @@ class Place(PhasedSkill):
     def _grasp_yaw(self) -> float:
         transform = self.world.sim.object_transform(self.block)
         model = self.world.sim.object_model(self.block)
-        return nearest_yaw(object_yaw(transform), symmetry(model), GRIPPER_YAW)
+        return nearest_yaw(object_yaw(transform), symmetry(model), self.world.sim.robot.arm(self.arm).top_down_yaw)
 
     def _over_block(self, height: float) -> np.ndarray:
         centre = self.world.sim.object_transform(self.block)[:3, 3]

@@ -155,3 +155,12 @@ def test_a_robot_placed_too_far_from_the_objects_reports_reachability(tmp_path, 
     assert failure["kind"] == "reachability" and failure["args"] == ["b0", "0", "0"]
     assert failure["evidence"]["target_xyz"][0] == pytest.approx(0.55 + 0.45, abs=0.01)  # the block, moved away
     assert failure["evidence"]["label"] == "above b0"
+
+
+def test_bench_ik_on_the_panda_against_pybullet_in_the_same_run():
+    from bt_meta.bench.ik import run_benchmark
+
+    report = run_benchmark(n=6, seed=2, arm=None, pybullet_calls=3, robot_name="panda")
+    assert report["robot"] == "panda" and report["arm"] == "arm"  # the robot's first arm
+    assert report["ours"]["successes"] >= 5 and report["ours"]["every_returned_solution_collision_free"]
+    assert report["pybullet"]["mean_ms"] is not None and report["ratio_mean_time_pybullet_over_ours"] is not None

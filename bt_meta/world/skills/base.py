@@ -7,6 +7,7 @@ Offers:
   into a FAILURE with its kind (a skill never raises out of ``tick`` for a physical or motion failure)
 * :class:`PhasedSkill` -- a skill made of sub-skills run in order (a small state machine)
 * :class:`SkillAbort` -- raised inside a skill to fail it with a kind, a message and evidence
+* :class:`SkillWorld` -- the protocol of the world skills act on
 * :func:`rounded` -- numbers rounded for records (JSON-able, short)
 
 Why the split between ``start`` and ``begin``: HTN primitives pass symbols (``b0``, ``1.5``, ``attach_pose``); a
@@ -17,16 +18,50 @@ world, ``begin`` takes the ground values.
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
+
+import numpy as np
 
 from bt_meta.bt.failures import FailureKind
 from bt_meta.errors import BtMetaError
 from bt_meta.world.base import FAILURE, RUNNING, SUCCESS, SkillFailure
 
-if TYPE_CHECKING:
-    from bt_meta.world.simulation.sim_world import SimWorld
+__all__ = ["PhasedSkill", "SimSkill", "SkillAbort", "SkillWorld", "rounded"]
 
-__all__ = ["PhasedSkill", "SimSkill", "SkillAbort", "rounded"]
+
+class SkillWorld(Protocol):
+    """What the skills use of the world they act on (the
+    :class:`~bt_meta.world.simulation.sim_world.SimWorld` implements it): skills depend on this, not on the
+    SimWorld module, which imports the skills' registry."""
+
+    sim: Any
+    kin: Any
+    ik: Any
+    collision: Any
+    seed: int
+    joint_speed: float
+    tick_seconds: float
+    steps_per_tick: int
+
+    def end_effector(self, arm: str) -> str: ...
+    def current_q(self) -> np.ndarray: ...
+    def drive_arm(self, arm: str, values: np.ndarray) -> None: ...
+    def advance(self, ticks: int = 1) -> None: ...
+    def held_relative(self, arm: str) -> np.ndarray: ...
+    def grasp(self, name: str, arm: str, reach: float) -> bool: ...
+    def release(self, arm: str) -> str | None: ...
+    def allow_hand(self, name: str, arm: str, allowed: bool = True) -> None: ...
+    def allow_objects(self, name: str, others: Iterable[str]) -> None: ...
+    def robot_contacts(self, arm: str) -> list[str]: ...
+    def object_lowest(self, name: str) -> float: ...
+    def object_top(self, name: str) -> float: ...
+    def contact_object(self, name: str) -> str: ...
+    def object_name(self, symbol: str) -> str: ...
+    def feature_of(self, symbol: str) -> tuple[str, str | None]: ...
+    def pose_spec(self, symbol: str) -> dict[str, Any]: ...
+    def ground_pose(self, symbol: str, arm: str | None = None) -> np.ndarray: ...
+    def ground_cell(self, frame: str, x: str, y: str) -> tuple[float, float, float]: ...
+    def sync_collision(self) -> None: ...
 
 
 class SkillAbort(BtMetaError):
@@ -53,7 +88,7 @@ class SimSkill:
     spec: dict[str, Any] = {}
     """The grounding file's entry for the primitive this skill runs (options such as ``frame`` or ``mode``)."""
 
-    def __init__(self, world: SimWorld, arm: str = "right") -> None:
+    def __init__(self, world: SkillWorld, arm: str = "right") -> None:
         self.world = world
         self.arm = arm
         self.failure: SkillFailure | None = None

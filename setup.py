@@ -27,6 +27,7 @@ setup(
         "bt_meta.data.trees": ["*.yaml", "*.xml", "*.md", "scenes/*.yaml", "poses/*.yaml", "poses/*.md"],
         "bt_meta_plugins": ["*.yaml"],
         "bt_meta.bench": ["problems/*.yaml"],
+        "bt_meta.campaign": ["specs/*.yaml"],
     },
     include_package_data=False,
 )

@@ -77,15 +77,15 @@ def _one_run(task: dict[str, Any], memory_path: Path, *, save: bool) -> dict[str
 
         extra = perceived_plugins(int(task["seed"]))
     with EpisodicMemory.open(memory_path) as memory, RefinementStore.open(memory_path) as refinements:
-        task_file, problem, world = variant_world(task_path, task["problem"], task["scene"], VARIANT_NAME,
-                                                  int(task["seed"]))
+        task_file, problem, world = variant_world(task_path, task["problem"], task["scene"],
+                                                  task.get("scene_variant", VARIANT_NAME), int(task["seed"]))
         try:
             host = plugin_host(task_path, memory, configuration=task["configuration"], seed=int(task["seed"]),
                                extra=extra)
             executor = MetaExecutor(task_file.domain, problem, world, host,
                                     limits=Limits(max_attempts=MAX_ATTEMPTS, max_seconds=MAX_SECONDS),
                                     refinements=refinements, save_refinements=save, task_file=task_file,
-                                    variant=VARIANT_NAME, memory=memory)
+                                    variant=task.get("scene_variant", VARIANT_NAME), memory=memory)
             report = executor.run().to_dict()
             done, truth = achieved(chosen.truth, world, memory, problem)
             report["simulated_seconds"] = world.total_ticks * world.tick_seconds

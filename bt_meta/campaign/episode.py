@@ -33,7 +33,7 @@ MAX_SECONDS = 90.0
 
 
 def episode_task(folder: str | Path, manifest: dict[str, Any], variant: dict[str, Any], configuration: str,
-                 seed: int, *, perfect_sensing: bool = True) -> dict[str, Any]:
+                 seed: int, *, perfect_sensing: bool = False) -> dict[str, Any]:
     folder = Path(folder).resolve()
     return {"folder": str(folder), "family": manifest["family"], "task_file": manifest["task_file"],
             "problem": manifest["problem"], "variant": variant["name"], "scene": str(folder / variant["file"]),
@@ -73,7 +73,7 @@ def _one_run(task: dict[str, Any], memory_path: Path, *, save: bool) -> dict[str
     task_path = chosen.task_path()
     extra = []
     if not task.get("perfect_sensing", True):
-        from bt_meta.campaign.perceived import perceived_plugins
+        from bt_meta.sensing.perceived import perceived_plugins
 
         extra = perceived_plugins(int(task["seed"]))
     with EpisodicMemory.open(memory_path) as memory, RefinementStore.open(memory_path) as refinements:

@@ -144,7 +144,7 @@ def _ray_results(tasks: Sequence[dict[str, Any]], address: str, workers: int | N
 
 def run_campaign(folder: str | Path, *, configurations: Sequence[str] = ("dual", "symbolic", "low_level", "retry"),
                  seeds: int = 1, workers: int | None = None, ray_address: str | None = None,
-                 perfect_sensing: bool = True, progress: bool = True, echo: Callable[[str], None] | None = None,
+                 perfect_sensing: bool = False, progress: bool = True, echo: Callable[[str], None] | None = None,
                  limit: int | None = None) -> dict[str, Any]:
     """Run (or resume) the campaign in ``folder``; ``limit`` stops after that many new episodes (tests)."""
     import json

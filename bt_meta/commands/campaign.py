@@ -3,7 +3,8 @@
 * ``campaign generate FAMILY --n N --seed S -o DIR [--spec FILE] [--scene FILE]`` -- variant scene files with
   their expected outcomes from ground truth, and ``DIR/campaign.json``
 * ``campaign run DIR [--configurations dual,symbolic,low_level,retry] [--seeds K] [--workers N]
-  [--ray ADDRESS|auto] [--perfect-sensing] [--json]`` -- every episode, resumable (``DIR/campaign.sqlite``)
+  [--ray ADDRESS|auto] [--perfect-sensing] [--json]`` -- every episode, resumable (``DIR/campaign.sqlite``);
+  monitors compare with the state perceived through noisy sensing unless ``--perfect-sensing``
 * ``campaign report DIR [-o report.html] [--json]`` -- rates with Wilson 95 % intervals, the confusion table,
   loops, false alarms, second exposure, plots
 
@@ -45,11 +46,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     run.add_argument("--workers", type=int, help="local worker processes (default: the core count)")
     run.add_argument("--ray", metavar="ADDRESS", help="run the episodes as Ray tasks: auto (a local instance) or "
                                                      "HOST:PORT of a cluster (pip install 'bt-meta[ray]')")
-    sensing = run.add_mutually_exclusive_group()
-    sensing.add_argument("--perfect-sensing", dest="perfect_sensing", action="store_true", default=True,
-                         help="monitors compare with the simulator's true state (default)")
-    sensing.add_argument("--perceived", dest="perfect_sensing", action="store_false",
-                         help="monitors compare with the state perceived through noisy sensing")
+    run.add_argument("--perfect-sensing", action="store_true",
+                     help="monitors compare with the simulator's bookkept state instead of the perceived one "
+                          "(noisy camera and pose sensing; the default)")
     run.add_argument("--json", action="store_true", help="print {episodes, summary}")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.set_defaults(func=_run)

@@ -78,6 +78,16 @@ class CampaignDatabase:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+    def check_sensing(self, sensing: str) -> None:
+        """The first run fixes the campaign's sensing (``perceived`` or ``perfect``); another is refused."""
+        row = self._connection.execute("SELECT value FROM meta WHERE key = 'sensing'").fetchone()
+        if row is None:
+            self._connection.execute("INSERT INTO meta VALUES ('sensing', ?)", (sensing,))
+        elif row[0] != sensing:
+            option = "--perfect-sensing" if row[0] == "perfect" else "no --perfect-sensing"
+            raise CampaignDirError(f"its episodes ran with {row[0]} sensing, this run asks for {sensing}: never "
+                                   f"mixed; use {option} or another campaign directory", self.path)
+
     def done(self) -> set[tuple[str, str, int]]:
         return {(v, c, int(s)) for v, c, s in
                 self._connection.execute("SELECT variant, configuration, seed FROM episodes")}

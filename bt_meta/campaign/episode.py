@@ -104,6 +104,7 @@ def run_episode(task: dict[str, Any]) -> dict[str, Any]:
     started = time.perf_counter()
     row: dict[str, Any] = {key: task[key] for key in ("variant", "configuration", "seed", "expected")}
     row["family"] = task["family"]
+    row["sensing"] = "perceived" if not task.get("perfect_sensing", True) else "perfect"
     with tempfile.TemporaryDirectory(prefix="bt_meta_episode_") as scratch:
         copy = Path(scratch) / "memory.sqlite"
         try:

@@ -162,6 +162,7 @@ def run_campaign(folder: str | Path, *, configurations: Sequence[str] = ("dual",
     workers = workers or os.cpu_count() or 1
     database = CampaignDatabase.open(folder, manifest_digest(folder))
     try:
+        database.check_sensing("perfect" if perfect_sensing else "perceived")
         ensure_memory(folder, manifest, echo=say)
         done = database.done()
         tasks = [episode_task(folder, manifest, variant, configuration, seed, perfect_sensing=perfect_sensing)

@@ -82,3 +82,12 @@ def test_unknown_configuration_exits_2(tmp_path, capsys):
     _manifest(tmp_path)
     assert main(["campaign", "run", str(tmp_path), "--configurations", "dual,bogus"]) == 2
     assert "unknown bogus" in capsys.readouterr().err
+
+
+def test_perfect_and_perceived_sensing_are_never_mixed(tmp_path):
+    _manifest(tmp_path)
+    with CampaignDatabase.open(tmp_path, manifest_digest(tmp_path)) as db:
+        db.check_sensing("perceived")
+        db.check_sensing("perceived")
+        with pytest.raises(CampaignDirError, match="ran with perceived sensing, this run asks for perfect"):
+            db.check_sensing("perfect")

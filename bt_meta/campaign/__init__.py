@@ -15,7 +15,8 @@ Modules (one concept each):
 * :mod:`bt_meta.campaign.episode` -- one episode (variant x configuration x seed) in a fresh world
 * :mod:`bt_meta.campaign.runner` -- the driver: local process pool or Ray, progress bar, resume
 * :mod:`bt_meta.campaign.stats` -- Wilson intervals and the per-outcome x configuration tables
-* :mod:`bt_meta.campaign.report` -- ``campaign report``: JSON and HTML with matplotlib plots
+* :mod:`bt_meta.campaign.report` -- ``campaign report``: JSON and HTML with matplotlib plots (:mod:`bt_meta.plotting`)
+* :mod:`bt_meta.campaign.ablation` -- the paper's ablation as campaigns (``experiment ablation --generated``)
 """
 
 CAMPAIGN_VERSION = 1

@@ -44,7 +44,7 @@ def build_report(folder: str | Path, out: str | Path) -> dict[str, Any]:
 
 
 def _html(summary: dict[str, Any], manifest: dict[str, Any], folder: Path, out: Path) -> str:
-    from bt_meta.campaign.plots import heatmap, rate_bars
+    from bt_meta.plotting import heatmap, rate_bars
 
     e = html.escape
     table = summary["table"]

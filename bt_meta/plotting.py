@@ -7,17 +7,19 @@ Offers:
 
 * :func:`rate_bars` -- grouped bars of rates with interval whiskers (campaign: expected outcome x configuration)
 * :func:`heatmap` -- a labelled count matrix (the confusion table)
-* :func:`series` -- lines over steps with a shaded min-max band and marked points (the demo's R_p / R_n)
-* :func:`horizontal_bars` -- one bar per label (the demo's failure kinds and attempts)
+* :func:`line_plot` -- series of (x, y) points (``None`` breaks a line), shaded bands (x, low, high) per series,
+  vertical markers (x, label) listed in the legend: the demo report's R_p / R_n over the executed steps
+* :func:`horizontal_bars` -- one bar per label
 """
 
 from __future__ import annotations
 
+import html
 import io
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
-__all__ = ["heatmap", "horizontal_bars", "rate_bars", "series"]
+__all__ = ["heatmap", "horizontal_bars", "line_plot", "rate_bars"]
 
 
 def _pyplot() -> Any:
@@ -84,26 +86,38 @@ def heatmap(rows: Sequence[str], columns: Sequence[str], counts: dict[tuple[str,
     return _svg(figure)
 
 
-def series(x: Sequence[float], lines: dict[str, Sequence[float]], *, band: tuple[Sequence[float], Sequence[float]]
-           | None = None, band_label: str = "min-max", marks: Sequence[float] = (), mark_label: str = "",
-           xlabel: str = "", ylabel: str = "", title: str = "", xticklabels: Sequence[str] | None = None) -> str:
-    """Lines over ``x``; ``band`` (low, high) shaded; ``marks`` x values drawn as vertical red lines."""
+def line_plot(series: Mapping[str, Sequence[tuple[float, float | None]]], *, title: str, x_label: str,
+              y_label: str, bands: Mapping[str, Sequence[tuple[float, float, float]]] | None = None,
+              markers: Sequence[tuple[float, str]] = (), width: float = 5.2, height: float = 3.2) -> str:
+    """Lines with optional bands (drawn at 30 % opacity with an edge, so a narrow band stays visible) and dashed
+    vertical markers whose labels go in the legend (nothing is clipped at the plot's edge)."""
+    import math
+
+    bands = bands or {}
+    if not any(y is not None for values in series.values() for _, y in values) and not any(bands.values()):
+        return (f'<svg xmlns="http://www.w3.org/2000/svg" width="{int(width * 90)}" height="40"><text x="4" y="20" '
+                f'font-family="sans-serif" font-size="12">{html.escape(title)}: no data</text></svg>')
     plt = _pyplot()
-    figure, axes = plt.subplots(figsize=(6.4, 3.0))
-    if band is not None:
-        axes.fill_between(x, band[0], band[1], alpha=0.3, color="tab:blue", label=band_label, linewidth=0)
-    for name, values in lines.items():
-        axes.plot(x, values, marker="o", markersize=3, label=name)
-    for k, value in enumerate(marks):
-        axes.axvline(value, color="tab:red", linestyle="--", linewidth=1, label=mark_label if k == 0 else None)
-    if xticklabels is not None:
-        axes.set_xticks(list(x), list(xticklabels), rotation=30, ha="right", fontsize="x-small")
-    axes.set_xlabel(xlabel)
-    axes.set_ylabel(ylabel)
-    if title:
-        axes.set_title(title)
+    figure, axes = plt.subplots(figsize=(width, height))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for index, (name, values) in enumerate(series.items()):
+        colour = colours[index % len(colours)]
+        band = bands.get(name)
+        if band:
+            xs = [b[0] for b in band]
+            axes.fill_between(xs, [b[1] for b in band], [b[2] for b in band], color=colour, alpha=0.3,
+                              edgecolor=colour, linewidth=0.8, label=f"{name}: min-max")
+        xs = [float(x) for x, _ in values]
+        ys = [math.nan if y is None else float(y) for _, y in values]
+        axes.plot(xs, ys, marker="o", markersize=3.5, color=colour, label=name)
+    for k, (x, label) in enumerate(markers):
+        axes.axvline(x, color="tab:red", linestyle="--", linewidth=1.2,
+                     label=label if label not in [m[1] for m in markers[:k]] else None)
+    axes.set_title(title, fontsize="medium")
+    axes.set_xlabel(x_label)
+    axes.set_ylabel(y_label)
     axes.grid(alpha=0.3)
-    axes.legend(fontsize="small")
+    axes.legend(fontsize="x-small", loc="upper center", bbox_to_anchor=(0.5, -0.22), ncols=2, frameon=False)
     return _svg(figure)
 
 

@@ -10,7 +10,7 @@ called first), and the monitor adopts it as the new belief. Perceivable atoms, b
 * ``at(block, x, y)`` (a task frame in the grounding, e.g. the letters) -- the noisy top view shows a block
   colour over every unit cell the block's believed shape covers there (grid-map occupancy,
   :mod:`bt_meta.perception.topview`: at least 3 of the 4 half-lb cells of each unit cell); a cell the robot's
-  own body hides for more than half (its self-filter: the segmentation of its links) is not perceivable then
+  own body hides in part (its self-filter: the segmentation of its links) is not perceivable then
 * ``at(pose)`` -- the gripper's pose (proprioception) is within 2.5 cm of the pose the symbol grounds to now
 * ``holding(part)`` -- the gripper holds that part (gripper sensing: the grasp constraint / finger contact)
 * ``on_table(part)`` -- not held, and its sensed lowest point within 1.5 cm of the table top
@@ -42,8 +42,9 @@ __all__ = ["PerceivedState", "perceived_plugins"]
 
 CELL_OCCUPIED = 3
 """Of the 4 grid-map cells (0.5 lb each) covering a unit cell, at least this many show a block colour."""
-OCCLUDED = 0.5
-"""A unit cell more than this fraction covered by the robot in the image is occluded (not perceivable)."""
+OCCLUDED = 0.05
+"""A unit cell (with a half-lb margin) more than this fraction covered by the robot in the image is occluded:
+not perceivable now (a robot self-filter masks its own body; what it hid cannot be judged)."""
 BLOCK_TOP = 0.6
 """lb: height of a Mega Blok's top face (its studs excluded) above the table."""
 POSE_TOLERANCE = 0.025
@@ -176,7 +177,7 @@ def _occupied(view: Any, point: Any, top: float) -> bool | None:
     if mask is not None:
         camera = view.camera
         u, v = camera.table_to_pixel(float(point[0]), float(point[1]), top)
-        half = max(1, round(0.5 * LB / camera.metres_per_pixel(top)))
+        half = max(1, round(LB / camera.metres_per_pixel(top)))
         window = mask[max(0, int(v) - half):int(v) + half, max(0, int(u) - half):int(u) + half]
         if window.size == 0 or float(window.mean()) > OCCLUDED:
             return None

@@ -87,7 +87,10 @@ def run(family_name: str = "letters_A", configuration: str = "dual", *, repeat: 
     from bt_meta.campaign.families import family
     from bt_meta.campaign.runner import ensure_memory
     from bt_meta.world.scenes import load_scene
+    from bt_meta.world.sim_world import quiet_stdout
 
+    with quiet_stdout():
+        import pybullet  # noqa: F401  (prints its build time on import)
     chosen = family(family_name)
     scene_path = str(load_scene(chosen.scene).path)
     with tempfile.TemporaryDirectory(prefix="bt_meta_bench_episode_") as folder:

@@ -76,12 +76,22 @@ def _generate(args: argparse.Namespace) -> int:
     if (out / "campaign.json").exists():
         raise CampaignInputError("already holds a campaign; choose another -o or remove it", out)
 
-    def progress(k: int, n: int) -> None:
-        if not args.json:
-            print(f"\rlabelled {k}/{n}", end="" if k < n else "\n", file=sys.stderr, flush=True)
+    bar = None
+    if not args.json:
+        from tqdm import tqdm
 
-    manifest = generate(args.family, args.n, args.seed, out, spec_path=args.spec, scene_path=args.scene,
-                        progress=progress)
+        bar = tqdm(total=args.n, unit="variant", desc="labelling", file=sys.stderr, dynamic_ncols=True)
+
+    def progress(k: int, n: int) -> None:
+        if bar is not None:
+            bar.update(1)
+
+    try:
+        manifest = generate(args.family, args.n, args.seed, out, spec_path=args.spec, scene_path=args.scene,
+                            progress=progress)
+    finally:
+        if bar is not None:
+            bar.close()
     if args.json:
         print_json(manifest)
     else:

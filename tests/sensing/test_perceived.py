@@ -55,3 +55,22 @@ def test_a_1x1_where_a_1x2_belongs_contradicts_the_bar(world):
     observed = PerceivedState(seed=0, noise=SensingNoise.perfect()).bt_meta_observe(world, None)
     assert bar not in observed["symbolic_state"]
     world.apply_symbolic([], [bar])
+
+
+def test_gripper_at_an_absolute_pose_is_sensed_and_an_object_relative_one_is_not_judged():
+    from bt_meta.campaign.episode import variant_world
+    from bt_meta.campaign.families import family
+    from bt_meta.sensing.noise import SensingNoise
+    from bt_meta.sensing.perceived import PerceivedState
+    from bt_meta.world.scenes import load_scene
+
+    _, _, world = variant_world(family("magnetic").task_path(), "nominal", load_scene("magnetic_attach").path,
+                                None, 0)
+    try:
+        plugin = PerceivedState(seed=0, noise=SensingNoise.perfect())
+        world.apply_symbolic([("at", "staging"), ("at", "active_above")], [("at", "home")])
+        observed = plugin.bt_meta_observe(world, None)["symbolic_state"]
+        assert ("at", "staging") not in observed  # the gripper is at home, far from the staging pose
+        assert ("at", "active_above") in observed  # relative to the part: not judged, the belief stays
+    finally:
+        world.close()

@@ -103,3 +103,29 @@ def test_magnetic_labels(tmp_path):
             path.write_text(NOMINAL_MAGNETIC + f"    {change}\n", encoding="utf-8")
             label = labeller.label(path, "perturbed")
             assert label.expected == expected, (case, label.reason)
+
+
+@pytest.mark.slow
+def test_generate_with_a_users_scene_and_spec_writes_labelled_scene_files(tmp_path, capsys):
+    import json
+
+    from bt_meta.campaign.labeller import OUTCOMES
+    from bt_meta.cli import main
+    from bt_meta.world.scenes import load_scene
+
+    scene = tmp_path / "my_magnet.yaml"
+    scene.write_text(NOMINAL_MAGNETIC.replace("variants:\n  perturbed:\n", ""), encoding="utf-8")
+    spec = tmp_path / "spec.yaml"
+    spec.write_text("family: magnetic\nperturbations:\n  - rotate: {objects: [active], choices: [[180, 0, 0]]}\n",
+                    encoding="utf-8")
+    out = tmp_path / "C"
+    assert main(["campaign", "generate", "magnetic", "--n", "2", "--seed", "4", "--scene", str(scene), "--spec",
+                 str(spec), "-o", str(out), "--json"]) == 0
+    manifest = json.loads(capsys.readouterr().out)
+    assert manifest["scene"] == str(scene) and len(manifest["variants"]) == 2
+    for variant in manifest["variants"]:
+        assert variant["expected"] == "repairable" and variant["expected"] in OUTCOMES  # upside down: re-orient
+        loaded = load_scene(out / variant["file"])
+        active = next(o for o in loaded.objects_for("perturbed") if o.name == "active")
+        assert abs(abs(active.rpy[0]) - 3.14159) < 1e-3
+    assert main(["campaign", "generate", "magnetic", "--n", "1", "-o", str(out)]) == 2  # already a campaign

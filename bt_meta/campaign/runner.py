@@ -111,6 +111,8 @@ def _pool_results(tasks: Sequence[dict[str, Any]], workers: int) -> Iterator[dic
             yield future.result()
     finally:
         pool.shutdown(wait=False, cancel_futures=True)
+        for process in list(getattr(pool, "_processes", {}).values()):  # episodes in flight are run again later
+            process.terminate()
 
 
 def _ray_results(tasks: Sequence[dict[str, Any]], address: str, workers: int | None) -> Iterator[dict[str, Any]]:
@@ -142,6 +144,18 @@ def _ray_results(tasks: Sequence[dict[str, Any]], address: str, workers: int | N
             ray.shutdown()
 
 
+def _terminate_as_interrupt() -> None:
+    """SIGTERM unwinds like Ctrl-C, so the pool's workers are stopped rather than left running orphaned."""
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        def interrupt(signum: int, frame: Any) -> None:
+            raise KeyboardInterrupt
+
+        signal.signal(signal.SIGTERM, interrupt)
+
+
 def run_campaign(folder: str | Path, *, configurations: Sequence[str] = ("dual", "symbolic", "low_level", "retry"),
                  seeds: int = 1, workers: int | None = None, ray_address: str | None = None,
                  perfect_sensing: bool = False, progress: bool = True, echo: Callable[[str], None] | None = None,
@@ -163,6 +177,7 @@ def run_campaign(folder: str | Path, *, configurations: Sequence[str] = ("dual",
     if ray_address is not None:
         check_ray_address(ray_address)
     workers = workers or os.cpu_count() or 1
+    _terminate_as_interrupt()
     database = CampaignDatabase.open(folder, manifest_digest(folder))
     try:
         database.check_sensing("perfect" if perfect_sensing else "perceived")

@@ -28,6 +28,7 @@ setup(
                              "objects/*.yaml"],
         "bt_meta_plugins": ["*.yaml"],
         "bt_meta.bench": ["problems/*.yaml"],
+        "bt_meta.campaign": ["specs/*.yaml"],
     },
     include_package_data=False,
 )

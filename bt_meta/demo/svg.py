@@ -1,18 +1,18 @@
-"""Inline SVG pictures for the demo report, drawn by hand (no graphviz binary or plotting library needed).
+"""Inline SVG pictures for the demo report: trees drawn by hand (no graphviz binary needed), plots by matplotlib.
 
 Offers:
 
 * :class:`TreeNode` -- one behaviour of a py_trees tree as the picture needs it (name, kind, status, children)
 * :func:`tree_from_behaviour` -- a py_trees tree to :class:`TreeNode` s, statuses from a node-id -> status map
 * :func:`tree_svg` -- the tree as a left-to-right indented diagram, boxes coloured by status
-* :func:`line_plot_svg` -- one or more series over steps (R_p, R_n), with axes, ticks and a legend
+* :func:`line_plot_svg` -- one or more series over steps (R_p, R_n) with bands and markers (matplotlib, through
+  :mod:`bt_meta.plotting`, the plotting code the campaign report uses too)
 * :data:`STATUS_COLOURS` -- the colour of each node status
 """
 
 from __future__ import annotations
 
 import html
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -26,7 +26,6 @@ STATUS_COLOURS = {
     "INVALID": "#cfd8dc",
 }
 
-_SERIES_COLOURS = ("#1565c0", "#e65100", "#2e7d32", "#6a1b9a", "#c62828", "#00838f")
 
 
 @dataclass
@@ -154,93 +153,18 @@ def _label(node: TreeNode) -> str:
     return f"{prefix}{node.name}"
 
 
-def _nice_ticks(low: float, high: float, count: int = 5) -> list[float]:
-    if high <= low:
-        high = low + 1.0
-    raw = (high - low) / max(count, 1)
-    magnitude = 10 ** math.floor(math.log10(raw))
-    step = min((m * magnitude for m in (1, 2, 2.5, 5, 10) if m * magnitude >= raw), default=raw)
-    first = math.floor(low / step + 1e-9) * step
-    last = math.ceil(high / step - 1e-9) * step
-    return [round(first + i * step, 10) for i in range(round((last - first) / step) + 1)]
-
-
 def line_plot_svg(
     series: Mapping[str, Sequence[tuple[float, float | None]]],
     *,
     title: str,
     x_label: str,
     y_label: str,
-    width: int = 460,
-    height: int = 270,
     bands: Mapping[str, Sequence[tuple[float, float, float]]] | None = None,
     markers: Sequence[tuple[float, str]] = (),
 ) -> str:
     """Series of (x, y) points (``None`` y breaks the line), an optional band (x, low, high) per series (the
-    expectation's tolerance), and vertical markers (x, label) such as the failing step."""
-    bands = bands or {}
-    points = [(x, y) for values in series.values() for x, y in values if y is not None]
-    points += [(x, v) for values in bands.values() for x, lo, hi in values for v in (lo, hi)]
-    if not points:
-        return (f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="40"><text x="4" y="20" '
-                f'font-family="sans-serif" font-size="12">{_esc(title)}: no data</text></svg>')
-    xs = [p[0] for p in points] + [m[0] for m in markers]
-    ys = [p[1] for p in points]
-    x_ticks = _nice_ticks(min(xs), max(xs), 6)
-    y_ticks = _nice_ticks(min(0.0, min(ys)), max(ys) * 1.05 if max(ys) > 0 else 1.0, 5)
-    x0, x1, y0, y1 = x_ticks[0], x_ticks[-1], y_ticks[0], y_ticks[-1]
-    left, right, top = 52, 12, 26
-    bottom = 40 + 14 * len(series)  # axis labels, then one legend line per series
-    pw, ph = width - left - right, height - top - bottom
+    expectation's min..max), and vertical markers (x, label) such as the failing step -- drawn by matplotlib
+    (:func:`bt_meta.plotting.line_plot`), which lays out labels and legend without clipping them."""
+    from bt_meta.plotting import line_plot
 
-    def sx(x: float) -> float:
-        return left + (x - x0) / ((x1 - x0) or 1.0) * pw
-
-    def sy(y: float) -> float:
-        return top + ph - (y - y0) / ((y1 - y0) or 1.0) * ph
-
-    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
-           f'viewBox="0 0 {width} {height}" font-family="sans-serif" font-size="11">',
-           f'<text x="{left}" y="15" font-weight="bold" font-size="12">{_esc(title)}</text>',
-           f'<rect x="{left}" y="{top}" width="{pw}" height="{ph}" fill="#fafafa" stroke="#90a4ae"/>']
-    for t in y_ticks:
-        out.append(f'<line x1="{left}" x2="{left + pw}" y1="{sy(t):.1f}" y2="{sy(t):.1f}" stroke="#eceff1"/>'
-                   f'<text x="{left - 4}" y="{sy(t) + 4:.1f}" text-anchor="end">{t:g}</text>')
-    for t in x_ticks:
-        out.append(f'<text x="{sx(t):.1f}" y="{top + ph + 14}" text-anchor="middle">{t:g}</text>')
-    out.append(f'<text x="{left + pw / 2}" y="{top + ph + 30}" text-anchor="middle">{_esc(x_label)}</text>')
-    out.append(f'<text x="12" y="{top + ph / 2}" text-anchor="middle" '
-               f'transform="rotate(-90 12 {top + ph / 2})">{_esc(y_label)}</text>')
-    for x, label in markers:
-        out.append(f'<line x1="{sx(x):.1f}" x2="{sx(x):.1f}" y1="{top}" y2="{top + ph}" stroke="#e53935" '
-                   f'stroke-dasharray="4 3"/><text x="{sx(x) + 3:.1f}" y="{top + 10}" fill="#e53935">'
-                   f'{_esc(label)}</text>')
-    for index, (name, values) in enumerate(series.items()):
-        colour = _SERIES_COLOURS[index % len(_SERIES_COLOURS)]
-        band = bands.get(name)
-        if band:
-            upper = " ".join(f"{sx(x):.1f},{sy(hi):.1f}" for x, _, hi in band)
-            lower = " ".join(f"{sx(x):.1f},{sy(lo):.1f}" for x, lo, _ in reversed(band))
-            out.append(f'<polygon points="{upper} {lower}" fill="{colour}" fill-opacity="0.12" stroke="none"/>')
-        segment: list[str] = []
-        segments: list[list[str]] = []
-        for x, y in values:
-            if y is None:
-                if segment:
-                    segments.append(segment)
-                segment = []
-                continue
-            segment.append(f"{sx(x):.1f},{sy(y):.1f}")
-        if segment:
-            segments.append(segment)
-        for seg in segments:
-            out.append(f'<polyline points="{" ".join(seg)}" fill="none" stroke="{colour}" stroke-width="1.8"/>')
-        for x, y in values:
-            if y is not None:
-                out.append(f'<circle cx="{sx(x):.1f}" cy="{sy(y):.1f}" r="2.6" fill="{colour}"><title>'
-                           f'{_esc(name)} step {x:g}: {y:.4g}</title></circle>')
-        legend_y = top + ph + 44 + index * 14
-        out.append(f'<rect x="{left}" y="{legend_y - 4}" width="14" height="3" fill="{colour}"/>'
-                   f'<text x="{left + 20}" y="{legend_y}">{_esc(name)}</text>')
-    out.append("</svg>")
-    return "".join(out)
+    return line_plot(series, title=title, x_label=x_label, y_label=y_label, bands=bands, markers=markers)

@@ -19,7 +19,9 @@ with a seeded percentile-bootstrap 95 % interval (2,000 resamples).
 Offers:
 
 * :func:`register` -- ``bt-meta experiment ablation [--seeds N] [--seed S] [--families F,...]
-  [--configurations C,...] [--variants V,...] [--json]``
+  [--configurations C,...] [--variants V,...] [--json]``; with ``--generated N [--out DIR] [--workers W]
+  [--ray ADDRESS] [--perfect-sensing]`` the experiment runs as campaigns of generated variants instead
+  (:mod:`bt_meta.campaign.ablation`)
 * :func:`run` -- the experiment; returns ``{"configurations", "families", "rows", "runs", ...}``
 * :func:`wilson` -- Wilson score interval of a proportion
 * :func:`bootstrap_mean` -- seeded percentile-bootstrap interval of a mean
@@ -86,6 +88,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="comma-separated configurations (default dual,symbolic,low_level,retry; also "
                              "dual_kp_monitor)")
     parser.add_argument("--variants", help="comma-separated variant names to run (default: all of the families)")
+    parser.add_argument("--generated", type=int, metavar="N",
+                        help="run as campaigns instead: N generated variants per family (letters_A, letters_H, "
+                             "magnetic, housing) on the perceived world; see bt_meta.campaign.ablation")
+    parser.add_argument("--out", metavar="DIR", help="with --generated: the campaign directories (default "
+                                                    "ablation-campaigns; resumed when present)")
+    parser.add_argument("--workers", type=int, help="with --generated: local worker processes")
+    parser.add_argument("--ray", metavar="ADDRESS", help="with --generated: run the episodes on Ray")
+    parser.add_argument("--perfect-sensing", action="store_true",
+                        help="with --generated: compare with the bookkept state instead of the perceived one")
     parser.add_argument("--json", action="store_true", help="print JSON")
     parser.set_defaults(func=_main)
 
@@ -105,6 +116,8 @@ def _main(args: argparse.Namespace) -> int:
 
     if not 1 <= args.seeds <= 50:
         raise AblationInputError("--seeds must be between 1 and 50", path="<command line>")
+    if args.generated is not None:
+        return _generated(args)
     families = _choices(args.families, list(FAMILIES), "--families")
     configurations = _choices(args.configurations, list(CONFIGURATIONS), "--configurations")
     only = None
@@ -117,6 +130,34 @@ def _main(args: argparse.Namespace) -> int:
     else:
         _print(result)
     return 0 if not result["crashed"] else 1
+
+
+def _generated(args: argparse.Namespace) -> int:
+    """``--generated N``: the ablation as campaigns (:mod:`bt_meta.campaign.ablation`)."""
+    from bt_meta.campaign.ablation import ABLATION_FAMILIES, run_ablation
+
+    if args.generated < 1:
+        raise AblationInputError("--generated must be at least 1", path="<command line>")
+    families = ABLATION_FAMILIES if args.families == "letters,magnetic,housing" else _choices(
+        args.families, list(ABLATION_FAMILIES), "--families")
+    configurations = _choices(args.configurations, ["dual", "symbolic", "low_level", "retry", "dual_kp_monitor"],
+                              "--configurations")
+    result = run_ablation(args.out or "ablation-campaigns", n=args.generated, seeds=args.seeds, seed=args.seed,
+                          families=families, configurations=configurations, workers=args.workers,
+                          ray_address=args.ray, perfect_sensing=args.perfect_sensing, progress=not args.json)
+    if args.json:
+        print_json(result)
+        return 0
+    from bt_meta.campaign.report import print_summary
+
+    for name, entry in result["families"].items():
+        print(f"\n== {name} ({result['sensing']} sensing, {args.generated} variants x {args.seeds} seed(s))")
+        print_summary(entry["summary"])
+        for other, verdict in entry["verdicts"].items():
+            word = "beats" if verdict["beats"] else ("is beaten by" if verdict["beaten"] else "overlaps")
+            d, o = verdict["dual"], verdict["other"]
+            print(f"  dual {d[0]:.2f} [{d[1]:.2f}, {d[2]:.2f}] {word} {other} {o[0]:.2f} [{o[1]:.2f}, {o[2]:.2f}]")
+    return 0
 
 
 def run(*, seeds: int = 3, seed: int = 0, families: Sequence[str] = ("letters", "magnetic", "housing"),

@@ -107,6 +107,7 @@ class CollisionChecker:
         self._pair_kinds: list[str] = []
         self._masks: dict[tuple[bool, bool, str | None], np.ndarray] = {}
         self._active_key: tuple[bool, bool, str | None] | None = None
+        self._self_pairs: list[tuple[int, int]] | None = None
         self._rebuild_pairs()
 
     # -- pairs -------------------------------------------------------------------------------------------------
@@ -119,19 +120,20 @@ class CollisionChecker:
     def _rebuild_pairs(self) -> None:
         """Robot pairs minus the SRDF's, then every robot geometry against every scene object, minus allowed."""
         geometry = self.geometry
-        geometry.removeAllCollisionPairs()
         objects = geometry.geometryObjects
         n_robot = self._robot_geometries
-        kinds = []
-        for i in range(n_robot):
-            for j in range(i + 1, n_robot):
-                a, b = objects[i], objects[j]
-                if a.parentJoint == b.parentJoint:
-                    continue  # rigidly joined: they never move relative to each other
-                if frozenset((self._link_of[i], self._link_of[j])) in self._disabled_links:
-                    continue
-                geometry.addCollisionPair(pin.CollisionPair(i, j))
-                kinds.append("self")
+        if self._self_pairs is None:  # the robot's own pairs never change: found once
+            self._self_pairs = [
+                (i, j) for i in range(n_robot) for j in range(i + 1, n_robot)
+                # rigidly joined geometries never move relative to each other
+                if objects[i].parentJoint != objects[j].parentJoint
+                and frozenset((self._link_of[i], self._link_of[j])) not in self._disabled_links]
+        # One boolean map handed over at once: adding ~1,600 pairs one by one cost ~15 ms per rebuild, and a
+        # grasp, a release or an allowed touch rebuilds.
+        active = np.zeros((geometry.ngeoms, geometry.ngeoms), dtype=bool)
+        if self._self_pairs:
+            rows, columns = zip(*self._self_pairs, strict=True)
+            active[list(rows), list(columns)] = True
         for j in range(n_robot, geometry.ngeoms):
             carried_by = objects[j].parentJoint
             for i in range(n_robot):
@@ -139,8 +141,7 @@ class CollisionChecker:
                     continue
                 if frozenset((self._link_of[i], objects[j].name)) in self._allowed:
                     continue
-                geometry.addCollisionPair(pin.CollisionPair(i, j))
-                kinds.append("scene")
+                active[i, j] = True
             # A carried object can hit the other objects; fixed objects never move relative to each other.
             for i in range(n_robot, j):
                 other = objects[i].parentJoint
@@ -148,8 +149,9 @@ class CollisionChecker:
                     continue
                 if frozenset((objects[i].name, objects[j].name)) in self._allowed:
                     continue
-                geometry.addCollisionPair(pin.CollisionPair(i, j))
-                kinds.append("scene")
+                active[i, j] = True
+        geometry.setCollisionPairs(active, True)
+        kinds = ["self" if pair.second < n_robot else "scene" for pair in geometry.collisionPairs]
         self._pair_kinds = kinds
         self._masks = {}
         self._geometry_data = None

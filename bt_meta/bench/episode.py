@@ -1,0 +1,172 @@
+"""``bt-meta bench episode``: how fast a whole campaign episode runs against simulated time, next to raw pybullet.
+
+An episode here is what a campaign runs: a fresh Python process (pinned to one core) imports bt-meta, loads the
+robot model, builds the scene's world, plans, and runs the problem with monitors and the meta-reasoner under a
+configuration, on a copy of a demonstration memory recorded once beforehand (not timed). The figure of merit is
+``real_time_factor`` = simulated seconds / wall seconds of the whole process, process start and model loading
+included; ``inner_real_time_factor`` counts only the run itself. The baseline measured in the same run is
+pybullet's raw stepping rate with the same robot and scene (``pybullet_real_time_factor``: simulated seconds /
+wall seconds of ``stepSimulation`` alone). The child also reports where its wall time went (``phases``).
+
+Offers:
+
+* :func:`register` -- ``bt-meta bench episode [--family F] [--configuration C] [--repeat N] [--json]``
+* :func:`run` -- the benchmark; returns the figures as a dict
+* :func:`child` -- the timed episode (``python -m bt_meta.bench.episode TASK.json``)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from bt_meta.commands._common import print_json
+from bt_meta.errors import UserInputError
+
+__all__ = ["child", "register", "run"]
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser("episode", help="a whole campaign episode's real-time factor vs raw pybullet")
+    parser.add_argument("--family", default="letters_A", help="letters_A, letters_H, magnetic or housing")
+    parser.add_argument("--configuration", default="dual", help="plugin configuration (default dual)")
+    parser.add_argument("--repeat", type=int, default=3, help="episodes (processes) to time (default 3)")
+    parser.add_argument("--json", action="store_true", help="print JSON")
+    parser.set_defaults(func=_main)
+
+
+def _main(args: argparse.Namespace) -> int:
+    from bt_meta.campaign.families import family
+    from bt_meta.demo.configurations import CONFIGURATIONS
+
+    family(args.family)
+    if args.configuration not in CONFIGURATIONS:
+        raise UserInputError(f"unknown configuration {args.configuration!r}; known: {', '.join(CONFIGURATIONS)}",
+                             "<command line>")
+    if not 1 <= args.repeat <= 50:
+        raise UserInputError("--repeat must be between 1 and 50", "<command line>")
+    result = run(args.family, args.configuration, repeat=args.repeat)
+    if args.json:
+        print_json(result)
+    else:
+        _print(result)
+    return 0
+
+
+def _pybullet_rate(scene: str, steps: int = 2400) -> dict[str, float]:
+    """Raw ``stepSimulation`` with the robot and the scene's objects: steps per second and real-time factor."""
+    import pybullet
+
+    from bt_meta.world.scenes import load_scene
+    from bt_meta.world.sim import Simulation
+    from bt_meta.world.sim_world import quiet_stdout
+
+    with quiet_stdout():
+        sim = Simulation(seed=0, visuals="light")
+    try:
+        load_scene(scene).build(sim, None, seed=0)
+        started = time.perf_counter()
+        for _ in range(steps):
+            pybullet.stepSimulation(physicsClientId=sim.client)
+        wall = time.perf_counter() - started
+        return {"steps": steps, "steps_per_second": steps / wall,
+                "real_time_factor": steps * sim.time_step / wall}
+    finally:
+        sim.close()
+
+
+def run(family_name: str = "letters_A", configuration: str = "dual", *, repeat: int = 3) -> dict[str, Any]:
+    from bt_meta.campaign.families import family
+    from bt_meta.campaign.runner import ensure_memory
+    from bt_meta.world.scenes import load_scene
+    from bt_meta.world.sim_world import quiet_stdout
+
+    with quiet_stdout():
+        import pybullet  # noqa: F401  (prints its build time on import)
+    chosen = family(family_name)
+    scene_path = str(load_scene(chosen.scene).path)
+    with tempfile.TemporaryDirectory(prefix="bt_meta_bench_episode_") as folder:
+        ensure_memory(Path(folder), {"family": family_name, "seed": 0}, echo=lambda text: None)
+        runs = []
+        for k in range(repeat):
+            task = {"folder": folder, "family": family_name, "task_file": chosen.task_file,
+                    "problem": chosen.problem, "variant": "nominal", "scene": scene_path, "scene_variant": None,
+                    "expected": "nominal_equivalent", "configuration": configuration, "seed": k,
+                    "memory": str(Path(folder) / "memory.sqlite"), "perfect_sensing": True}
+            task_file = Path(folder) / f"task{k}.json"
+            task_file.write_text(json.dumps(task), encoding="utf-8")
+            started = time.perf_counter()
+            done = subprocess.run([sys.executable, "-m", "bt_meta.bench.episode", str(task_file)],
+                                  capture_output=True, text=True, check=False)
+            wall = time.perf_counter() - started
+            if done.returncode != 0:
+                raise UserInputError(f"the timed episode failed: {done.stderr.strip().splitlines()[-1:]}")
+            inner = json.loads(done.stdout.strip().splitlines()[-1])
+            inner["process_wall_seconds"] = wall
+            inner["real_time_factor"] = inner["simulated_seconds"] / wall
+            runs.append(inner)
+    raw = _pybullet_rate(chosen.scene)
+    factor = statistics.median(r["real_time_factor"] for r in runs)
+    inner_factor = statistics.median(r["inner_real_time_factor"] for r in runs)
+    phases = {name: statistics.median(r["phases"][name] for r in runs) for name in runs[0]["phases"]}
+    return {"family": family_name, "configuration": configuration, "repeat": repeat,
+            "real_time_factor": factor, "inner_real_time_factor": inner_factor,
+            "pybullet_real_time_factor": raw["real_time_factor"], "pybullet_steps_per_second": raw["steps_per_second"],
+            "ratio_to_pybullet": factor / raw["real_time_factor"],
+            "simulated_seconds": statistics.median(r["simulated_seconds"] for r in runs),
+            "process_wall_seconds": statistics.median(r["process_wall_seconds"] for r in runs),
+            "phases": phases, "runs": runs}
+
+
+def child(task_path: str) -> dict[str, Any]:
+    """The timed episode, in its own process: phases (s) and the simulated time."""
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+    phases: dict[str, float] = {}
+    started = time.perf_counter()
+    from bt_meta.world.sim_world import quiet_stdout
+
+    with quiet_stdout():
+        import pybullet  # noqa: F401
+
+        from bt_meta.campaign import episode  # noqa: F401
+        from bt_meta.demo import configurations  # noqa: F401
+        from bt_meta.meta import MetaExecutor  # noqa: F401
+    phases["import"] = time.perf_counter() - started
+    task = json.loads(Path(task_path).read_text(encoding="utf-8"))
+    from bt_meta.campaign.episode import run_episode
+
+    mark = time.perf_counter()
+    row = run_episode(task)
+    phases["episode"] = time.perf_counter() - mark
+    if row["status"] == "crashed":
+        raise SystemExit(f"episode crashed: {row['error']}")
+    report = row.get("report") or {}
+    simulated = float(row.get("simulated_seconds") or 0.0)
+    run_seconds = float(report.get("seconds") or phases["episode"])
+    phases["world_and_plugins"] = max(0.0, phases["episode"] - run_seconds)
+    phases["run"] = run_seconds
+    return {"status": row["status"], "simulated_seconds": simulated, "phases": phases,
+            "inner_real_time_factor": simulated / run_seconds if run_seconds > 0 else 0.0}
+
+
+def _print(result: dict[str, Any]) -> None:
+    print(f"episode ({result['family']}, {result['configuration']}, {result['repeat']} process(es), median): "
+          f"{result['simulated_seconds']:.1f} s simulated in {result['process_wall_seconds']:.2f} s wall -> "
+          f"real_time_factor {result['real_time_factor']:.2f}x (inside the process "
+          f"{result['inner_real_time_factor']:.2f}x)")
+    print(f"pybullet raw stepping, same robot and scene: {result['pybullet_steps_per_second']:.0f} steps/s = "
+          f"{result['pybullet_real_time_factor']:.1f}x real time; episode / raw = {result['ratio_to_pybullet']:.3f}")
+    print("wall time per phase: " + ", ".join(f"{k} {v:.2f} s" for k, v in result["phases"].items()))
+
+
+if __name__ == "__main__":  # the timed child process
+    print(json.dumps(child(sys.argv[1])))

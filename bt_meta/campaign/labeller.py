@@ -1,0 +1,313 @@
+"""The expected outcome of a variant, decided from ground truth: the true scene in the simulator, not by hand.
+
+The variant's scene is built in pybullet and settled; then, in this order (the first that applies wins):
+
+1. ``unrepairable`` -- the objects on the table cannot make the goal. Letters: the letter's cells (from the
+   nominal plan: every ``place`` with its block's shape) need ``U`` units; with ``n1`` 1x1 and ``n2`` 1x2 blocks
+   present and at most ``M`` disjoint pairs of neighbouring cells a 1x2 can cover, the letter can be drawn iff
+   ``n1 + 2 min(n2, M) >= U``. Other families: every object the problem names is present with its type, or a
+   spare of that type is.
+2. ``limit:reachability`` / ``limit:collision`` -- kinematics and collision checks on the true scene: for every
+   object the robot must pick up (the needed ones, else spares that could stand in), mink IK to the top-down
+   grasp pose the skills use, collision-checked against the robot and the scene (the hand may touch the object
+   grasped). A role no candidate can fill: the failed solve's kind (``reachability`` beats ``collision``). A place
+   where the task puts something that an object the task does not name occupies: ``limit:collision``.
+3. ``repairable`` -- the goal can be reached but not by the nominal plan: a needed object is missing or of
+   another type (substitution), has another colour where the task's symbols name colours (its initial facts),
+   is turned off its nominal up axis by more than 20 degrees (re-orientation / pose repair), or a fixture the
+   nominal plan's absolute poses depend on moved more than 1 cm.
+4. ``nominal_equivalent`` -- otherwise (shifts, turns about the vertical, distractors clear of the work, colours
+   the task does not name): the nominal plan still succeeds.
+
+Offers:
+
+* :class:`Labeller` -- ``label(scene_path, variant, changes)`` -> :class:`Label`; ``targets``; a context manager
+  owning one simulator for many variants
+* :class:`Label` -- expected outcome, reason, evidence
+* :data:`OUTCOMES` -- the five expected outcomes
+* :func:`letter_cells` / :func:`max_pairs` / :func:`letters_feasible` -- the inventory rule of the letters
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["OUTCOMES", "Label", "Labeller", "letter_cells", "letters_feasible", "max_pairs"]
+
+OUTCOMES = ("nominal_equivalent", "repairable", "limit:reachability", "limit:collision", "unrepairable")
+
+UP_TOLERANCE = math.radians(20.0)
+FIXTURE_TOLERANCE = 0.01
+BLOCKING_RADIUS = 0.6
+"""An object whose centre is within this many lb (x, y) of a place the task puts something blocks it."""
+GRASP_HEIGHT = 0.004
+"""Gripper above the object's top at the grasp (the place and move_to skills use 2-4 mm)."""
+APPROACH_HEIGHT = 0.08
+
+
+@dataclass(frozen=True)
+class Label:
+    expected: str
+    reason: str
+    evidence: dict[str, Any] = field(default_factory=dict)
+
+
+def letter_cells(plan: Iterable[Any], shapes: dict[str, str]) -> list[tuple[float, float]]:
+    """The unit cells (lb) a letter's plan fills: ``place(b, x, y)`` covers (x, y), or for a 1x2 the two cells
+    half a unit either side along the letter's x."""
+    cells: list[tuple[float, float]] = []
+    for action in plan:
+        if action.name != "place":
+            continue
+        block, x, y = action.args[0], float(action.args[1]), float(action.args[2])
+        cells += [(x - 0.5, y), (x + 0.5, y)] if shapes.get(block) == "1x2" else [(x, y)]
+    return cells
+
+
+def max_pairs(cells: Sequence[tuple[float, float]]) -> int:
+    """The most disjoint pairs of neighbouring cells (one lb apart): where 1x2 blocks can stand in."""
+    edges = [(i, j) for i in range(len(cells)) for j in range(i + 1, len(cells))
+             if abs(math.dist(cells[i], cells[j]) - 1.0) < 1e-6]
+
+    def best(used: frozenset[int], start: int) -> int:
+        top = 0
+        for k in range(start, len(edges)):
+            i, j = edges[k]
+            if i not in used and j not in used:
+                top = max(top, 1 + best(used | {i, j}, k + 1))
+        return top
+
+    return best(frozenset(), 0)
+
+
+def letters_feasible(units: int, pairs: int, n1: int, n2: int) -> bool:
+    """Can ``n1`` 1x1 and ``n2`` 1x2 blocks fill ``units`` cells with at most ``pairs`` 1x2 placements?"""
+    return n1 + 2 * min(n2, pairs) >= units
+
+
+class Labeller:
+    """Labels the variants of one family; owns one headless simulator reused for every variant."""
+
+    def __init__(self, family: Any, scene: Any) -> None:
+        from bt_meta.campaign.families import needed_objects
+        from bt_meta.htn import load_task_file
+        from bt_meta.htn.planner import plan
+        from bt_meta.world.sim import Simulation
+        from bt_meta.world.sim_world import load_grounding, quiet_stdout
+
+        self.family = family
+        self.scene = scene
+        task_path = family.task_path()
+        self.task_file = load_task_file(task_path)
+        self.problem = self.task_file.problem(family.problem)
+        self.grounding = load_grounding(self.task_file.domain.name, task_path)
+        self.needed = needed_objects(self.problem, self.grounding)
+        self.nominal = {o.name: o for o in scene.objects}
+        facts = list(self.problem.state) if hasattr(self.problem, "state") else []
+        self.shapes = {str(f[1]): str(f[2]) for f in facts if len(f) == 3 and f[0] == "shape"}
+        self.colour_symbols = {str(f[1]) for f in facts if len(f) == 3 and f[0] == "colour"}
+        result = plan(self.task_file.domain, self.problem)
+        self.plan = list(result.plan) if result.ok else []
+        with quiet_stdout():
+            import pybullet  # noqa: F401  (prints its build time on import)
+
+            self.sim = Simulation(seed=0, visuals="light")
+        world = self._world(scene.path, None)
+        try:
+            self.targets = self._targets(world)
+            self.nominal_up = {name: _up(world.sim.object_transform(name)) for name in world.sim.object_names()}
+            self.nominal_xy = {name: world.sim.object_transform(name)[:2, 3].copy()
+                               for name in world.sim.object_names()}
+        finally:
+            world.close()
+        self.cells = letter_cells(self.plan, self.shapes) if family.truth == "letters" else []
+
+    def __enter__(self) -> Labeller:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self.sim.close()
+
+    # -- worlds ---------------------------------------------------------------------------------------------
+
+    def _world(self, scene_path: str | Path, variant: str | None) -> Any:
+        from bt_meta.world.sim_world import SimWorld, quiet_stdout
+
+        setup = {"scene": str(scene_path)}
+        grounding = dataclasses.replace(self.grounding, problems={**self.grounding.problems,
+                                                                  self.problem.name: setup})
+        with quiet_stdout():
+            return SimWorld(self.task_file.domain, self.problem, grounding, variant=variant, seed=0, sim=self.sim)
+
+    def _targets(self, world: Any) -> list[tuple[float, float, float]]:
+        """Where the task puts things (x, y, z): the letter's cells, or the feature / part the held one goes to."""
+        out: list[tuple[float, float, float]] = []
+        frame = next((spec.get("frame") for spec in self.grounding.skills.values() if spec.get("frame")), None)
+        for action in self.plan:
+            if action.name == "place" and frame is not None:
+                shape = self.shapes.get(action.args[0])
+                x, y = float(action.args[1]), float(action.args[2])
+                for dx in ((-0.5, 0.5) if shape == "1x2" else (0.0,)):
+                    gx, gy, _ = world.ground_cell(str(frame), str(x + dx), str(y))
+                    out.append((gx, gy, world.sim.table.top_z))
+        if out:
+            return out
+        grasped = set(self.family.grasped or ())
+        for name in self.needed:
+            if name in grasped or name not in world.sim.object_names():
+                continue
+            point, _ = world.sim.feature(name, None)
+            feature_names = [s.get("feature") for s in self.grounding.features.values() if s.get("object") == name]
+            if feature_names and feature_names[0]:
+                point, _ = world.sim.feature(name, feature_names[0])
+            out.append((float(point[0]), float(point[1]), float(point[2])))
+        return out
+
+    # -- the label ------------------------------------------------------------------------------------------
+
+    def label(self, scene_path: str | Path, variant: str | None, changes: Sequence[dict[str, Any]] = ()) -> Label:
+        world = self._world(scene_path, variant)
+        try:
+            return self._label(world)
+        finally:
+            world.close()
+
+    def _label(self, world: Any) -> Label:
+        from bt_meta.world.objects import LB
+
+        sim = world.sim
+        present = {name: sim.object_model(name) for name in sim.object_names()}
+        roles = self._roles(present)
+        if isinstance(roles, Label):
+            return roles
+        # 2. kinematics and collisions on the true scene
+        feasible: dict[str, tuple[bool, str | None, str]] = {}
+        for name in sorted({c for candidates in roles.values() for c in candidates}):
+            feasible[name] = self._graspable(world, name)
+        limit = self._fill(roles, feasible, present)
+        if limit is not None:
+            return limit
+        fixtures = {n for n in self.needed if self.family.grasped is not None and n not in self.family.grasped}
+        for tx, ty, _ in self.targets:
+            for name in present:
+                if name in fixtures:
+                    continue
+                xy = sim.object_transform(name)[:2, 3]
+                if math.hypot(xy[0] - tx, xy[1] - ty) < BLOCKING_RADIUS * LB:
+                    return Label("limit:collision", f"{name} occupies a place the task puts something "
+                                 f"({tx:.3f}, {ty:.3f})", {"object": name, "target": [tx, ty]})
+        # 3. repairable or nominal-equivalent
+        for name in self.needed:
+            nominal = self.nominal.get(name)
+            if name not in present or nominal is None:
+                return Label("repairable", f"{name} is missing; others can stand in", {"object": name})
+            if name in feasible and not feasible[name][0]:
+                return Label("repairable", f"{name} cannot be grasped ({feasible[name][1]}); others can stand in",
+                             {"object": name, "kind": feasible[name][1]})
+            if present[name].type != nominal.type:
+                return Label("repairable", f"{name} is a {present[name].type}, not a {nominal.type}",
+                             {"object": name})
+            if name in self.colour_symbols and nominal.colour is not None and present[name].colour != nominal.colour:
+                return Label("repairable", f"{name} is {present[name].colour} where the task's symbols say "
+                             f"{nominal.colour}", {"object": name})
+            if name in self.nominal_up:
+                angle = _angle(_up(sim.object_transform(name)), self.nominal_up[name])
+                if angle > UP_TOLERANCE:
+                    return Label("repairable", f"{name} is turned {math.degrees(angle):.0f} deg off its nominal "
+                                 "up axis (re-orientation or pose repair)", {"object": name,
+                                                                             "degrees": math.degrees(angle)})
+            if name in self.family.absolute_fixtures and name in self.nominal_xy:
+                moved = float(np.linalg.norm(sim.object_transform(name)[:2, 3] - self.nominal_xy[name]))
+                if moved > FIXTURE_TOLERANCE:
+                    return Label("repairable", f"{name} moved {moved * 100:.1f} cm; the nominal plan's poses "
+                                 "for it are absolute", {"object": name, "moved": moved})
+        return Label("nominal_equivalent", "every needed object present, reachable, upright; nothing in the way")
+
+    def _roles(self, present: dict[str, Any]) -> dict[str, list[str]] | Label:
+        """Role -> candidate objects (the needed object first, then stand-ins); ``unrepairable`` when the table
+        cannot make the goal."""
+        grasped = self.family.grasped
+        if self.family.truth == "letters":
+            blocks = {n: m for n, m in present.items() if m.shape in ("1x1", "1x2")}
+            n1 = sum(m.shape == "1x1" for m in blocks.values())
+            n2 = sum(m.shape == "1x2" for m in blocks.values())
+            units, pairs = len(self.cells), max_pairs(self.cells)
+            if not letters_feasible(units, pairs, n1, n2):
+                return Label("unrepairable", f"the letter needs {units} cells; {n1} 1x1 and {n2} 1x2 blocks "
+                             f"cover at most {n1 + 2 * min(n2, pairs)}", {"units": units, "n1": n1, "n2": n2})
+            return {"blocks": sorted(blocks)}
+        roles: dict[str, list[str]] = {}
+        for name in self.needed:
+            nominal = self.nominal.get(name)
+            if nominal is None:
+                continue
+            spares = [n for n, m in present.items() if m.type == nominal.type and n not in self.needed]
+            candidates = ([name] if name in present and present[name].type == nominal.type else []) + spares
+            if not candidates:
+                return Label("unrepairable", f"no {nominal.type} on the table for {name}", {"object": name})
+            if grasped is not None and name in grasped:
+                roles[name] = candidates
+        return roles
+
+    def _graspable(self, world: Any, name: str) -> tuple[bool, str | None, str]:
+        """(ok, failure kind, message) of the top-down grasp and its approach above ``name``."""
+        import pinocchio as pin
+
+        from bt_meta.world.skills.place import GRIPPER_YAW, nearest_yaw, object_yaw, symmetry, top_down
+
+        transform = world.sim.object_transform(name)
+        yaw = nearest_yaw(object_yaw(transform), symmetry(world.sim.object_model(name)), GRIPPER_YAW)
+        top = world.stack_top(name)
+        q = world.current_q()
+        for height, allowed in ((APPROACH_HEIGHT, False), (GRASP_HEIGHT, True)):
+            target = top_down(transform[0, 3], transform[1, 3], top + height, yaw)
+            world.allow_hand(name, "right", allowed)
+            result = world.ik.solve("right", pin.SE3(target[:3, :3], target[:3, 3]), q, seed=0)
+            world.allow_hand(name, "right", False)
+            if not result.success:
+                return False, result.kind, f"{name}: {result.message}"
+            q = result.q
+        return True, None, ""
+
+    def _fill(self, roles: dict[str, list[str]], feasible: dict[str, tuple[bool, str | None, str]],
+              present: dict[str, Any]) -> Label | None:
+        """A limit label when some role has no candidate the robot can grasp."""
+        def limit(names: Iterable[str]) -> Label:
+            kinds = [feasible[n][1] for n in names if not feasible[n][0]]
+            kind = "reachability" if "reachability" in kinds else "collision"
+            message = next((feasible[n][2] for n in names if feasible[n][1] == kind), "")
+            return Label(f"limit:{kind}", f"no graspable object: {message}", {"kind": kind})
+
+        if self.family.truth == "letters":
+            ok = [n for n in roles["blocks"] if feasible[n][0]]
+            n1 = sum(present[n].shape == "1x1" for n in ok)
+            n2 = sum(present[n].shape == "1x2" for n in ok)
+            if not letters_feasible(len(self.cells), max_pairs(self.cells), n1, n2):
+                return limit(roles["blocks"])
+            needed_bad = [n for n in self.needed if n in feasible and not feasible[n][0]]
+            spare_ok = any(feasible[n][0] for n in roles["blocks"] if n not in self.needed)
+            if needed_bad and not spare_ok:
+                return limit(needed_bad)
+            return None
+        for candidates in roles.values():
+            if not any(feasible[n][0] for n in candidates):
+                return limit(candidates)
+        return None
+
+
+def _up(transform: np.ndarray) -> np.ndarray:
+    return np.asarray(transform[:3, 2], dtype=float)
+
+
+def _angle(a: np.ndarray, b: np.ndarray) -> float:
+    return float(math.acos(max(-1.0, min(1.0, float(np.dot(a, b)) / (np.linalg.norm(a) * np.linalg.norm(b))))))

@@ -1,0 +1,108 @@
+"""The numbers of a campaign: per expected outcome x configuration rates with Wilson intervals, and the rest.
+
+The Wilson 95 % interval comes from scipy (``binomtest(...).proportion_ci(method="wilson")``); means get a seeded
+percentile-bootstrap interval (:func:`bt_meta.experiments.ablation.bootstrap_mean`).
+
+What a row counts (``rows`` are the database's episode rows):
+
+* **success** -- the executor ended ``success`` and the simulator confirms the task done; for a ``limit:*`` or
+  ``unrepairable`` variant, success is the *right report*: the run ended failed with the limit's kind among its
+  failures (``limit:reachability`` -> ``reachability``) or, unrepairable, failed at all -- a run that claims to
+  have done the impossible is not a success
+* **loops** -- runs stopped because the attempt budget was spent
+* **false alarms** -- runs of a ``nominal_equivalent`` variant with any failure classified
+* **second exposure** -- every repaired run run again on the memory its repair wrote: attempts then
+
+Offers:
+
+* :func:`wilson_interval` -- (low, high)
+* :func:`correct` -- whether an episode row reached its expected outcome
+* :func:`summarise` -- the summary dict (``table``, ``confusion``, ``loops``, ``false_alarms``, ``second_exposure``)
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+__all__ = ["correct", "summarise", "wilson_interval"]
+
+
+def wilson_interval(successes: int, n: int, level: float = 0.95) -> tuple[float, float]:
+    """The Wilson score interval of ``successes`` out of ``n`` (``(0, 1)`` when ``n`` is 0)."""
+    if n <= 0:
+        return 0.0, 1.0
+    from scipy.stats import binomtest
+
+    interval = binomtest(int(successes), int(n)).proportion_ci(confidence_level=level, method="wilson")
+    return float(interval.low), float(interval.high)
+
+
+def correct(row: dict[str, Any]) -> bool:
+    """Did the episode reach its expected outcome (see the module docstring)?"""
+    expected = row.get("expected", "")
+    if row.get("status") == "crashed":
+        return False
+    if expected in ("nominal_equivalent", "repairable"):
+        return bool(row.get("success"))
+    if expected.startswith("limit:"):
+        return row.get("status") != "success" and expected.split(":", 1)[1] in (row.get("kinds") or [])
+    if expected == "unrepairable":
+        return row.get("status") != "success"
+    return False
+
+
+def _mean(values: Sequence[float], seed: int = 0) -> dict[str, float]:
+    from bt_meta.experiments.ablation import bootstrap_mean
+
+    mean, low, high = bootstrap_mean(values, seed=seed)
+    return {"mean": mean, "low": low, "high": high}
+
+
+def summarise(rows: Iterable[dict[str, Any]], *, configurations: Sequence[str] | None = None) -> dict[str, Any]:
+    rows = list(rows)
+    configurations = list(configurations or dict.fromkeys(r["configuration"] for r in rows))
+    expected_values = [e for e in ("nominal_equivalent", "repairable", "limit:reachability", "limit:collision",
+                                   "unrepairable") if any(r["expected"] == e for r in rows)]
+    table = []
+    for expected in [*expected_values, "all"]:
+        for configuration in configurations:
+            chosen = [r for r in rows if r["configuration"] == configuration and expected in (r["expected"], "all")]
+            if not chosen:
+                continue
+            ok = sum(correct(r) for r in chosen)
+            low, high = wilson_interval(ok, len(chosen))
+            table.append({"expected": expected, "configuration": configuration, "episodes": len(chosen),
+                          "correct": ok, "rate": ok / len(chosen), "wilson95": [low, high],
+                          "attempts": _mean([r["attempts"] for r in chosen]),
+                          "seconds": _mean([r["seconds"] for r in chosen]),
+                          "loops": sum(bool(r.get("loop")) for r in chosen),
+                          "crashed": sum(r["status"] == "crashed" for r in chosen)})
+    confusion: dict[str, dict[str, int]] = {}
+    for r in rows:
+        kinds = r.get("kinds") or (["crashed"] if r["status"] == "crashed" else ["none"])
+        counter = confusion.setdefault(r["expected"], Counter())
+        for kind in kinds:
+            counter[kind] += 1
+    nominal = [r for r in rows if r["expected"] == "nominal_equivalent"]
+    false_alarms = [r for r in nominal if r.get("kinds")]
+    second = [r for r in rows if r.get("second_exposure")]
+    return {
+        "episodes": len(rows), "configurations": configurations, "table": table,
+        "confusion": {k: dict(v) for k, v in confusion.items()},
+        "loops": sum(bool(r.get("loop")) for r in rows),
+        "false_alarms": {"count": len(false_alarms), "of": len(nominal),
+                         "episodes": [_key(r) for r in false_alarms]},
+        "second_exposure": {"repaired": len(second),
+                            "zero_attempts": sum(r["second_exposure"]["attempts"] == 0 and
+                                                 r["second_exposure"]["status"] == "success" for r in second),
+                            "attempts": _mean([r["second_exposure"]["attempts"] for r in second]) if second else None},
+        "crashed": sum(r["status"] == "crashed" for r in rows),
+        "seconds": sum(float(r["seconds"]) for r in rows),
+        "simulated_seconds": sum(float(r.get("simulated_seconds") or 0.0) for r in rows),
+    }
+
+
+def _key(row: dict[str, Any]) -> str:
+    return f"{row['variant']}/{row['configuration']}/{row['seed']}"

@@ -1,0 +1,131 @@
+"""The ground-truth labeller on hand-built variants (the simulator builds each true scene)."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import pytest
+
+from bt_meta.campaign.labeller import letter_cells, letters_feasible, max_pairs
+
+
+def test_letter_cells_and_pairs_of_A():
+    plan = [SimpleNamespace(name="place", args=(b, x, y)) for b, x, y in
+            [("b0", "0", "0"), ("b1", "0", "1"), ("b2", "3", "0"), ("b3", "3", "1"), ("b5", "1.5", "1"),
+             ("b4", "1.5", "2")]]
+    cells = letter_cells(plan, {"b5": "1x2"})
+    assert sorted(cells) == sorted([(0, 0), (0, 1), (3, 0), (3, 1), (1, 1), (2, 1), (1.5, 2)])
+    assert max_pairs(cells) == 3  # two legs and the bar; the apex stands alone
+    assert letters_feasible(7, 3, 5, 1) and letters_feasible(7, 3, 7, 0) and letters_feasible(7, 3, 1, 3)
+    assert not letters_feasible(7, 3, 4, 1) and not letters_feasible(7, 3, 0, 4)
+
+
+NOMINAL_A = """scene: hand
+anchors:
+  letter_origin: [0.55, 0.10, table, 0, 0, -90]
+objects:
+  - {name: b0, type: megablok_1x1, colour: blue, pose: [0.55, -0.31, table, 0, 0, 0]}
+  - {name: b1, type: megablok_1x1, colour: blue, pose: [0.64, -0.31, table, 0, 0, 0]}
+  - {name: b2, type: megablok_1x1, colour: blue, pose: [0.73, -0.31, table, 0, 0, 0]}
+  - {name: b3, type: megablok_1x1, colour: blue, pose: [0.55, -0.40, table, 0, 0, 0]}
+  - {name: b4, type: megablok_1x1, colour: blue, pose: [0.64, -0.40, table, 0, 0, 0]}
+  - {name: b5, type: megablok_1x2, colour: blue, pose: [0.60, -0.50, table, 0, 0, 0]}
+variants:
+  perturbed:
+"""
+
+LETTER_CASES = {
+    "shifted": ("nominal_equivalent", "override: {b0: {pose: [0.57, -0.29, table, 0, 0, 25]}}"),
+    "distractor_aside": ("nominal_equivalent",
+                         "add: [{name: d, type: megablok_1x1, colour: green, pose: [0.72, -0.52, table, 0, 0, 0]}]"),
+    "removed": ("unrepairable", "remove: [b0]"),
+    "removed_with_spare": ("repairable", "remove: [b0]\n    add: [{name: s, type: megablok_1x1, colour: blue, "
+                                         "pose: [0.72, -0.52, table, 0, 0, 0]}]"),
+    "bar_as_two_1x1": ("repairable", "remove: [b5]\n    add: [{name: b5, type: megablok_1x1, colour: blue, pose: "
+                                     "[0.57, -0.50, table, 0, 0, 0]}, {name: b6, type: megablok_1x1, colour: blue, "
+                                     "pose: [0.64, -0.50, table, 0, 0, 0]}]"),
+    "other_colour": ("repairable", "override: {b5: {colour: red}}"),
+    "on_its_side": ("repairable", "override: {b1: {pose: [0.64, -0.31, table, 90, 0, 0]}}"),
+    "far_away": ("limit:reachability", "override: {b2: {pose: [0.98, 0.30, table, 0, 0, 0]}}"),
+    "far_with_spare": ("repairable", "override: {b2: {pose: [0.98, 0.30, table, 0, 0, 0]}}\n    add: [{name: s, "
+                                     "type: megablok_1x1, colour: blue, pose: [0.72, -0.52, table, 0, 0, 0]}]"),
+    "cell_blocked": ("limit:collision",
+                     "add: [{name: d, type: megablok_1x1, colour: green, pose: [0.55, 0.10, table, 0, 0, 0]}]"),
+}
+
+
+@pytest.fixture(scope="module")
+def letters_labeller():
+    from bt_meta.campaign.families import family
+    from bt_meta.campaign.labeller import Labeller
+    from bt_meta.world.scenes import load_scene
+
+    with Labeller(family("letters_A"), load_scene("letters_A")) as labeller:
+        yield labeller
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", sorted(LETTER_CASES))
+def test_letters_labels(letters_labeller, tmp_path, case):
+    expected, change = LETTER_CASES[case]
+    path = tmp_path / f"{case}.yaml"
+    path.write_text(NOMINAL_A + f"    {change}\n", encoding="utf-8")
+    label = letters_labeller.label(path, "perturbed")
+    assert label.expected == expected, label.reason
+
+
+NOMINAL_MAGNETIC = """scene: hand
+objects:
+  - {name: reference, type: magnet_reference, pose: [0.62, -0.10, table, 0, 0, 0]}
+  - {name: active, type: magnet_active, pose: [0.58, -0.40, table, 0, 0, 0]}
+variants:
+  perturbed:
+"""
+
+MAGNETIC_CASES = {
+    "shifted_active": ("nominal_equivalent", "override: {active: {pose: [0.60, -0.37, table, 0, 0, 30]}}"),
+    "shifted_reference": ("repairable", "override: {reference: {pose: [0.64, -0.07, table, 0, 0, 0]}}"),
+    "upside_down": ("repairable", "override: {active: {pose: [0.58, -0.40, table, 180, 0, 0]}}"),
+    "removed": ("unrepairable", "remove: [active]"),
+    "far": ("limit:reachability", "override: {active: {pose: [0.98, 0.30, table, 0, 0, 0]}}"),
+}
+
+
+@pytest.mark.slow
+def test_magnetic_labels(tmp_path):
+    from bt_meta.campaign.families import family
+    from bt_meta.campaign.labeller import Labeller
+    from bt_meta.world.scenes import load_scene
+
+    with Labeller(family("magnetic"), load_scene("magnetic_attach")) as labeller:
+        for case, (expected, change) in MAGNETIC_CASES.items():
+            path = tmp_path / f"{case}.yaml"
+            path.write_text(NOMINAL_MAGNETIC + f"    {change}\n", encoding="utf-8")
+            label = labeller.label(path, "perturbed")
+            assert label.expected == expected, (case, label.reason)
+
+
+@pytest.mark.slow
+def test_generate_with_a_users_scene_and_spec_writes_labelled_scene_files(tmp_path, capsys):
+    import json
+
+    from bt_meta.campaign.labeller import OUTCOMES
+    from bt_meta.cli import main
+    from bt_meta.world.scenes import load_scene
+
+    scene = tmp_path / "my_magnet.yaml"
+    scene.write_text(NOMINAL_MAGNETIC.replace("variants:\n  perturbed:\n", ""), encoding="utf-8")
+    spec = tmp_path / "spec.yaml"
+    spec.write_text("family: magnetic\nperturbations:\n  - rotate: {objects: [active], choices: [[180, 0, 0]]}\n",
+                    encoding="utf-8")
+    out = tmp_path / "C"
+    assert main(["campaign", "generate", "magnetic", "--n", "2", "--seed", "4", "--scene", str(scene), "--spec",
+                 str(spec), "-o", str(out), "--json"]) == 0
+    manifest = json.loads(capsys.readouterr().out)
+    assert manifest["scene"] == str(scene) and len(manifest["variants"]) == 2
+    for variant in manifest["variants"]:
+        assert variant["expected"] == "repairable" and variant["expected"] in OUTCOMES  # upside down: re-orient
+        loaded = load_scene(out / variant["file"])
+        active = next(o for o in loaded.objects_for("perturbed") if o.name == "active")
+        assert abs(abs(active.rpy[0]) - 3.14159) < 1e-3
+    assert main(["campaign", "generate", "magnetic", "--n", "1", "-o", str(out)]) == 2  # already a campaign

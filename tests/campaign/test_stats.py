@@ -1,0 +1,63 @@
+"""The campaign's numbers: Wilson intervals from scipy, what counts as reaching an expected outcome, the summary."""
+
+from __future__ import annotations
+
+import pytest
+
+from bt_meta.campaign.ablation import verdicts
+from bt_meta.campaign.stats import correct, summarise, wilson_interval
+from bt_meta.experiments.ablation import wilson
+
+
+def test_wilson_interval_agrees_with_the_closed_form():
+    for k, n in ((0, 10), (3, 10), (10, 10), (47, 120)):
+        assert wilson_interval(k, n) == pytest.approx(wilson(k, n), abs=1e-9)
+    assert wilson_interval(0, 0) == (0.0, 1.0)
+
+
+def _row(expected, status="failed", kinds=(), configuration="dual", success=None, **more):
+    row = {"variant": f"v{len(kinds)}{status}", "configuration": configuration, "seed": 0, "expected": expected,
+           "status": status, "success": status == "success" if success is None else success, "attempts": 1,
+           "kinds": list(kinds), "seconds": 2.0, "loop": False, "second_exposure": None}
+    row.update(more)
+    return row
+
+
+def test_what_reaching_an_expected_outcome_means():
+    assert correct(_row("repairable", "success"))
+    assert not correct(_row("repairable", "success", success=False))  # ended success, the task is not done
+    assert correct(_row("limit:reachability", kinds=["unknown_entity", "reachability"]))
+    assert not correct(_row("limit:reachability", kinds=["collision"]))
+    assert not correct(_row("limit:collision", "success", kinds=["collision"]))
+    assert correct(_row("unrepairable"))
+    assert not correct(_row("unrepairable", "success"))
+    assert not correct(_row("nominal_equivalent", "crashed"))
+
+
+def test_summary_counts_loops_false_alarms_and_second_exposure():
+    rows = [_row("nominal_equivalent", "success"), _row("nominal_equivalent", "failed", ["unexpected_configuration"]),
+            _row("repairable", "failed", ["precondition"], loop=True),
+            _row("repairable", "success", ["unknown_entity"],
+                 second_exposure={"status": "success", "attempts": 0, "achieved": True}),
+            _row("repairable", "success", ["physical"], configuration="retry")]
+    summary = summarise(rows)
+    assert summary["loops"] == 1
+    assert summary["false_alarms"]["count"] == 1 and summary["false_alarms"]["of"] == 2
+    assert summary["second_exposure"]["repaired"] == 1 and summary["second_exposure"]["zero_attempts"] == 1
+    assert summary["confusion"]["nominal_equivalent"] == {"none": 1, "unexpected_configuration": 1}
+    table = {(r["expected"], r["configuration"]): r for r in summary["table"]}
+    assert table[("repairable", "dual")]["correct"] == 1 and table[("repairable", "dual")]["episodes"] == 2
+    assert table[("all", "dual")]["episodes"] == 4
+    low, high = table[("all", "dual")]["wilson95"]
+    assert low < table[("all", "dual")]["rate"] < high
+
+
+def test_dual_beats_only_with_disjoint_intervals():
+    rows = [_row("repairable", "success", configuration="dual") for _ in range(30)]
+    rows += [_row("repairable", "failed", configuration="retry") for _ in range(30)]
+    rows += [_row("repairable", "success" if k % 2 else "failed", configuration="symbolic") for k in range(30)]
+    found = verdicts(summarise(rows))
+    assert found["retry"]["beats"] and not found["retry"]["beaten"]
+    assert found["symbolic"]["beats"]  # 1.0 [0.89, 1] against 0.5 [0.33, 0.67]
+    few = verdicts(summarise([_row("repairable", "success"), _row("repairable", configuration="retry")]))
+    assert not few["retry"]["beats"] and not few["retry"]["beaten"]  # one run each: the intervals overlap

@@ -24,6 +24,14 @@ The steps, as the paper gives them:
    ``splice`` replacing the invoked task's remaining steps with the matched decomposition's steps, rebound to the
    unknown entities (A's bar drawn with two 1x1 blocks at the cells of H's bar).
 
+**Spares** (:mod:`bt_meta_plugins._spares`, no memory needed) come first: a missing entity that a step still to
+run uses is replaced one for one (``substitute``) by an object seen on the table that the plan does not use, when
+the precondition of every method that chose the missing entity holds with the spare in its place -- so colour
+counts only where the task's symbols name one. Besides ``unknown_entity`` and ``unexpected_configuration``, a
+``collision``, ``physical``, ``precondition`` or ``reachability`` failure is answered when the failed step itself
+names a missing entity (a 1x2 block placed where a 1x1 was planned collides: A's bar then stands in for H's two
+1x1 placements).
+
 Before proposing, the unknown entities are **anchored** in the world's symbolic state (``world.apply_symbolic``):
 their perceived ``block``/``shape``/``colour`` facts replace what the problem assumed, and an unknown entity the
 failed step itself moved is made ``available`` again (its placement did not meet the expectation, and the repair
@@ -58,6 +66,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from bt_meta_plugins._spares import spare_proposals
+
 from bt_meta.bt.failures import FailureKind, RepairProposal
 from bt_meta.errors import ConfigError
 from bt_meta.meta.proposals import SPLICE, SUBSTITUTE
@@ -82,6 +92,9 @@ MATCHERS = ("gridmap", "symbolic")
 LEVELS = ("task", "step")
 ENV_MATCHER = "BT_META_SUBSTITUTION_MATCHER"
 _KINDS = (FailureKind.UNKNOWN_ENTITY, FailureKind.UNEXPECTED_CONFIGURATION)
+_STEP_KINDS = (FailureKind.COLLISION, FailureKind.PHYSICAL, FailureKind.PRECONDITION, FailureKind.REACHABILITY)
+"""Failures answered only when the failed step itself names a missing entity: a 1x2 block where a 1x1 was
+planned collides at its placement; a block that is not there cannot be grasped."""
 _MAX_BINDING = 6  # entities bound by brute force; a variant replacing more blocks than this is not searched
 
 
@@ -370,6 +383,11 @@ def _done_targets(plan: Sequence[Mapping[str, Any]]) -> set[tuple[str, ...]]:
     return targets
 
 
+def _names_missing(failure: Any, vector: MismatchVector) -> bool:
+    """Whether the failed step's arguments name an entity the world does not show as the plan assumes it."""
+    return bool({e.name for e in vector.missing} & {str(a) for a in getattr(failure, "args", ()) or ()})
+
+
 def _call(action: str, args: Sequence[Any]) -> str:
     return f"{action}({', '.join(str(a) for a in args)})"
 
@@ -398,7 +416,8 @@ class ObjectSubstitution:
     """Section 6.4's repair with one matcher (``gridmap`` or ``symbolic``); see the module docstring."""
 
     def __init__(self, memory: Any = None, *, matcher: str | None = None, k: int = 5, rotations: bool = False,
-                 level: str = "task", max_proposals: int = 3, anchor: bool = True, candidates: int = 200) -> None:
+                 level: str = "task", max_proposals: int = 3, anchor: bool = True, candidates: int = 200,
+                 spares: bool = True) -> None:
         where = "<plugin settings>"
         if matcher is None:
             matcher = os.environ.get(ENV_MATCHER) or "gridmap"
@@ -419,6 +438,7 @@ class ObjectSubstitution:
         self.max_proposals = max_proposals
         self.anchor = anchor
         self.candidates = candidates
+        self.spares = spares
 
     # -- steps 2 to 4 -----------------------------------------------------------------------------------------------
 
@@ -597,17 +617,20 @@ class ObjectSubstitution:
 
     @hookimpl
     def bt_meta_propose_repairs(self, failure: Any, context: Any) -> list[RepairProposal] | None:
-        if failure.kind not in _KINDS:
+        if failure.kind not in _KINDS and failure.kind not in _STEP_KINDS:
             return None
         vector = mismatch_vector(failure, context)
-        if vector is None or not vector.unknown:
+        if vector is None:
             return None
-        memory = memory_for(context, self.memory)
-        if memory is None:
-            return None
+        if failure.kind in _STEP_KINDS and not _names_missing(failure, vector):
+            return None  # a motion or grasp failure of a step whose entities are as the plan assumes
         plan = failure.evidence.get("plan") or []
-        retrieval = self.retrieve(vector, plan, memory, root_task(context))
-        proposals = self.proposals(retrieval, plan)
+        proposals = spare_proposals(vector, failure, context) if self.spares else []
+        memory = memory_for(context, self.memory) if vector.unknown else None
+        if memory is not None:
+            retrieval = self.retrieve(vector, plan, memory, root_task(context))
+            proposals += self.proposals(retrieval, plan)
+        proposals.sort(key=lambda p: -p.score)
         if proposals and self.anchor:
             self.anchor_entities(vector, failure, context, proposals)
         return proposals or None

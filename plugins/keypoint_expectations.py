@@ -40,9 +40,11 @@ from typing import Any
 from bt_meta.bt.expectations import Comparison, Expectation
 from bt_meta.bt.failures import FailureKind
 from bt_meta.perception.keypoints import (
+    CONTACT_DISTANCE,
     KeypointError,
     KeypointExpectation,
     expected_relation,
+    informative,
     judge,
     pairs_from_states,
     relation,
@@ -71,7 +73,7 @@ class KeypointExpectations:
         position_tolerance: float | None = 0.01,
         angle_tolerance: float | None = math.radians(15.0),
         check: str = "task_end",
-        contact_distance: float | None = 0.03,
+        contact_distance: float | None = CONTACT_DISTANCE,
     ) -> None:
         if n < 1:
             raise ValueError(f"n must be >= 1, got {n}")
@@ -90,16 +92,9 @@ class KeypointExpectations:
         self.contact_distance = contact_distance
 
     def informative(self, expected: KeypointExpectation) -> tuple[float | None, float | None]:
-        """The (position, angle) tolerances to check for ``expected``; ``None`` for a relation the traces say is
-        not informative here (see the module docstring)."""
-        position = self.position_tolerance
-        if position is not None and self.contact_distance is not None \
-                and expected.r_p + expected.r_p_std > self.contact_distance:
-            position = None  # the parts have not met: R_p is the scene's layout, not the task's relation
-        angle = self.angle_tolerance
-        if angle is not None and expected.r_n_std > angle:
-            angle = None  # the traces disagree on R_n here: no expectation to hold it to
-        return position, angle
+        """The (position, angle) tolerances to check for ``expected`` (see ``keypoints.informative``)."""
+        return informative(expected, position_tolerance=self.position_tolerance,
+                           angle_tolerance=self.angle_tolerance, contact_distance=self.contact_distance)
 
     def _pairs(self, context: Any, states: list[Any]) -> list[tuple[str, str]]:
         if self.pairs is not None:

@@ -48,7 +48,15 @@ from typing import Any
 import numpy as np
 
 from bt_meta.bt.failures import Failure, FailureKind, RepairProposal
-from bt_meta.perception.keypoints import KeypointError, expected_relation, judge, keypoints_of, relation
+from bt_meta.perception.keypoints import (
+    CONTACT_DISTANCE,
+    KeypointError,
+    expected_relation,
+    informative,
+    judge,
+    keypoints_of,
+    relation,
+)
 from bt_meta.perception.recall import memory_for, root_task
 from bt_meta.plugins import ConfiguredPlugin, hookimpl
 from bt_meta.world.objects import matrix_to_pose, pose_to_matrix
@@ -187,9 +195,12 @@ def step_relations(
     *,
     position_tolerance: float | None = 0.01,
     angle_tolerance: float | None = math.radians(15.0),
+    contact_distance: float | None = CONTACT_DISTANCE,
 ) -> list[StepRelation]:
     """For every step of ``current`` (step -> object states) whose action (``actions``) the traces ran at the same
-    index: the current R_p / R_n, the traces' means, and whether they deviate (:func:`judge`)."""
+    index: the current R_p / R_n, the traces' means, and whether they deviate (:func:`judge`) in the relations
+    informative there (:func:`~bt_meta.perception.keypoints.informative`: a part merely lying elsewhere does not
+    deviate)."""
     rows = []
     for step in sorted(current):
         objects = current[step]
@@ -207,7 +218,9 @@ def step_relations(
             continue
         expected = expected_relation(pairs)
         observed = relation(objects[active], objects[reference])
-        verdict = judge(observed, expected, position_tolerance=position_tolerance, angle_tolerance=angle_tolerance)
+        position, angle = informative(expected, position_tolerance=position_tolerance,
+                                      angle_tolerance=angle_tolerance, contact_distance=contact_distance)
+        verdict = judge(observed, expected, position_tolerance=position, angle_tolerance=angle)
         rows.append(StepRelation(step, actions.get(step, ""), observed.r_p, observed.r_n, expected.r_p, expected.r_n,
                                  expected.n, not verdict.matched, expected.r_p_std, expected.r_n_std))
     return rows

@@ -268,7 +268,7 @@ class MetaExecutor:
             else:
                 # kept: how what was perceived differs from what the problem assumed at the start
                 facts = ({f for f in anchored[0] if f not in assumed}, {f for f in anchored[1] if f in assumed})
-                report.refinement_saved = self._save_refinement(domain, report, start_objects, facts,
+                report.refinement_saved = self._save_refinement(domain, _replayed(report), start_objects, facts,
                                                                 list(getattr(run.problem, "goal", None) or []))
         return self._finish(report, run, started)
 
@@ -426,6 +426,17 @@ class MetaExecutor:
         log.info("meta: run %s %s after %d attempt(s) in %.3f s%s", report.problem, report.status,
                  len(report.attempts), report.seconds, f" ({report.stop_reason})" if report.stop_reason else "")
         return report
+
+
+def _replayed(report: RunReport) -> RunReport:
+    """``report`` with the plan a refinement should replay: the last (repairing) attempt's ``replay_plan`` when its
+    plugin planned the repair from the initial state (a re-orientation: not the failed attach, its release and the
+    re-pick), else the plan as run."""
+    last = report.attempts[-1] if report.attempts else None
+    replay = None if last is None else (last.proposal.get("evidence") or {}).get("replay_plan")
+    if not replay or last is None or last.outcome != "repaired":
+        return report
+    return dataclasses.replace(report, plan=[[str(a) for a in step] for step in replay])
 
 
 def _with_tried(entry: dict[str, Any], attempts: list[Attempt], diagnosis: Diagnosis,

@@ -9,13 +9,17 @@ had it at the start, it looks in the method library for a **re-orientation task*
 problem's own task network again, from where the run stands. The task files that need it ship the methods (a
 regrasp: set the part down on another face, pick it again; ``trees/magnetic_attach.yaml``).
 
-How many times: each run of the task turns the held part by the rotation between its set-down pose and its
-grasp pose (read from the world's pose grounding when it offers ``ground_pose``; else a quarter turn about the
-robot's x axis); the fewest runs that bring the normal within :data:`ALIGNED_ANGLE` of the demonstrated one.
+How many times: each run of the task (planned one after the other: the method may differ, a held part is set
+down first) turns the part by the rotation between its last set-down pose and the top-down grasp (read from the
+world's pose grounding when it offers ``ground_pose``; else a quarter turn about the robot's x axis); the fewest
+runs that bring the normal within :data:`ALIGNED_ANGLE` of the demonstrated one.
 
 The proposal is a ``splice`` of the planned steps from the failed step on. Its evidence carries ``replay_plan``:
-the same re-orientation planned from the problem's initial state, which the executor stores as the refinement
-(the failed attempt, its release and re-pick are not replayed on the next exposure).
+the same re-orientation planned from the problem's initial state (the part's normal when the run started,
+``run.start_objects``), which the executor stores as the refinement (the failed attempt, its release and re-pick
+are not replayed on the next exposure). A held part whose method lets it go without a turn (a part jammed in an
+insertion) is only set down first (``keep_goal``: the goal is not rewritten): the turns are counted at the next
+failure, from how it landed.
 
 Offers:
 
@@ -171,7 +175,9 @@ class Reorientation:
         except KeypointError:
             return None
         off = _angle(normal, wanted)
-        if off <= GROSS_ANGLE:
+        history = failure.evidence.get("repair_history") or []
+        ours = [a for a in history if ((a.get("proposal") or {}).get("evidence") or {}).get("strategy") == STRATEGY]
+        if off <= GROSS_ANGLE and not ours:
             return None  # the orientation is as demonstrated: not a re-orientation's business
         state = world.symbolic_state()
         held = (world.observe() or {}).get("held") or {}
@@ -179,40 +185,101 @@ class Reorientation:
                                     "normal": [round(float(v), 4) for v in normal],
                                     "demonstrated_normal": [round(float(v), 4) for v in wanted],
                                     "off_degrees": round(math.degrees(off), 1)}
+        if held and seen_name not in held.values() and any(h is not None for h in held.values()):
+            log.info("reorientation: the gripper holds %s, not %s", held, part)
+            return None
+        localisation = failure.evidence.get("localisation") or {}
+        start = int(localisation.get("step", failure.step if failure.step is not None else 0))
+        end = max(len(failure.evidence.get("plan") or []), start + 1)
+        initial = self._initial_normal(run, seen_name)
         for name in names:
-            one = self._plan(domain, problem, state, [(name, part)], run, goal=[])
-            if one is None:
-                continue
-            turns = quarter_turns(normal, wanted, self.turn_of(world, domain, one))
+            settle = self._settle(world, domain, problem, state, name, part, run)
+            if settle is not None and off > GROSS_ANGLE:
+                # A held part is let go without a turn first (it may land any way: a jammed part springs free);
+                # the turns are counted once it lies where it can be seen, at the next failure.
+                evidence.update(method_task=name, turns=0, settle=True, keep_goal=True)
+                return [RepairProposal(
+                    SPLICE, self.score, f"let {part} go and set it down ({name}) to see how it lies: its normal is "
+                    f"{math.degrees(off):.0f} deg from the demonstrations'",
+                    changes={"start": start, "end": end, "actions": settle}, evidence=evidence)]
+            turns = self._turns(world, domain, problem, state, name, part, normal, wanted, run)
             if turns is None:
-                log.info("reorientation: %s turns %s the wrong way for its normal", name, part)
+                log.info("reorientation: no number of %s brings the normal of %s to the demonstrated one", name, part)
                 continue
-            if held and seen_name not in held.values() and any(h is not None for h in held.values()):
-                log.info("reorientation: the gripper holds %s, not %s", held, part)
-                return None
-            tasks = [(name, part)] * turns + [tuple(t) for t in problem.tasks]
-            now = self._plan(domain, problem, state, tasks, run)
-            replay = self._plan(domain, problem, problem.state, tasks, run)
+            now = self._plan(domain, problem, state, [(name, part)] * turns + [tuple(t) for t in problem.tasks], run)
             if now is None:
                 continue
-            localisation = failure.evidence.get("localisation") or {}
-            start = int(localisation.get("step", failure.step if failure.step is not None else 0))
-            plan = failure.evidence.get("plan") or []
+            replay = None
+            first = None if initial is None else self._turns(world, domain, problem, problem.state, name, part,
+                                                             initial, wanted, run)
+            if first is not None:  # the same repair from the start, for the refinement
+                replay = self._plan(domain, problem, problem.state,
+                                    [(name, part)] * first + [tuple(t) for t in problem.tasks], run)
             evidence.update(method_task=name, turns=turns, replay_plan=replay)
             return [RepairProposal(
                 SPLICE, self.score, f"re-orient {part} by {turns} x {name} (its normal is "
                 f"{math.degrees(off):.0f} deg from the demonstrations'), then {task} again",
-                changes={"start": start, "end": max(len(plan), start + 1), "actions": now}, evidence=evidence)]
+                changes={"start": start, "end": end, "actions": now}, evidence=evidence)]
+        return None
+
+    @staticmethod
+    def _initial_normal(run: Any, name: str) -> np.ndarray | None:
+        """The part's normal when the run started (the executor keeps the first observation on the run)."""
+        objects = getattr(run, "start_objects", None) or {}
+        try:
+            return keypoints_of(objects[name])[1] if name in objects else None
+        except KeypointError:
+            return None
+
+    def _settle(self, world: Any, domain: Any, problem: Any, state: Any, name: str, part: str, run: Any
+                ) -> list[list[str]] | None:
+        """The steps of ``name`` planned now when they let the held part go without turning it, else ``None``."""
+        tree = self._plan_tree(domain, problem, state, [(name, part)], run)
+        if tree is None:
+            return None
+        steps = [[n.task[0], *map(str, n.task[1:])] for n in tree.primitives()]
+        turn = self.turn_of(world, domain, steps)
+        if _angle(turn @ np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, 1.0])) > ALIGNED_ANGLE / 3:
+            return None
+        if _angle(turn @ np.array([1.0, 0.0, 0.0]), np.array([1.0, 0.0, 0.0])) > ALIGNED_ANGLE / 3:
+            return None
+        return steps
+
+    def _turns(self, world: Any, domain: Any, problem: Any, state: Any, name: str, part: str, normal: np.ndarray,
+               wanted: np.ndarray, run: Any) -> int | None:
+        """The fewest runs of task ``name`` (planned one after the other from ``state``: the method may differ per
+        run, e.g. a held part is set down first) whose turns bring ``normal`` within :data:`ALIGNED_ANGLE` of
+        ``wanted``; ``None`` when none up to :data:`MAX_TURNS` + 1 does."""
+        if _angle(np.asarray(normal, float), wanted) <= ALIGNED_ANGLE:
+            return 0
+        for k in range(1, MAX_TURNS + 2):
+            tree = self._plan_tree(domain, problem, state, [(name, part)] * k, run)
+            if tree is None:
+                return None
+            current = np.asarray(normal, float)
+            for root in tree.roots:
+                steps = [[n.task[0], *map(str, n.task[1:])] for n in tree.primitives(root)]
+                current = self.turn_of(world, domain, steps) @ current
+            if _angle(current, wanted) <= ALIGNED_ANGLE:
+                return k
         return None
 
     @staticmethod
     def _plan(domain: Any, problem: Any, state: Any, tasks: list[tuple[str, ...]], run: Any,
               goal: list[Any] | None = None) -> list[list[str]] | None:
+        tree = Reorientation._plan_tree(domain, problem, state, tasks, run, goal)
+        return None if tree is None else [[n.task[0], *map(str, n.task[1:])] for n in tree.primitives()]
+
+    @staticmethod
+    def _plan_tree(domain: Any, problem: Any, state: Any, tasks: list[tuple[str, ...]], run: Any,
+                   goal: list[Any] | None = None) -> Any:
         from bt_meta.htn import plan
 
         external = getattr(run, "external", None)
-        fresh = dataclasses.replace(problem, state=state, init=sorted(state), tasks=list(tasks),
-                                    goal=list(getattr(problem, "goal", None) or []) if goal is None else goal)
+        if goal is None:  # the problem's goal only when its own tasks are planned too
+            only_turns = all(str(t[0]).startswith(PREFIX) for t in tasks)
+            goal = [] if only_turns else list(getattr(problem, "goal", None) or [])
+        fresh = dataclasses.replace(problem, state=state, init=sorted(state), tasks=list(tasks), goal=goal)
         try:
             result = plan(domain, fresh, external=external, max_seconds=5.0)
         except BtMetaError as error:
@@ -220,7 +287,7 @@ class Reorientation:
             return None
         if result.status != "success" or result.tree is None:
             return None
-        return [[n.task[0], *map(str, n.task[1:])] for n in result.tree.primitives()]
+        return result.tree
 
 
 plugin = ConfiguredPlugin(Reorientation)

@@ -184,6 +184,7 @@ class MetaExecutor:
         planned = self._perceive(domain, [stored[n] for n in added if n in stored], planned, run, anchored)
         start_state = planned.state
         start_objects = _objects(self.world)
+        run.start_objects = start_objects  # what repair plugins compare the start with (a part's first orientation)
         run.emit("run_start", task_file=getattr(self.task_file, "path", None), problem=name,
                  state=[atom_text(a) for a in sorted(run.state)])
         external = self.plugins.external_predicate
@@ -251,7 +252,9 @@ class MetaExecutor:
                          skipped=skipped)
                 break
             plan_state = applied
-            if base_goal:  # the goal as the repair rewrote it (spliced placements stand for the replaced ones)
+            keep_goal = bool((report.attempts[-1].proposal.get("evidence") or {}).get("keep_goal"))
+            if base_goal and not keep_goal:  # the goal as the repair rewrote it (spliced placements stand for the
+                # replaced ones); a proposal that only prepares a later repair (keep_goal) leaves the goal alone
                 from bt_meta.meta.refinements import rewrite_goal
 
                 goal = rewrite_goal(domain, base_goal, report.initial_plan,
@@ -389,7 +392,8 @@ class MetaExecutor:
                 number = effects[effect]
                 reason = f"equivalent to attempt {number}: it would run the same steps from the same point"
                 log.info("meta: %s proposal of %s skipped: %s", proposal.action, proposal.plugin, reason)
-                run.emit("repair", outcome="equivalent", proposal=proposal.to_dict(), equivalent_to=number)
+                run.emit("repair", outcome="equivalent", proposal=proposal.to_dict(), equivalent_to=number,
+                         reason=reason)
                 skipped.append({"proposal": proposal.to_dict(), "reason": reason, "equivalent_to": number})
                 continue
             attempt = Attempt(number=len(report.attempts) + 1, failure=diagnosis.failure.to_dict(),

@@ -519,3 +519,30 @@ def test_camera_perception_needs_a_camera():
 
     with pytest.raises(PerceptionConfigError, match="expected a mapping with a 'colours' key"):
         camera_plugin.CameraPerception(thresholds={"colour": {}})
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("family", "task_file", "variant"), [
+    ("magnetic", "magnetic_attach.yaml", "active_shifted"), ("housing", "housing_insertion.yaml", "parts_shifted")])
+def test_a_shifted_nominal_equivalent_scene_raises_nothing_with_keypoint_monitors(tmp_path, family, task_file,
+                                                                                  variant):
+    """Recorded nominal, then the parts (and board) moved a few cm: monitors at every task end, no mismatch."""
+    from bt_meta.demo.capture import Progress
+    from bt_meta.demo.runner import memory_environment, record_demonstration, run_variant
+    from bt_meta.demo.scenario import Demonstration, VariantRun
+    from bt_meta.meta import RefinementStore
+
+    path = tmp_path / "memory.sqlite"
+    progress = Progress(quiet=True)
+    with memory_environment(path):
+        memory = EpisodicMemory.open(path)
+        try:
+            assert record_demonstration(Demonstration(family, task_file, "nominal", 0), memory,
+                                        progress).status == "recorded"
+            with RefinementStore.open(path) as refinements:
+                outcome = run_variant(VariantRun(family, task_file, "nominal", variant, 0), memory, refinements,
+                                      progress, configuration="dual_kp_monitor", pictures=False)
+        finally:
+            memory.close()
+    assert outcome.report["status"] == "success", outcome.report["stop_reason"]
+    assert outcome.report["failures"] == [] and outcome.report["attempts"] == []

@@ -8,7 +8,8 @@ are
 named after the simulator's objects they lie on (the nearest object within half a block), so remembered and
 observed grid-maps of the same block can be paired; the geometry itself comes from the image only.
 
-Settings (:func:`configure`): HSV thresholds (a mapping, see :meth:`HSVThresholds.from_mapping`), the grid spec,
+Settings (:func:`configure`): HSV thresholds (a mapping, see :meth:`HSVThresholds.from_mapping`; default: derived
+from every colour the scene format defines, see :mod:`bt_meta.perception.colours`), the grid spec,
 whether to use the depth image, the camera's centre and height.
 
 Offers:
@@ -28,20 +29,28 @@ import weakref
 from collections.abc import Mapping
 from typing import Any
 
+from bt_meta.perception.colours import scene_thresholds
 from bt_meta.perception.gridmap import DEFAULT_SPEC, GridSpec
-from bt_meta.perception.hsv import DEFAULT_THRESHOLDS, HSVThresholds
+from bt_meta.perception.hsv import HSVThresholds
 from bt_meta.perception.topview import TopView, capture
 from bt_meta.plugins import ConfiguredPlugin, hookimpl
 from bt_meta.world.simulation.objects import LB
 
+TABLE_COLOUR = (0.93, 0.9, 0.83, 1.0)
+"""The simulator's table (RGBA), the background thresholds are derived on when the world does not say."""
+
 
 class CameraPerception:
-    """Top-view perception with fixed settings; one camera per simulator, made on first use."""
+    """Top-view perception with fixed settings; one camera per simulator, made on first use.
+
+    ``thresholds`` ``None`` (default): derived from every colour the scene format defines, on the simulator's
+    table colour (:func:`bt_meta.perception.colours.scene_thresholds`), so a block of any declared colour is seen.
+    """
 
     def __init__(
         self,
         *,
-        thresholds: HSVThresholds | Mapping[str, Any] = DEFAULT_THRESHOLDS,
+        thresholds: HSVThresholds | Mapping[str, Any] | None = None,
         spec: GridSpec = DEFAULT_SPEC,
         use_depth: bool = True,
         camera_centre: tuple[float, float] | None = None,
@@ -96,7 +105,15 @@ class CameraPerception:
                         best, best_d = name, d
                 return best
 
-        return capture(camera, thresholds=self.thresholds, spec=self.spec, use_depth=self.use_depth, namer=namer)
+        return capture(camera, thresholds=self.thresholds_for(world), spec=self.spec, use_depth=self.use_depth,
+                       namer=namer)
+
+    def thresholds_for(self, world: Any) -> HSVThresholds:
+        """The configured thresholds, or those derived from the declared colours on the world's table colour."""
+        if self.thresholds is not None:
+            return self.thresholds
+        table = getattr(getattr(world, "sim", None), "table", None)
+        return scene_thresholds(getattr(table, "colour", None) or TABLE_COLOUR)
 
     def object_grid_maps(self, world: Any, view: TopView) -> dict[str, Any]:
         """One grid-map per simulator block, centred where the block truly is: the instructor's annotation of

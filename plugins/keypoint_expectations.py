@@ -11,6 +11,13 @@ Which pairs: the ``pairs`` setting when given; else, when the remembered states 
 pair (R_p and R_n are symmetric, so the order does not matter); else the first two arguments of the problem's
 root task, mapped to world object names through ``world.object_name`` when the world has it.
 
+Only informative relations are checked (section 7.4: R_p at the end of the attach, R_n for gross pose changes).
+R_p is checked where the traces bring the attachment points together -- mean plus spread within
+``contact_distance`` (3 cm) -- because before the parts meet R_p only measures where they happen to lie on the
+table: a part or board shifted a few centimetres would be a false alarm. R_n is checked where the traces agree
+on it (spread within ``angle_tolerance``); both relations are invariant to moving or turning the scene as a whole.
+An expectation with neither relation informative is not made. ``data["checked"]`` names the relations checked.
+
 ``check="task_end"`` (default) checks only after the last primitive of each task (the task's bubbled-up
 expectation, section 6.2), which is where the paper compares; ``check="all"`` checks after every step the memory
 knows. Not the default because a variant pose differs from the traces from step 0 on, before any pose-setting step
@@ -33,9 +40,11 @@ from typing import Any
 from bt_meta.bt.expectations import Comparison, Expectation
 from bt_meta.bt.failures import FailureKind
 from bt_meta.perception.keypoints import (
+    CONTACT_DISTANCE,
     KeypointError,
     KeypointExpectation,
     expected_relation,
+    informative,
     judge,
     pairs_from_states,
     relation,
@@ -51,7 +60,8 @@ class KeypointExpectations:
     """R_p/R_n expectations from the last ``n`` successful traces.
 
     ``position_tolerance`` (m) and ``angle_tolerance`` (rad) bound ``|R - mean|``; ``None`` switches a relation
-    off. Defaults: the simulator's attach rule, 1 cm and 15 degrees.
+    off. Defaults: the simulator's attach rule, 1 cm and 15 degrees. ``contact_distance`` (m): R_p is checked only
+    where the traces' R_p (mean plus spread) is within it; ``None`` checks it everywhere.
     """
 
     def __init__(
@@ -63,12 +73,14 @@ class KeypointExpectations:
         position_tolerance: float | None = 0.01,
         angle_tolerance: float | None = math.radians(15.0),
         check: str = "task_end",
+        contact_distance: float | None = CONTACT_DISTANCE,
     ) -> None:
         if n < 1:
             raise ValueError(f"n must be >= 1, got {n}")
         if check not in CHECKS:
             raise ValueError(f"check must be one of {', '.join(CHECKS)}, got {check!r}")
-        for name, value in (("position_tolerance", position_tolerance), ("angle_tolerance", angle_tolerance)):
+        for name, value in (("position_tolerance", position_tolerance), ("angle_tolerance", angle_tolerance),
+                            ("contact_distance", contact_distance)):
             if value is not None and value < 0:
                 raise ValueError(f"{name} must be >= 0 or None, got {value}")
         self.memory = memory
@@ -77,6 +89,12 @@ class KeypointExpectations:
         self.position_tolerance = position_tolerance
         self.angle_tolerance = angle_tolerance
         self.check = check
+        self.contact_distance = contact_distance
+
+    def informative(self, expected: KeypointExpectation) -> tuple[float | None, float | None]:
+        """The (position, angle) tolerances to check for ``expected`` (see ``keypoints.informative``)."""
+        return informative(expected, position_tolerance=self.position_tolerance,
+                           angle_tolerance=self.angle_tolerance, contact_distance=self.contact_distance)
 
     def _pairs(self, context: Any, states: list[Any]) -> list[tuple[str, str]]:
         if self.pairs is not None:
@@ -116,6 +134,9 @@ class KeypointExpectations:
             if not pairs:
                 continue
             expected = expected_relation(pairs)
+            position_tolerance, angle_tolerance = self.informative(expected)
+            if position_tolerance is None and angle_tolerance is None:
+                continue
             expectations.append(Expectation(
                 kind=KIND,
                 description=f"R_p/R_n of {active} and {reference} after {call} "
@@ -124,8 +145,10 @@ class KeypointExpectations:
                     "active": active,
                     "reference": reference,
                     "expected": expected.as_dict(),
-                    "position_tolerance": self.position_tolerance,
-                    "angle_tolerance": self.angle_tolerance,
+                    "position_tolerance": position_tolerance,
+                    "angle_tolerance": angle_tolerance,
+                    "checked": [r for r, t in (("r_p", position_tolerance), ("r_n", angle_tolerance))
+                                if t is not None],
                     "parent_task": remembered.parent_task,
                     "task_end": remembered.task_end,
                     "matched_by": remembered.key,

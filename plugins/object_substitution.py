@@ -24,6 +24,14 @@ The steps, as the paper gives them:
    ``splice`` replacing the invoked task's remaining steps with the matched decomposition's steps, rebound to the
    unknown entities (A's bar drawn with two 1x1 blocks at the cells of H's bar).
 
+**Spares** (:mod:`bt_meta_plugins._spares`, no memory needed) come first: a missing entity that a step still to
+run uses is replaced one for one (``substitute``) by an object seen on the table that the plan does not use, when
+the precondition of every method that chose the missing entity holds with the spare in its place -- so colour
+counts only where the task's symbols name one. Besides ``unknown_entity`` and ``unexpected_configuration``, a
+``collision``, ``physical``, ``precondition`` or ``reachability`` failure is answered when the failed step itself
+names a missing entity (a 1x2 block placed where a 1x1 was planned collides: A's bar then stands in for H's two
+1x1 placements).
+
 Before proposing, the unknown entities are **anchored** in the world's symbolic state (``world.apply_symbolic``):
 their perceived ``block``/``shape``/``colour`` facts replace what the problem assumed, and an unknown entity the
 failed step itself moved is made ``available`` again (its placement did not meet the expectation, and the repair
@@ -42,7 +50,8 @@ Offers:
 
 * :class:`ObjectSubstitution` -- the plugin as an object; :meth:`ObjectSubstitution.retrieve` gives the ranked
   matches without proposing (what ``bt-meta experiment substitution`` tabulates)
-* :class:`Entity`, :class:`MismatchVector`, :class:`Decomposition`, :class:`Match`, :class:`Retrieval`
+* :class:`Match`, :class:`Retrieval`; re-exported from its private modules: :class:`Entity`,
+  :class:`MismatchVector` (``_mismatch``), :class:`Decomposition` (``_decompositions``)
 * :func:`mismatch_vector` -- step 1 for a failure and its context
 * :func:`bind` -- one-to-one binding of a decomposition's blocks to entities
 * :func:`bt_meta_propose_repairs` -- the module-level plugin (see :func:`configure`)
@@ -51,12 +60,14 @@ Offers:
 
 from __future__ import annotations
 
-import itertools
 import os
-from collections import Counter
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
+
+from bt_meta_plugins._decompositions import Decomposition, Library, bind, why_not
+from bt_meta_plugins._mismatch import Entity, MismatchVector, mismatch_vector
+from bt_meta_plugins._spares import spare_proposals
 
 from bt_meta.bt.failures import FailureKind, RepairProposal
 from bt_meta.errors import ConfigError
@@ -82,75 +93,9 @@ MATCHERS = ("gridmap", "symbolic")
 LEVELS = ("task", "step")
 ENV_MATCHER = "BT_META_SUBSTITUTION_MATCHER"
 _KINDS = (FailureKind.UNKNOWN_ENTITY, FailureKind.UNEXPECTED_CONFIGURATION)
-_MAX_BINDING = 6  # entities bound by brute force; a variant replacing more blocks than this is not searched
-
-
-@dataclass(frozen=True)
-class Entity:
-    """A block as the plan assumes it (missing) or as it is seen (unknown)."""
-
-    name: str
-    shape: str | None
-    colour: str | None
-
-    def describe(self) -> str:
-        return f"{self.name} ({self.colour or '?'} {self.shape or '?'})"
-
-
-@dataclass(frozen=True)
-class MismatchVector:
-    """Step 1: the failed step, what is missing and what is seen instead."""
-
-    step: int | None
-    missing: tuple[Entity, ...]
-    unknown: tuple[Entity, ...]
-    maps: tuple[dict[str, Any], ...] = ()
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"step": self.step, "missing": [e.describe() for e in self.missing],
-                "unknown": [e.describe() for e in self.unknown]}
-
-
-@dataclass(frozen=True)
-class Decomposition:
-    """One stored task occurrence: its steps (calls) and the shape and colour of the blocks they use."""
-
-    episode_id: int
-    task: str
-    parent_task: str | None
-    parent_node: str | None
-    first_step: int
-    calls: tuple[tuple[str, tuple[str, ...]], ...]
-    blocks: Mapping[str, tuple[str | None, str | None]]
-
-    def block_args(self) -> list[str]:
-        """The blocks used, in the order the steps first name them."""
-        seen: list[str] = []
-        for _, args in self.calls:
-            for arg in args:
-                if arg in self.blocks and arg not in seen:
-                    seen.append(arg)
-        return seen
-
-    def lifted_facts(self) -> Counter[tuple[Any, ...]]:
-        """The symbolic expectation without object names: each block's shape and colour, each step's other
-        arguments (a placement's cell)."""
-        facts: Counter[tuple[Any, ...]] = Counter()
-        for name in self.block_args():
-            shape, colour = self.blocks[name]
-            facts[("shape", shape)] += 1
-            facts[("colour", colour)] += 1
-        for action, args in self.calls:
-            facts[(action, *(a for a in args if a not in self.blocks))] += 1
-        return facts
-
-    def signature(self) -> tuple[Any, ...]:
-        """What two occurrences of the same decomposition share (blocks lifted to their kind)."""
-        return (self.parent_task, tuple(
-            (action, tuple(self.blocks.get(a, a) for a in args)) for action, args in self.calls))
-
-    def describe(self) -> str:
-        return "; ".join(f"{a}({', '.join(args)})" for a, args in self.calls)
+_STEP_KINDS = (FailureKind.COLLISION, FailureKind.PHYSICAL, FailureKind.PRECONDITION, FailureKind.REACHABILITY)
+"""Failures answered only when the failed step itself names a missing entity: a 1x2 block where a 1x1 was
+planned collides at its placement; a block that is not there cannot be grasped."""
 
 
 @dataclass
@@ -206,159 +151,6 @@ class Retrieval:
                 else self.found.to_dict(), "note": self.note}
 
 
-# -- step 1: the mismatch vector ----------------------------------------------------------------------------------
-
-
-def _problem_attributes(problem: Any) -> dict[str, tuple[str | None, str | None]]:
-    """(shape, colour) of every object the problem describes with ``shape``/``colour`` facts."""
-    facts = getattr(problem, "init", None)
-    if facts is None:
-        facts = getattr(problem, "state", None) or ()
-    return _attributes(facts)
-
-
-def _attributes(facts: Iterable[Sequence[Any]]) -> dict[str, tuple[str | None, str | None]]:
-    shapes: dict[str, str] = {}
-    colours: dict[str, str] = {}
-    for fact in facts:
-        if len(fact) == 3 and fact[0] == "shape":
-            shapes[str(fact[1])] = str(fact[2])
-        elif len(fact) == 3 and fact[0] == "colour":
-            colours[str(fact[1])] = str(fact[2])
-    return {name: (shapes.get(name), colours.get(name)) for name in sorted(set(shapes) | set(colours))}
-
-
-def _seen_objects(world: Any) -> dict[str, dict[str, Any]] | None:
-    observe = getattr(world, "observe", None)
-    if observe is None:
-        return None
-    objects = (observe() or {}).get("objects")
-    if not isinstance(objects, Mapping):
-        return None
-    return {str(k): dict(v) for k, v in objects.items() if isinstance(v, Mapping) and v.get("shape")}
-
-
-def mismatch_vector(failure: Any, context: Any) -> MismatchVector | None:
-    """The failed step, the missing entities and the unknown ones seen; ``None`` when nothing is missing."""
-    evidence = getattr(failure, "evidence", None) or {}
-    maps = tuple(m for mismatch in evidence.get("mismatches") or [] for m in (mismatch.get("evidence") or {})
-                 .get("maps") or [] if isinstance(m, Mapping))
-    run = getattr(context, "run", None)
-    assumed = _problem_attributes(getattr(run, "problem", None))
-    seen = _seen_objects(getattr(context, "world", None))
-    missing: dict[str, Entity] = {}
-    unknown: dict[str, Entity] = {}
-    if seen is not None:
-        for name, (shape, colour) in assumed.items():
-            obj = seen.get(name)
-            if obj is None or obj.get("shape") != shape or (colour is not None and obj.get("colour") != colour):
-                missing[name] = Entity(name, shape, colour)
-        for name, obj in seen.items():
-            if name not in assumed or name in missing:
-                unknown[name] = Entity(name, str(obj.get("shape")), obj.get("colour"))
-    for record in maps:  # the monitor's own account: a block seen with another form than remembered
-        expected, observed = record.get("expected") or {}, record.get("observed") or {}
-        name = record.get("object")
-        if name and observed.get("block_seen") and observed.get("shape") != expected.get("shape") \
-                and name not in missing:
-            missing[str(name)] = Entity(str(name), expected.get("shape"), expected.get("colour"))
-    for key, target in (("missing_entities", missing), ("unknown_entities", unknown)):
-        for name in evidence.get(key) or []:
-            if str(name) not in target:
-                shape, colour = assumed.get(str(name), (None, None))
-                if target is unknown and seen is not None and str(name) in seen:
-                    shape, colour = seen[str(name)].get("shape"), seen[str(name)].get("colour")
-                target[str(name)] = Entity(str(name), shape, colour)
-    if not missing:
-        return None
-    return MismatchVector(getattr(failure, "step", None), tuple(missing[n] for n in sorted(missing)),
-                          tuple(unknown[n] for n in sorted(unknown)), maps)
-
-
-# -- binding ------------------------------------------------------------------------------------------------------
-
-
-def bind(decomposition: Decomposition, entities: Sequence[Entity], *, colour: bool) -> dict[str, str] | None:
-    """A one-to-one binding of the decomposition's blocks to ``entities`` (all of them used), matching shape (and
-    colour when ``colour``); the first in name order, or ``None``."""
-    blocks = decomposition.block_args()
-    if len(blocks) != len(entities) or not blocks or len(blocks) > _MAX_BINDING:
-        return None
-    ordered = sorted(entities, key=lambda e: e.name)
-    for permutation in itertools.permutations(ordered):
-        ok = True
-        for block, entity in zip(blocks, permutation, strict=True):
-            shape, block_colour = decomposition.blocks[block]
-            if entity.shape != shape or (colour and entity.colour != block_colour):
-                ok = False
-                break
-        if ok:
-            return {block: entity.name for block, entity in zip(blocks, permutation, strict=True)}
-    return None
-
-
-def _why_not(decomposition: Decomposition, entities: Sequence[Entity], *, colour: bool) -> str:
-    needs = ", ".join(f"{(c or '?') + ' ' if colour else ''}{s}" for s, c in
-                      (decomposition.blocks[b] for b in decomposition.block_args()))
-    has = ", ".join(f"{(e.colour or '?') + ' ' if colour else ''}{e.shape}" for e in entities) or "nothing"
-    return f"needs {needs}; the unknown entities are {has}"
-
-
-# -- the memory's side ----------------------------------------------------------------------------------------------
-
-
-class _Library:
-    """P_a of every successful episode, indexed, with each episode's block attributes (read once per call)."""
-
-    def __init__(self, memory: Any) -> None:
-        self.memory = memory
-        self.rows = memory.plan_executions()
-        self.by_step = {(r.episode_id, r.step_index): r for r in self.rows}
-        self._attributes: dict[int, dict[str, tuple[str | None, str | None]]] = {}
-
-    def attributes(self, episode_id: int) -> dict[str, tuple[str | None, str | None]]:
-        found = self._attributes.get(episode_id)
-        if found is None:
-            trace = self.memory.trace(episode_id)
-            facts = list(trace.initial.facts) + [f for s in trace.steps for f in s.state.facts]
-            found = self._attributes[episode_id] = _attributes(facts)
-        return found
-
-    def occurrence(self, episode_id: int, step_index: int) -> Decomposition | None:
-        """The task occurrence step ``step_index`` of an episode belongs to (consecutive steps, same parent)."""
-        row = self.by_step.get((episode_id, step_index))
-        if row is None:
-            return None
-        key = (row.parent_task, row.parent_node)
-        first = step_index
-        while (prev := self.by_step.get((episode_id, first - 1))) is not None \
-                and (prev.parent_task, prev.parent_node) == key:
-            first -= 1
-        calls = []
-        index = first
-        while (r := self.by_step.get((episode_id, index))) is not None and (r.parent_task, r.parent_node) == key:
-            calls.append((r.action, tuple(str(a) for a in r.args)))
-            index += 1
-        attributes = self.attributes(episode_id)
-        blocks = {a: attributes[a] for _, args in calls for a in args if a in attributes}
-        return Decomposition(episode_id, row.task, row.parent_task, row.parent_node, first, tuple(calls), blocks)
-
-    def ends_task(self, episode_id: int, step_index: int) -> bool:
-        row = self.by_step.get((episode_id, step_index))
-        nxt = self.by_step.get((episode_id, step_index + 1))
-        return row is not None and (nxt is None or (nxt.parent_task, nxt.parent_node)
-                                    != (row.parent_task, row.parent_node))
-
-    def occurrences(self) -> list[Decomposition]:
-        out = []
-        for row in self.rows:
-            if self.ends_task(row.episode_id, row.step_index):
-                found = self.occurrence(row.episode_id, row.step_index)
-                if found is not None:
-                    out.append(found)
-        return out
-
-
 def _done_targets(plan: Sequence[Mapping[str, Any]]) -> set[tuple[str, ...]]:
     """Each executed step as its action and its arguments after the first (the entity it moved, as in
     ``place(block, x, y)``): for ``place``, the cells an executed step already filled."""
@@ -368,6 +160,11 @@ def _done_targets(plan: Sequence[Mapping[str, Any]]) -> set[tuple[str, ...]]:
             args = [str(a) for a in step["args"]]
             targets.add((str(step["action"]), *args[1:]))
     return targets
+
+
+def _names_missing(failure: Any, vector: MismatchVector) -> bool:
+    """Whether the failed step's arguments name an entity the world does not show as the plan assumes it."""
+    return bool({e.name for e in vector.missing} & {str(a) for a in getattr(failure, "args", ()) or ()})
 
 
 def _call(action: str, args: Sequence[Any]) -> str:
@@ -398,7 +195,8 @@ class ObjectSubstitution:
     """Section 6.4's repair with one matcher (``gridmap`` or ``symbolic``); see the module docstring."""
 
     def __init__(self, memory: Any = None, *, matcher: str | None = None, k: int = 5, rotations: bool = False,
-                 level: str = "task", max_proposals: int = 3, anchor: bool = True, candidates: int = 200) -> None:
+                 level: str = "task", max_proposals: int = 3, anchor: bool = True, candidates: int = 200,
+                 spares: bool = True) -> None:
         where = "<plugin settings>"
         if matcher is None:
             matcher = os.environ.get(ENV_MATCHER) or "gridmap"
@@ -419,6 +217,7 @@ class ObjectSubstitution:
         self.max_proposals = max_proposals
         self.anchor = anchor
         self.candidates = candidates
+        self.spares = spares
 
     # -- steps 2 to 4 -----------------------------------------------------------------------------------------------
 
@@ -433,7 +232,7 @@ class ObjectSubstitution:
             return retrieval
         retrieval.query_step = int(first["step"])
         retrieval.query_call = _call(first["action"], first["args"])
-        library = _Library(memory)
+        library = Library(memory)
         args = [str(a) for a in first["args"]]
         stored = [r for r in library.rows if (task is None or r.task == task) and r.action == first["action"]
                   and [str(a) for a in r.args] == args]
@@ -449,7 +248,7 @@ class ObjectSubstitution:
             retrieval.matches = self._symbolic_matches(library, vector, retrieval)
         return retrieval
 
-    def _gridmap_matches(self, library: _Library, row: Any, vector: MismatchVector, retrieval: Retrieval
+    def _gridmap_matches(self, library: Library, row: Any, vector: MismatchVector, retrieval: Retrieval
                          ) -> list[Match]:
         memory = library.memory
         maps = [x for x in memory.expectations(action=row.action, task=row.task)
@@ -473,13 +272,13 @@ class ObjectSubstitution:
             binding = bind(decomposition, vector.unknown, colour=False)
             matches.append(Match(len(matches) + 1, "gridmap", decomposition, hit.distance, hit.step_index,
                                  _call(hit.action, hit.args_pattern), binding,
-                                 "" if binding else _why_not(decomposition, vector.unknown, colour=False),
+                                 "" if binding else why_not(decomposition, vector.unknown, colour=False),
                                  hit.rotation))
             if len(matches) >= self.k:
                 break
         return matches
 
-    def _symbolic_matches(self, library: _Library, vector: MismatchVector, retrieval: Retrieval) -> list[Match]:
+    def _symbolic_matches(self, library: Library, vector: MismatchVector, retrieval: Retrieval) -> list[Match]:
         query = retrieval.query
         assert query is not None
         wanted = query.lifted_facts()
@@ -499,7 +298,7 @@ class ObjectSubstitution:
             action, args = decomposition.calls[-1]
             binding = bind(decomposition, vector.unknown, colour=True)
             matches.append(Match(len(matches) + 1, "symbolic", decomposition, distance, last, _call(action, args),
-                                 binding, "" if binding else _why_not(decomposition, vector.unknown, colour=True)))
+                                 binding, "" if binding else why_not(decomposition, vector.unknown, colour=True)))
         return matches
 
     # -- step 5: proposals ------------------------------------------------------------------------------------------
@@ -597,17 +396,20 @@ class ObjectSubstitution:
 
     @hookimpl
     def bt_meta_propose_repairs(self, failure: Any, context: Any) -> list[RepairProposal] | None:
-        if failure.kind not in _KINDS:
+        if failure.kind not in _KINDS and failure.kind not in _STEP_KINDS:
             return None
         vector = mismatch_vector(failure, context)
-        if vector is None or not vector.unknown:
+        if vector is None:
             return None
-        memory = memory_for(context, self.memory)
-        if memory is None:
-            return None
+        if failure.kind in _STEP_KINDS and not _names_missing(failure, vector):
+            return None  # a motion or grasp failure of a step whose entities are as the plan assumes
         plan = failure.evidence.get("plan") or []
-        retrieval = self.retrieve(vector, plan, memory, root_task(context))
-        proposals = self.proposals(retrieval, plan)
+        proposals = spare_proposals(vector, failure, context) if self.spares else []
+        memory = memory_for(context, self.memory) if vector.unknown else None
+        if memory is not None:
+            retrieval = self.retrieve(vector, plan, memory, root_task(context))
+            proposals += self.proposals(retrieval, plan)
+        proposals.sort(key=lambda p: -p.score)
         if proposals and self.anchor:
             self.anchor_entities(vector, failure, context, proposals)
         return proposals or None

@@ -33,6 +33,8 @@ Offers:
   reference, then placed on the reference as it is now)
 * :func:`gripper_pose_for` -- the gripper pose that holds an object at a pose, through the grasp transform
 * :func:`configure` and the module-level hooks (``bt_meta_observe``, ``bt_meta_propose_repairs``): the entry point
+
+The geometry lives in ``_good_poses``, the step comparison in ``_trace_relations`` (re-exported here).
 """
 
 from __future__ import annotations
@@ -42,190 +44,28 @@ import math
 import time
 from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from bt_meta_plugins._good_poses import good_object_poses, gripper_pose_for, local_keypoints
+from bt_meta_plugins._good_poses import matrix_of as _matrix
+from bt_meta_plugins._good_poses import state_pose as _state_pose
+from bt_meta_plugins._trace_relations import StepRelation, step_relations
+from bt_meta_plugins._trace_relations import moved as _moved
+from bt_meta_plugins._trace_relations import moved_in_trace as _moved_in_trace
 
 from bt_meta.bt.failures import Failure, FailureKind, RepairProposal
-from bt_meta.perception.keypoints import KeypointError, expected_relation, judge, keypoints_of, relation
 from bt_meta.perception.recall import memory_for, root_task
 from bt_meta.plugins import ConfiguredPlugin, hookimpl
 from bt_meta.world.simulation.objects import matrix_to_pose, pose_to_matrix
 
 __all__ = ["PoseBacktracking", "StepRelation", "configure", "good_object_poses", "gripper_pose_for",
-           "step_relations"]
+           "local_keypoints", "step_relations"]
 
 log = logging.getLogger("bt_meta.meta.pose_backtracking")
 
 STRATEGY = "pose_backtracking"
 KINDS = (FailureKind.VERIFICATION, FailureKind.UNEXPECTED_CONFIGURATION)
-MOVED_POSITION = 0.005
-"""Metres: an object that moved more than this (or turned more than :data:`MOVED_ANGLE`) during a step had its
-pose set by it."""
-MOVED_ANGLE = 0.05
-
-
-# -- geometry ---------------------------------------------------------------------------------------------------
-
-
-def _matrix(pose: Sequence[float]) -> np.ndarray:
-    return pose_to_matrix([float(v) for v in pose])
-
-
-def _state_pose(state: Any) -> np.ndarray:
-    pose = state.get("pose") if isinstance(state, Mapping) else getattr(state, "pose", None)
-    if pose is None or len(pose) != 6:
-        raise KeypointError(f"object state {state!r} has no 6-number pose")
-    return _matrix(pose)
-
-
-def _axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rodrigues: the rotation by ``angle`` about the unit ``axis``."""
-    x, y, z = axis / np.linalg.norm(axis)
-    k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
-
-
-def gripper_pose_for(object_pose: np.ndarray, grasp: np.ndarray) -> np.ndarray:
-    """The gripper pose (4x4, base frame) that holds an object at ``object_pose`` when the object sits at ``grasp``
-    in the gripper frame (the object-gripper relation): ``object = gripper @ grasp``."""
-    return np.asarray(object_pose, dtype=float) @ np.linalg.inv(np.asarray(grasp, dtype=float))
-
-
-def local_keypoints(state: Any) -> tuple[np.ndarray, np.ndarray]:
-    """(AP, AN) of an object state in its own frame: intrinsic, the same in every trace of that object."""
-    transform = _state_pose(state)
-    ap, an = keypoints_of(state)
-    rotation = transform[:3, :3]
-    return rotation.T @ (ap - transform[:3, 3]), rotation.T @ an
-
-
-@dataclass(frozen=True)
-class Candidate:
-    """A known-good pose of the active object for one step: from trace ``trace`` turned by ``turn`` about AN."""
-
-    step: int
-    trace: int
-    turn: float
-    object_pose: np.ndarray
-    ap: np.ndarray
-    an: np.ndarray
-
-
-def good_object_poses(
-    traces: Sequence[Any],
-    step: int,
-    active: str,
-    reference: str,
-    *,
-    reference_now: Any,
-    active_now: Any,
-    turns: Sequence[float],
-    order: Sequence[int],
-) -> list[Candidate]:
-    """Poses of the active object for ``step`` that succeeded before: for each trace in ``order`` (indices into
-    ``traces``) and each ``turn`` (radians about the attachment normal; 0 keeps the trace's own orientation), the
-    pose whose attachment point and normal relative to the reference are the trace's, placed on the reference as it
-    is now (``reference_now``). ``active_now`` gives the active object's intrinsic AP/AN."""
-    ap_local, an_local = local_keypoints(active_now)
-    ref_now = _state_pose(reference_now)
-    out = []
-    for j in order:
-        try:
-            state = traces[j].steps[step].state
-            ref_then, act_then = state.object(reference), state.object(active)
-        except (IndexError, KeyError):
-            continue
-        relative = np.linalg.inv(_state_pose(ref_then)) @ _state_pose(act_then)
-        ap_then, _ = keypoints_of(act_then)
-        ap_rel = np.linalg.inv(_state_pose(ref_then)) @ np.append(ap_then, 1.0)
-        target_ap = (ref_now @ ap_rel)[:3]
-        base_rotation = ref_now[:3, :3] @ relative[:3, :3]
-        target_an = base_rotation @ an_local
-        for turn in turns:
-            rotation = _axis_rotation(target_an, turn) @ base_rotation
-            pose = np.eye(4)
-            pose[:3, :3] = rotation
-            pose[:3, 3] = target_ap - rotation @ ap_local
-            out.append(Candidate(step, j, float(turn), pose, target_ap, target_an))
-    return out
-
-
-# -- comparing the current execution with the traces ------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class StepRelation:
-    """R_p / R_n after one step: now, and the traces' mean; ``deviates`` when outside the tolerances."""
-
-    step: int
-    action: str
-    r_p: float
-    r_n: float
-    expected_p: float
-    expected_n: float
-    traces: int
-    deviates: bool
-    spread_p: float = 0.0
-    spread_n: float = 0.0
-    """Standard deviations of R_p and R_n over the traces: how much the traces agree at this step."""
-
-    def as_dict(self) -> dict[str, Any]:
-        return {"step": self.step, "action": self.action, "R_p": round(self.r_p, 5), "R_n": round(self.r_n, 4),
-                "expected_R_p": round(self.expected_p, 5), "expected_R_n": round(self.expected_n, 4),
-                "traces": self.traces, "deviates": self.deviates, "spread_R_p": round(self.spread_p, 5),
-                "spread_R_n": round(self.spread_n, 4)}
-
-
-def step_relations(
-    current: Mapping[int, Mapping[str, Any]],
-    traces: Sequence[Any],
-    active: str,
-    reference: str,
-    actions: Mapping[int, str],
-    *,
-    position_tolerance: float | None = 0.01,
-    angle_tolerance: float | None = math.radians(15.0),
-) -> list[StepRelation]:
-    """For every step of ``current`` (step -> object states) whose action (``actions``) the traces ran at the same
-    index: the current R_p / R_n, the traces' means, and whether they deviate (:func:`judge`)."""
-    rows = []
-    for step in sorted(current):
-        objects = current[step]
-        if active not in objects or reference not in objects:
-            continue
-        pairs = []
-        for trace in traces:
-            if step < len(trace.steps) and trace.steps[step].action == actions.get(step):
-                state = trace.steps[step].state
-                try:
-                    pairs.append((state.object(active), state.object(reference)))
-                except KeyError:
-                    continue
-        if not pairs:
-            continue
-        expected = expected_relation(pairs)
-        observed = relation(objects[active], objects[reference])
-        verdict = judge(observed, expected, position_tolerance=position_tolerance, angle_tolerance=angle_tolerance)
-        rows.append(StepRelation(step, actions.get(step, ""), observed.r_p, observed.r_n, expected.r_p, expected.r_n,
-                                 expected.n, not verdict.matched, expected.r_p_std, expected.r_n_std))
-    return rows
-
-
-def _moved(before: Any, after: Any) -> bool:
-    a, b = _state_pose(before), _state_pose(after)
-    turned = math.acos(max(-1.0, min(1.0, (float(np.trace(a[:3, :3].T @ b[:3, :3])) - 1.0) / 2.0)))
-    return float(np.linalg.norm(a[:3, 3] - b[:3, 3])) > MOVED_POSITION or turned > MOVED_ANGLE
-
-
-def _moved_in_trace(trace: Any, step: int, active: str) -> bool:
-    if not 0 < step < len(trace.steps):
-        return False
-    try:
-        return _moved(trace.steps[step - 1].state.object(active), trace.steps[step].state.object(active))
-    except (KeyError, KeypointError):
-        return False
 
 
 # -- the plugin -------------------------------------------------------------------------------------------------

@@ -65,9 +65,9 @@ def _pybullet_rate(scene: str, steps: int = 2400) -> dict[str, float]:
     """Raw ``stepSimulation`` with the robot and the scene's objects: steps per second and real-time factor."""
     import pybullet
 
-    from bt_meta.world.scenes import load_scene
-    from bt_meta.world.sim import Simulation
-    from bt_meta.world.sim_world import quiet_stdout
+    from bt_meta.world.simulation.scenes import load_scene
+    from bt_meta.world.simulation.sim import Simulation
+    from bt_meta.world.simulation.sim_world import quiet_stdout
 
     with quiet_stdout():
         sim = Simulation(seed=0, visuals="light")
@@ -86,8 +86,8 @@ def _pybullet_rate(scene: str, steps: int = 2400) -> dict[str, float]:
 def run(family_name: str = "letters_A", configuration: str = "dual", *, repeat: int = 3) -> dict[str, Any]:
     from bt_meta.campaign.families import family
     from bt_meta.campaign.runner import ensure_memory
-    from bt_meta.world.scenes import load_scene
-    from bt_meta.world.sim_world import quiet_stdout
+    from bt_meta.world.simulation.scenes import load_scene
+    from bt_meta.world.simulation.sim_world import quiet_stdout
 
     with quiet_stdout():
         import pybullet  # noqa: F401  (prints its build time on import)
@@ -132,7 +132,7 @@ def child(task_path: str) -> dict[str, Any]:
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     phases: dict[str, float] = {}
     started = time.perf_counter()
-    from bt_meta.world.sim_world import quiet_stdout
+    from bt_meta.world.simulation.sim_world import quiet_stdout
 
     with quiet_stdout():
         import pybullet  # noqa: F401

@@ -12,7 +12,7 @@ Offers:
 
 * :func:`episode_task` -- the dict an episode needs
 * :func:`run_episode` -- run it; returns the row the database stores
-* :func:`variant_world` -- the :class:`~bt_meta.world.sim_world.SimWorld` of a variant scene file
+* :func:`variant_world` -- the :class:`~bt_meta.world.simulation.sim_world.SimWorld` of a variant scene file
 * :data:`MAX_ATTEMPTS` -- the repair attempt budget of an episode
 """
 
@@ -45,7 +45,7 @@ def variant_world(task_path: Path, problem_name: str, scene: str | Path, variant
     """(task file, problem, world): the problem's grounding with its scene replaced by ``scene``."""
     from bt_meta.demo.runner import jitter
     from bt_meta.htn import load_task_file
-    from bt_meta.world.sim_world import SimWorld, load_grounding, quiet_stdout
+    from bt_meta.world.simulation.sim_world import SimWorld, load_grounding, quiet_stdout
 
     task_file = load_task_file(task_path)
     problem = task_file.problem(problem_name)
@@ -97,7 +97,7 @@ def _one_run(task: dict[str, Any], memory_path: Path, *, save: bool) -> dict[str
 
 def run_episode(task: dict[str, Any]) -> dict[str, Any]:
     """Run one episode (see the module docstring); never raises: a crash is a row with status ``crashed``."""
-    from bt_meta.world.sim_world import quiet_stdout
+    from bt_meta.world.simulation.sim_world import quiet_stdout
 
     with quiet_stdout():
         import pybullet  # noqa: F401  (prints its build time on import: keeps --json clean)

@@ -37,7 +37,7 @@ __all__ = ["VARIANT_NAME", "Placed", "draw_variant", "generate", "scene_text"]
 VARIANT_NAME = "perturbed"
 
 #: Where spares and distractors are put down: the part of the table the right arm reaches pointing down
-#: (bt_meta.world.sim.Table's docstring: x 0.45..0.75, y -0.55..0.15), kept off the table's edge.
+#: (bt_meta.world.simulation.sim.Table's docstring: x 0.45..0.75, y -0.55..0.15), kept off the table's edge.
 FREE_REGION = ((0.47, 0.74), (-0.55, 0.12))
 #: Outside the arm's workspace but on the table (x up to 1.05): where ``out_of_reach`` puts an object.
 FAR_REGION = ((0.90, 1.02), (-0.60, 0.40))
@@ -68,7 +68,7 @@ class Placed:
 
 def _radius(type_name: str) -> float:
     """Half the diagonal of an object's footprint (any yaw)."""
-    from bt_meta.world.objects import make_model
+    from bt_meta.world.simulation.objects import make_model
 
     low, high = make_model(type_name).extent()
     return 0.5 * float(math.hypot(high[0] - low[0], high[1] - low[1]))
@@ -163,7 +163,7 @@ def _colour(draw: _Draw, p: Perturbation, obj: Placed) -> dict[str, Any] | None:
 
 
 def _replace_shape(draw: _Draw, p: Perturbation, obj: Placed) -> dict[str, Any] | None:
-    from bt_meta.world.objects import LB
+    from bt_meta.world.simulation.objects import LB
 
     i = draw.index(obj.name)
     assert i is not None
@@ -338,8 +338,8 @@ def generate(family_name: str, n: int, seed: int, out: str | Path, *, spec_path:
     from bt_meta.campaign.labeller import Labeller
     from bt_meta.campaign.manifest import new_manifest, write_manifest
     from bt_meta.campaign.spec import load_spec
-    from bt_meta.world.scenes import load_scene
-    from bt_meta.world.sim import Table
+    from bt_meta.world.simulation.scenes import load_scene
+    from bt_meta.world.simulation.sim import Table
 
     chosen = family(family_name)
     scene = load_scene(scene_path if scene_path is not None else chosen.scene)

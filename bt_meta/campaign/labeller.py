@@ -99,8 +99,8 @@ class Labeller:
         from bt_meta.campaign.families import needed_objects
         from bt_meta.htn import load_task_file
         from bt_meta.htn.planner import plan
-        from bt_meta.world.sim import Simulation
-        from bt_meta.world.sim_world import load_grounding, quiet_stdout
+        from bt_meta.world.simulation.sim import Simulation
+        from bt_meta.world.simulation.sim_world import load_grounding, quiet_stdout
 
         self.family = family
         self.scene = scene
@@ -141,7 +141,7 @@ class Labeller:
     # -- worlds ---------------------------------------------------------------------------------------------
 
     def _world(self, scene_path: str | Path, variant: str | None) -> Any:
-        from bt_meta.world.sim_world import SimWorld, quiet_stdout
+        from bt_meta.world.simulation.sim_world import SimWorld, quiet_stdout
 
         setup = {"scene": str(scene_path)}
         grounding = dataclasses.replace(self.grounding, problems={**self.grounding.problems,
@@ -183,7 +183,7 @@ class Labeller:
             world.close()
 
     def _label(self, world: Any) -> Label:
-        from bt_meta.world.objects import LB
+        from bt_meta.world.simulation.objects import LB
 
         sim = world.sim
         present = {name: sim.object_model(name) for name in sim.object_names()}

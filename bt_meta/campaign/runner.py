@@ -167,7 +167,7 @@ def run_campaign(folder: str | Path, *, configurations: Sequence[str] = ("dual",
     from bt_meta.campaign.episode import episode_task
     from bt_meta.campaign.manifest import manifest_digest, read_manifest
     from bt_meta.campaign.stats import summarise
-    from bt_meta.world.sim_world import quiet_stdout
+    from bt_meta.world.simulation.sim_world import quiet_stdout
 
     with quiet_stdout():
         import pybullet  # noqa: F401  (prints its build time on import: keeps --json clean)

@@ -174,11 +174,11 @@ class _SpecReader:
                 raise self.error(f"{name}: a non-empty list of [roll, pitch, yaw] (degrees)", node)
             return tuple(tuple(self.numbers(item, f"{name} entry", 3)) for item in node.value)
         if kind_of == "colours":
-            from bt_meta.world.objects import COLOURS
+            from bt_meta.world.simulation.objects import COLOURS
 
             return self.names(node, name, COLOURS, "colour")
         if kind_of == "types":
-            from bt_meta.world.objects import OBJECT_TYPES
+            from bt_meta.world.simulation.objects import OBJECT_TYPES
 
             return self.names(node, name, OBJECT_TYPES, "object type")
         raise AssertionError(kind_of)  # pragma: no cover - KINDS names only the kinds above

@@ -160,9 +160,10 @@ def _repair_line(event: dict[str, Any]) -> str:
         proposal = attempt.get("proposal") or {}
         return (f"{'':>10}  repair #{attempt.get('number')}: {proposal.get('action')} by {proposal.get('plugin')} "
                 f"(score {proposal.get('score', 0):.2f}) -- {attempt.get('change')}")
-    if outcome == "not_applicable":
+    if outcome in ("not_applicable", "equivalent"):
         proposal = event.get("proposal") or {}
-        return f"{'':>10}  proposal {proposal.get('action')} by {proposal.get('plugin')} not applicable: " \
+        why = "not applicable" if outcome == "not_applicable" else "skipped"
+        return f"{'':>10}  proposal {proposal.get('action')} by {proposal.get('plugin')} {why}: " \
                f"{str(event.get('reason'))[:110]}"
     return f"{'':>10}  meta-reasoner stops: {str(event.get('reason'))[:140]}"
 

@@ -5,9 +5,10 @@ problem's goal, the staging move of MagneticAttach) are the same:
 
 * ``dual`` -- symbolic expectations and grid-map monitors; object substitution by grid-map retrieval; pose
   backtracking, which compares R_p / R_n with the remembered traces (section 7.4: the staging verification
-  detects the failure, the keypoint relations localise and repair it); the retry baseline
+  detects the failure, the keypoint relations localise and repair it); re-orientation by the task file's regrasp
+  methods when the part's normal is grossly off and no pose is feasible; the retry baseline
 * ``symbolic`` -- symbolic expectations only; object substitution by symbolic matching; no pose backtracking
-  (it needs the keypoint relations); the retry baseline
+  nor re-orientation (they need the keypoint relations); the retry baseline
 * ``low_level`` -- grid-map monitors only (no symbolic expectation plugin); the repairs of ``dual``
 * ``retry`` -- the expectations of ``dual``; the retry / replan baseline as the only repair plugin
 * ``dual_kp_monitor`` -- ``dual`` plus keypoint monitors (R_p / R_n checked after the last primitive of every task):
@@ -46,7 +47,7 @@ CONFIGURATIONS = {
 MAIN_CONFIGURATIONS = ("dual", "symbolic", "low_level", "retry")
 
 #: Experience-based repair plugins of the paper (module names under ``bt_meta_plugins``).
-EXPERIENCE_REPAIRS = ("object_substitution", "pose_backtracking")
+EXPERIENCE_REPAIRS = ("object_substitution", "pose_backtracking", "reorientation")
 
 _MEMORY_EXPECTATIONS = ("gridmap_expectations", "keypoint_expectations")
 _SYMBOLIC = ("symbolic_expectations",)
@@ -77,6 +78,8 @@ def _repair_plugin(name: str, memory: Any, configuration: str, seed: int) -> Any
         return module.ObjectSubstitution(memory, matcher=matcher)
     if name == "pose_backtracking" and hasattr(module, "PoseBacktracking"):
         return module.PoseBacktracking(memory, seed=seed)
+    if name == "reorientation" and hasattr(module, "Reorientation"):
+        return module.Reorientation(memory)
     return module
 
 
@@ -95,7 +98,7 @@ def plugin_host(task_file: str | Path, memory: Any, *, configuration: str = "dua
             host.unregister(name)
     repairs = [] if configuration == "retry" else available_repairs()
     if configuration == "symbolic":
-        repairs = [name for name in repairs if name != "pose_backtracking"]
+        repairs = [name for name in repairs if name not in ("pose_backtracking", "reorientation")]
     for name in repairs:
         host.register(_repair_plugin(name, memory, configuration, seed), name, source="bt-meta demo (memory-bound)")
     if configuration != "symbolic":

@@ -44,7 +44,7 @@ from bt_meta.bt.domain_nodes import domain_registry
 from bt_meta.bt.failures import Failure, FailureKind
 from bt_meta.errors import BtMetaError
 from bt_meta.htn.state import atom_text
-from bt_meta.meta.proposals import PlanState, ProposalError, apply_proposal
+from bt_meta.meta.proposals import PlanState, ProposalError, apply_proposal, plan_effect
 from bt_meta.meta.reasoner import Attempt, Decision, Diagnosis, Limits, MetaReasoner
 
 __all__ = ["MetaExecutor", "RunReport", "Verifier", "goal_verifier", "run_task_file"]
@@ -184,6 +184,7 @@ class MetaExecutor:
         planned = self._perceive(domain, [stored[n] for n in added if n in stored], planned, run, anchored)
         start_state = planned.state
         start_objects = _objects(self.world)
+        run.start_objects = start_objects  # what repair plugins compare the start with (a part's first orientation)
         run.emit("run_start", task_file=getattr(self.task_file, "path", None), problem=name,
                  state=[atom_text(a) for a in sorted(run.state)])
         external = self.plugins.external_predicate
@@ -204,6 +205,7 @@ class MetaExecutor:
         base_goal = list(getattr(run.problem, "goal", None) or [])
         registry = domain_registry(domain, self.plugins)
         tried: set[str] = set()
+        effects: dict[str, int] = {}  # an applied attempt's effect (plan_effect) -> its number
         while True:
             failures, status = self._segment(run, plan_state, registry, domain, report, started)
             if status is Status.SUCCESS:
@@ -231,22 +233,28 @@ class MetaExecutor:
                 _note_changes(anchored, before, _symbolic(self.world))  # what repair plugins anchored
             if decision.stop:
                 report.stop_reason = decision.reason
-                report.reported.append(self.reasoner.report_entry(diagnosis))
+                report.reported.append(_with_tried(self.reasoner.report_entry(diagnosis), report.attempts,
+                                                   diagnosis, decision.dropped, []))
                 for limit in decision.limits:
                     run.record_failure(limit)
                     report.reported.append(self.reasoner.limit_entry(limit, diagnosis))
                 run.emit("repair", outcome="stopped", reason=decision.reason, diagnosis=diagnosis.to_dict(),
                          dropped=decision.dropped)
                 break
-            applied = self._apply(decision.proposals, diagnosis, plan_state, run, domain, report, tried, started)
+            skipped: list[dict[str, Any]] = []
+            applied = self._apply(decision.proposals, diagnosis, plan_state, run, domain, report, tried, started,
+                                  effects, skipped)
             if applied is None:
-                report.stop_reason = (f"no proposal for {diagnosis.kind.value} at step {diagnosis.step} could be "
-                                      "applied")
-                report.reported.append(self.reasoner.report_entry(diagnosis))
-                run.emit("repair", outcome="stopped", reason=report.stop_reason, diagnosis=diagnosis.to_dict())
+                report.stop_reason = _unapplied_reason(diagnosis, skipped)
+                report.reported.append(_with_tried(self.reasoner.report_entry(diagnosis), report.attempts,
+                                                   diagnosis, decision.dropped, skipped))
+                run.emit("repair", outcome="stopped", reason=report.stop_reason, diagnosis=diagnosis.to_dict(),
+                         skipped=skipped)
                 break
             plan_state = applied
-            if base_goal:  # the goal as the repair rewrote it (spliced placements stand for the replaced ones)
+            keep_goal = bool((report.attempts[-1].proposal.get("evidence") or {}).get("keep_goal"))
+            if base_goal and not keep_goal:  # the goal as the repair rewrote it (spliced placements stand for the
+                # replaced ones); a proposal that only prepares a later repair (keep_goal) leaves the goal alone
                 from bt_meta.meta.refinements import rewrite_goal
 
                 goal = rewrite_goal(domain, base_goal, report.initial_plan,
@@ -263,7 +271,7 @@ class MetaExecutor:
             else:
                 # kept: how what was perceived differs from what the problem assumed at the start
                 facts = ({f for f in anchored[0] if f not in assumed}, {f for f in anchored[1] if f in assumed})
-                report.refinement_saved = self._save_refinement(domain, report, start_objects, facts,
+                report.refinement_saved = self._save_refinement(domain, _replayed(report), start_objects, facts,
                                                                 list(getattr(run.problem, "goal", None) or []))
         return self._finish(report, run, started)
 
@@ -356,7 +364,10 @@ class MetaExecutor:
         return failures, status
 
     def _apply(self, proposals: list[Any], diagnosis: Diagnosis, plan_state: PlanState, run: RunContext,
-               domain: Any, report: RunReport, tried: set[str], started: float) -> PlanState | None:
+               domain: Any, report: RunReport, tried: set[str], started: float, effects: dict[str, int],
+               skipped: list[dict[str, Any]]) -> PlanState | None:
+        """The plan state of the first proposal that applies and does something no earlier attempt did;
+        ``skipped`` receives the others with why (not applicable, or equivalent to attempt N)."""
         # Repairs start from what the world is, not from what the failed run believed.
         symbolic = getattr(self.world, "symbolic_state", None)
         if symbolic is not None:
@@ -374,6 +385,16 @@ class MetaExecutor:
             except ProposalError as error:
                 log.info("meta: %s proposal of %s not applicable: %s", proposal.action, proposal.plugin, error)
                 run.emit("repair", outcome="not_applicable", proposal=proposal.to_dict(), reason=str(error))
+                skipped.append({"proposal": proposal.to_dict(), "reason": f"not applicable: {error}"})
+                continue
+            effect = plan_effect(new_state)
+            if effect in effects:  # the identity of an attempt is what it does, not the node id it names
+                number = effects[effect]
+                reason = f"equivalent to attempt {number}: it would run the same steps from the same point"
+                log.info("meta: %s proposal of %s skipped: %s", proposal.action, proposal.plugin, reason)
+                run.emit("repair", outcome="equivalent", proposal=proposal.to_dict(), equivalent_to=number,
+                         reason=reason)
+                skipped.append({"proposal": proposal.to_dict(), "reason": reason, "equivalent_to": number})
                 continue
             attempt = Attempt(number=len(report.attempts) + 1, failure=diagnosis.failure.to_dict(),
                               kind=diagnosis.kind.value, proposal=proposal.to_dict(), change=change,
@@ -381,6 +402,7 @@ class MetaExecutor:
             attempt.failure.pop("evidence", None)
             attempt.failure["evidence_keys"] = sorted(diagnosis.failure.evidence)
             report.attempts.append(attempt)
+            effects[effect] = attempt.number
             log.info("meta: attempt %d: %s (%s, score %.2f, %s) -> %s", attempt.number, proposal.action,
                      proposal.plugin, proposal.score, proposal.description, change)
             run.emit("repair", outcome="applied", attempt=attempt.to_dict())
@@ -408,6 +430,55 @@ class MetaExecutor:
         log.info("meta: run %s %s after %d attempt(s) in %.3f s%s", report.problem, report.status,
                  len(report.attempts), report.seconds, f" ({report.stop_reason})" if report.stop_reason else "")
         return report
+
+
+def _replayed(report: RunReport) -> RunReport:
+    """``report`` with the plan a refinement should replay: the last (repairing) attempt's ``replay_plan`` when its
+    plugin planned the repair from the initial state (a re-orientation: not the failed attach, its release and the
+    re-pick), else the plan as run."""
+    last = report.attempts[-1] if report.attempts else None
+    replay = None if last is None else (last.proposal.get("evidence") or {}).get("replay_plan")
+    if not replay or last is None or last.outcome != "repaired":
+        return report
+    return dataclasses.replace(report, plan=[[str(a) for a in step] for step in replay])
+
+
+def _with_tried(entry: dict[str, Any], attempts: list[Attempt], diagnosis: Diagnosis,
+                dropped: list[dict[str, Any]], skipped: list[dict[str, Any]]) -> dict[str, Any]:
+    """``entry`` (an unrepaired failure of the run report) with ``tried``: every applied attempt and how it ended
+    (the failure that followed it), then the proposals for this failure that were dropped or not applied, and why."""
+    tried: list[dict[str, Any]] = []
+    for index, attempt in enumerate(attempts):
+        after = attempts[index + 1].failure if index + 1 < len(attempts) else diagnosis.failure.to_dict()
+        tried.append({"attempt": attempt.number, "action": attempt.proposal.get("action"),
+                      "plugin": attempt.proposal.get("plugin"), "description": attempt.proposal.get("description"),
+                      "change": attempt.change, "outcome": attempt.outcome,
+                      "why": f"then failed: [{after.get('kind')}] step {after.get('step')} {after.get('action')}"
+                             f"({', '.join(map(str, after.get('args') or []))}): {after.get('message')}"})
+    for item in [*dropped, *skipped]:
+        proposal = item.get("proposal")
+        proposal = proposal if isinstance(proposal, dict) else {"action": str(proposal)}
+        tried.append({"attempt": None, "action": proposal.get("action"), "plugin": proposal.get("plugin")
+                      or item.get("plugin"), "description": proposal.get("description"), "outcome": "not_applied",
+                      "why": item.get("reason")})
+    entry["tried"] = tried
+    return entry
+
+
+def _unapplied_reason(diagnosis: Diagnosis, skipped: list[dict[str, Any]]) -> str:
+    """Why no proposal for ``diagnosis`` was applied: each one's reason; repeats of earlier attempts named."""
+    where = f"{diagnosis.kind.value} at step {diagnosis.step}"
+    each = "; ".join(f"{s['proposal']['action']} ({s['proposal'].get('plugin')}): {s['reason']}" for s in skipped)
+    equivalent = sorted({s["equivalent_to"] for s in skipped if "equivalent_to" in s})
+    if equivalent and all("equivalent_to" in s for s in skipped):
+        head = (f"every proposal for {where} would repeat an attempt already made (attempt(s) "
+                f"{', '.join(map(str, equivalent))}): not looped on")
+    elif equivalent:
+        head = (f"no proposal for {where} could be applied, or it would repeat attempt(s) "
+                f"{', '.join(map(str, equivalent))}: not looped on")
+    else:
+        head = f"no proposal for {where} could be applied"
+    return f"{head} -- {each}" if each else head
 
 
 def _failed_step(failures: list[Failure], plan_state: PlanState) -> int:

@@ -34,6 +34,8 @@ Offers:
 * :class:`PlanState` -- tree, cursor, committed prefix; :meth:`PlanState.full_plan`, :meth:`PlanState.remaining_tree`
 * :func:`apply_proposal` -- one proposal applied to a :class:`PlanState` (returns a new one)
 * :func:`proposal_key` -- what makes two proposals the same (the reasoner never applies one twice to one failure)
+* :func:`plan_effect` -- what an applied proposal would do: where the plan resumes and the steps it would run,
+  with the objects and poses they bind (the executor never applies two proposals with the same effect)
 * :class:`ProposalError` -- a proposal that cannot be applied (bad step, wrong arity, no plan); the reasoner then
   tries the next one
 """
@@ -65,6 +67,7 @@ __all__ = [
     "ProposalError",
     "RepairProposal",
     "apply_proposal",
+    "plan_effect",
     "proposal_key",
 ]
 
@@ -142,6 +145,17 @@ class PlanState:
 def proposal_key(proposal: RepairProposal) -> str:
     """The identity of a proposal: its kind and changes (the score, description and evidence do not count)."""
     return f"{proposal.action}:{json.dumps(proposal.changes, sort_keys=True, default=str)}"
+
+
+def plan_effect(plan_state: PlanState) -> str:
+    """The identity of an attempt by its effect, not by the node ids or wording of the proposal that made it.
+
+    Two plan states have the same effect when execution resumes at the same place of the whole run (steps already
+    committed plus the cursor) and would run the same steps with the same arguments (objects, cells, pose symbols).
+    A replan from a new decomposition node that yields the plan that already failed is the same attempt again."""
+    steps = plan_state.steps()
+    suffix = [[n.task[0], *map(str, n.task[1:])] for n in steps[plan_state.cursor:]]
+    return json.dumps({"at": len(plan_state.committed) + plan_state.cursor, "run": suffix})
 
 
 # -- tree surgery ----------------------------------------------------------------------------------------------

@@ -150,6 +150,7 @@ class MetaReasoner:
         # The segment started at the cursor and ran up to the failing step: the steps before it are done.
         executed = plan_state if step < plan_state.cursor else dataclasses.replace(plan_state, cursor=step)
         primary.evidence["plan"] = executed.describe()
+        primary.evidence["methods"] = _methods(plan_state)
         primary.evidence["repair_history"] = [a.to_dict() for a in history or []]
         if related:
             primary.evidence.setdefault("related", [f.summary() for f in related])
@@ -318,6 +319,21 @@ class MetaReasoner:
         if diagnosis.kind in MOTION_LIMITS:
             entry["evidence"] = motion_evidence(diagnosis.failure.evidence)
         return entry
+
+
+def _methods(plan_state: PlanState) -> list[dict[str, Any]]:
+    """Each compound node with a step still to run: its task, method, bindings and steps -- what a repair plugin
+    needs to tell which of a method's conditions an entity it would replace must meet (its colour, its shape)."""
+    tree = plan_state.tree
+    out = []
+    for node in tree.walk():
+        if node.kind != "compound" or node.method is None:
+            continue
+        steps = sorted(p.step for p in tree.primitives(node.id) if p.step is not None)
+        if steps and steps[-1] >= plan_state.cursor:
+            out.append({"node_id": node.id, "task": list(node.task), "method": node.method,
+                        "bindings": {str(k): str(v) for k, v in node.bindings.items()}, "steps": steps})
+    return out
 
 
 def _comparison(record: dict[str, Any]) -> Comparison:

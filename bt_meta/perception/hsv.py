@@ -7,7 +7,8 @@ pinhole model, so shape and orientation do not depend on where in the image a bl
 
 * with a depth image, each blob pixel becomes its 3-D point and only the block's upper surfaces are kept (points
   within ``surface_tolerance`` of the blob's median height or above): the side faces a perspective view shows
-  near the image border are dropped, so the centroid is the footprint's;
+  near the image border are dropped, so the centroid is the footprint's; a blob lying below the plane (the floor
+  beyond the table's edge, which a light grey or white matches) is no block;
 * without depth (a plain RGB image, synthetic images), each pixel is intersected with the horizontal plane of
   the :class:`PlaneProjection` (the table top, or the blocks' top face when its height is known).
 
@@ -370,6 +371,8 @@ def detect_blocks(
             if depth is not None:
                 points = projection.pixel_to_point(u, v, np.asarray(depth)[rows, cols])
                 top = float(np.median(points[:, 2]))
+                if top < projection.plane_z - 0.01:
+                    continue  # below the table top: the floor or the background beyond the table's edge
                 keep = points[:, 2] >= top - surface_tolerance
                 plan = points[keep, :2]
             else:
@@ -386,8 +389,22 @@ def detect_blocks(
             block = Block(0, colour, shape, (float(centroid[0]), float(centroid[1])), orientation, length, width,
                           area, pixel_centroid, top, bbox)  # type: ignore[arg-type]
             found.append(((pixel_centroid[1], pixel_centroid[0]), block))
+    found = _without_side_faces(found)
     found.sort(key=lambda item: item[0])
     return [_reindex(block, i) for i, (_, block) in enumerate(found)]
+
+
+def _touching(a: tuple[int, int, int, int], b: tuple[int, int, int, int], margin: int = 2) -> bool:
+    return (a[0] - margin < b[0] + b[2] and b[0] - margin < a[0] + a[2]
+            and a[1] - margin < b[1] + b[3] and b[1] - margin < a[1] + a[3])
+
+
+def _without_side_faces(found: list[tuple[tuple[float, float], Block]]) -> list[tuple[tuple[float, float], Block]]:
+    """Drop blobs of no block shape that touch a block of another colour: the block's shaded side faces, which
+    for a grey render as the next darker grey (a chromatic colour's sides keep its hue and join its blob)."""
+    shaped = [block for _, block in found if block.shape != "unknown"]
+    return [(key, block) for key, block in found if block.shape != "unknown" or not any(
+        other.colour != block.colour and _touching(other.bbox, block.bbox) for other in shaped)]
 
 
 def _reindex(block: Block, index: int) -> Block:

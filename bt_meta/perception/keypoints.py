@@ -21,6 +21,8 @@ Offers:
 * :class:`Relation` / :func:`relation` -- R_p and R_n of two object states
 * :class:`KeypointExpectation` / :func:`expected_relation` -- means (and spreads) over past states
 * :class:`KeypointVerdict` / :func:`judge` -- does an observed relation match an expectation
+* :func:`informative` -- which relations an expectation can hold an observation to (R_p once the parts meet,
+  R_n where the traces agree), :data:`CONTACT_DISTANCE`
 * :func:`pairs_from_states` -- the (active, reference) object states of stored states
 """
 
@@ -37,11 +39,13 @@ from bt_meta.errors import BtMetaError
 from bt_meta.world.simulation.objects import rpy_to_matrix
 
 __all__ = [
+    "CONTACT_DISTANCE",
     "KeypointError",
     "KeypointExpectation",
     "KeypointVerdict",
     "Relation",
     "expected_relation",
+    "informative",
     "judge",
     "keypoints_of",
     "pairs_from_states",
@@ -178,6 +182,31 @@ def judge(
     if angle_tolerance is not None and delta_n > angle_tolerance:
         failed.append("r_n")
     return KeypointVerdict(not failed, observed, expected, delta_p, delta_n, tuple(failed))
+
+
+CONTACT_DISTANCE = 0.03
+"""Metres: R_p is informative where the traces' attachment points are this close (mean plus spread): the parts
+meet. Further apart it measures where the parts happen to lie on the table, which a shifted scene changes."""
+
+
+def informative(
+    expected: KeypointExpectation,
+    *,
+    position_tolerance: float | None,
+    angle_tolerance: float | None,
+    contact_distance: float | None = CONTACT_DISTANCE,
+) -> tuple[float | None, float | None]:
+    """The (position, angle) tolerances worth checking against ``expected`` (section 7.4: R_p at the end of the
+    attach, R_n for gross pose changes); ``None`` for a relation the traces say is not informative there: R_p
+    before the parts meet (unless ``contact_distance`` is ``None``), R_n where the traces disagree by more than
+    the angle tolerance."""
+    position = position_tolerance
+    if position is not None and contact_distance is not None and expected.r_p + expected.r_p_std > contact_distance:
+        position = None
+    angle = angle_tolerance
+    if angle is not None and expected.r_n_std > angle:
+        angle = None
+    return position, angle
 
 
 def pairs_from_states(states: Sequence[Any], active: str, reference: str) -> list[tuple[Any, Any]]:

@@ -20,12 +20,14 @@ import cv2
 import numpy as np
 
 from bt_meta.perception.hsv import PlaneProjection
-from bt_meta.world.simulation.objects import LB
+from bt_meta.world.simulation.objects import COLOURS, LB
 
 __all__ = ["BLOCK_RGB", "TABLE_RGB", "blank", "draw_block", "top_view_projection"]
 
 TABLE_RGB = (222, 214, 198)
-BLOCK_RGB = {"red": (217, 20, 20), "blue": (20, 51, 217), "green": (25, 166, 51)}
+BLOCK_RGB: dict[str, tuple[int, int, int]] = {
+    name: (round(rgba[0] * 255), round(rgba[1] * 255), round(rgba[2] * 255)) for name, rgba in COLOURS.items()}
+"""Every colour the scene format accepts, as the simulator renders it fully lit."""
 
 
 def top_view_projection(centre: tuple[float, float] = (0.70, -0.20), metres_per_pixel: float = 0.0025,

@@ -20,8 +20,8 @@ All draws take a seed (:meth:`SensingNoise.rng`): the same seed gives the same f
 Offers:
 
 * :class:`SensingNoise` -- the parameters; :meth:`SensingNoise.perfect` has them all zero
-* :func:`corrupt_image` -- a noisy copy of a :class:`~bt_meta.world.camera.CameraImage` (rgb, depth) and the pose
-  perception believes it was taken from
+* :func:`corrupt_image` -- a noisy copy of a :class:`~bt_meta.world.simulation.camera.CameraImage` (rgb, depth)
+  and the pose perception believes it was taken from
 * :func:`depth_sigma` -- the axial depth noise at a distance
 * :func:`pose_error` -- a seeded rigid error transform
 * :func:`sense_pose` -- a noisy 4x4 object pose

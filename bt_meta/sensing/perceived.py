@@ -70,7 +70,7 @@ class PerceivedState:
     def _camera(self, sim: Any) -> Any:
         camera = self._cameras.get(sim)
         if camera is None:
-            from bt_meta.world.camera import TopViewCamera
+            from bt_meta.world.simulation.camera import TopViewCamera
 
             camera = TopViewCamera(sim, hide_robot=not self.noise.occlusion)
             self._cameras[sim] = camera
@@ -105,7 +105,7 @@ class PerceivedState:
 
     def _rule(self, world: Any, atom: tuple[str, ...], believed: Any, view: Callable[[], Any]) -> bool | None:
         """True / False: sensing confirms / contradicts ``atom``; None: not perceivable."""
-        from bt_meta.world.objects import LB
+        from bt_meta.world.simulation.objects import LB
 
         name, args = atom[0], atom[1:]
         sim = world.sim
@@ -177,7 +177,7 @@ def _occupied(view: Any, point: Any, top: float) -> bool | None:
     """Does the noisy top view show a block colour over the unit cell centred at ``point`` (a grid-map of the
     window: blobs of touching blocks merge, occupancy does not)? ``None`` when the robot's own body covers most of
     the cell in the image (occluded: nothing can be said)."""
-    from bt_meta.world.objects import LB
+    from bt_meta.world.simulation.objects import LB
 
     mask = getattr(view, "robot_mask", None)
     if mask is not None:

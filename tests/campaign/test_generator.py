@@ -5,7 +5,7 @@ from __future__ import annotations
 from bt_meta.campaign.families import default_spec_path
 from bt_meta.campaign.generator import VARIANT_NAME, draw_variant, placed_objects, scene_text
 from bt_meta.campaign.spec import load_spec
-from bt_meta.world.scenes import load_scene
+from bt_meta.world.simulation.scenes import load_scene
 
 
 def _setup(name="letters_A", family="letters_A"):

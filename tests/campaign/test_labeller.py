@@ -58,7 +58,7 @@ LETTER_CASES = {
 def letters_labeller():
     from bt_meta.campaign.families import family
     from bt_meta.campaign.labeller import Labeller
-    from bt_meta.world.scenes import load_scene
+    from bt_meta.world.simulation.scenes import load_scene
 
     with Labeller(family("letters_A"), load_scene("letters_A")) as labeller:
         yield labeller
@@ -95,7 +95,7 @@ MAGNETIC_CASES = {
 def test_magnetic_labels(tmp_path):
     from bt_meta.campaign.families import family
     from bt_meta.campaign.labeller import Labeller
-    from bt_meta.world.scenes import load_scene
+    from bt_meta.world.simulation.scenes import load_scene
 
     with Labeller(family("magnetic"), load_scene("magnetic_attach")) as labeller:
         for case, (expected, change) in MAGNETIC_CASES.items():
@@ -111,7 +111,7 @@ def test_generate_with_a_users_scene_and_spec_writes_labelled_scene_files(tmp_pa
 
     from bt_meta.campaign.labeller import OUTCOMES
     from bt_meta.cli import main
-    from bt_meta.world.scenes import load_scene
+    from bt_meta.world.simulation.scenes import load_scene
 
     scene = tmp_path / "my_magnet.yaml"
     scene.write_text(NOMINAL_MAGNETIC.replace("variants:\n  perturbed:\n", ""), encoding="utf-8")

@@ -7,7 +7,7 @@ import pytest
 from bt_meta.campaign.families import FAMILIES, default_spec_path
 from bt_meta.campaign.spec import KINDS, SpecError, load_spec
 from bt_meta.cli import main
-from bt_meta.world.scenes import load_scene
+from bt_meta.world.simulation.scenes import load_scene
 
 
 @pytest.mark.parametrize("name", sorted(FAMILIES))

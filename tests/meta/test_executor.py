@@ -196,7 +196,11 @@ def test_a_motion_limit_that_recurs_after_a_repair_stops_the_loop(blocks):
     assert "collision again at step 1 after a repair" in report.stop_reason
     assert report.reported == [{"kind": "collision", "step": 1, "node_id": report.failures[-1]["node_id"],
                                 "action": "put", "args": ["b0", "1", "1"], "message": "gripper hits b1",
-                                "evidence": {"colliding_pair": ["right_gripper", "b1"]}}]
+                                "evidence": {"colliding_pair": ["right_gripper", "b1"]},
+                                "tried": [{"attempt": 1, "action": "rewrite_args", "plugin": "other_cell",
+                                           "description": "put it next door", "change": "step 1 now put(b0, 1, 1)",
+                                           "outcome": "failed_again",
+                                           "why": "then failed: [collision] step 1 put(b0, 1, 1): gripper hits b1"}]}]
 
 
 class Broken:
@@ -264,3 +268,23 @@ def test_run_task_file_with_the_fake_world(tmp_path):
     record = json.loads(json.dumps(report.to_dict()))
     assert record["attempts"][0]["kind"] == FailureKind.PHYSICAL.value
     assert record["repairs"][0]["action"] == "retry" and record["status"] == "success"
+
+
+def test_a_replan_that_yields_the_failed_plan_again_is_not_applied_twice(blocks):
+    """Every pick fails: a replan from the new node of the failed step plans the same steps again; it is the same
+    attempt (same steps, same objects), so the executor stops saying so instead of spending its budget."""
+    problem = blocks.problem("two")
+    world = FakeWorld(blocks.domain, problem, faults=["pick=fail:physical"])
+    report = MetaExecutor(blocks.domain, problem, world, make_host(), limits=Limits(max_attempts=8)).run()
+    assert not report.ok
+    assert "repeat attempt(s) 1: not looped on" in report.stop_reason
+    assert "replan_scratch (retry_repair): equivalent to attempt 1" in report.stop_reason
+    assert len(report.attempts) < 8
+    assert [a.proposal["action"] for a in report.attempts] == ["retry"]
+    assert report.reported and report.reported[0]["kind"] == "physical"
+    tried = report.reported[0]["tried"]  # what was tried for the unrepaired failure, and why each did not repair
+    assert tried[0]["attempt"] == 1 and tried[0]["action"] == "retry" and tried[0]["outcome"] == "failed_again"
+    assert "then failed: [physical] step 0 pick(b0)" in tried[0]["why"]
+    assert [(t["action"], t["outcome"]) for t in tried[1:]] == [("replan", "not_applied"),
+                                                               ("replan_scratch", "not_applied")]
+    assert tried[2]["why"].startswith("equivalent to attempt 1")

@@ -217,9 +217,14 @@ def test_rotations_let_legs_tie_with_h_bar(task_file, letters_memory):
 
 def test_nothing_to_do(task_file, letters_memory, tmp_path, monkeypatch):
     plugin = substitution.ObjectSubstitution(letters_memory)
+    failure, context, _, _ = bar_failure(task_file, letters_memory, {**NOMINAL, "b5": ("1x2", "blue")},
+                                         kind=FailureKind.COLLISION)
+    failure.evidence["mismatches"] = []
+    assert plugin.bt_meta_propose_repairs(failure, context) is None  # a collision with the entities as assumed
     failure, context, _, _ = bar_failure(task_file, letters_memory, VARIANT_OBJECTS["two_1x1_same_colour"],
                                          kind=FailureKind.COLLISION)
-    assert plugin.bt_meta_propose_repairs(failure, context) is None  # not a kind it repairs
+    proposals = plugin.bt_meta_propose_repairs(failure, context)  # the step's block is not the one planned
+    assert proposals and proposals[0].action == "splice"
     failure, context, _, _ = bar_failure(task_file, letters_memory, {**NOMINAL, "b5": ("1x2", "blue")})
     failure.evidence["mismatches"] = []
     assert plugin.bt_meta_propose_repairs(failure, context) is None  # nothing missing

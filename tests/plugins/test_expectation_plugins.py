@@ -295,6 +295,61 @@ def test_keypoint_thresholds_and_check_setting(attach_memory):
     assert not missing.matched and "active_part not observed" in missing.message
 
 
+PICK_PLAN = [("MoveTo", ("active_above",), "PickPart", "n3"), ("MoveTo", ("active_grasp",), "PickPart", "n3"),
+             ("Grasp", (), "PickPart", "n3"), ("MoveTo", ("active_above",), "PickPart", "n3")]
+
+
+def picked_states(shift: tuple[float, float, float] = (0.0, 0.0, 0.0), roll: float = 0.0
+                  ) -> dict[str, ObjectState]:
+    """After PickPart: the active part held 10 cm up above where it lay, 30 cm from the reference; ``shift`` moves
+    where it lay (a nominal-equivalent scene), ``roll`` lays it on its side (magnet facing -y)."""
+    reference = ObjectState("reference_part", (0.62, -0.10, -0.18, 0, 0, 0), REFERENCE_AP, (0, 0, 1))
+    x, y, z = np.add((0.58, -0.40, -0.07), shift)
+    normal = (0, math.sin(roll), -math.cos(roll))
+    active = ObjectState("active_part", (x, y, z, roll, 0, 0), (x, y, z - 0.03), normal)
+    return {"active_part": active, "reference_part": reference}
+
+
+@pytest.fixture(scope="module")
+def pick_memory(tmp_path_factory):
+    path = tmp_path_factory.mktemp("pick") / "memory.sqlite"
+    with EpisodicMemory.open(path) as memory:
+        for j in range(3):
+            steps = [Step(i, action, args, parent_task=parent, parent_node=node,
+                          state=State(objects=tuple(picked_states().values())))
+                     for i, (action, args, parent, node) in enumerate(PICK_PLAN)]
+            memory.write(Trace(Episode("MagneticAttach", "magnetic_attach.yaml", "attach_only",
+                                       started=time.time() + j, outcome="success"), tuple(steps)))
+    memory = EpisodicMemory.open(path, readonly=True)
+    yield memory
+    memory.close()
+
+
+@pytest.mark.parametrize("shift", [(0.04, 0.0, 0.0), (0.0, -0.03, 0.0), (0.03, 0.03, 0.0)])
+def test_a_part_shifted_a_few_cm_raises_no_keypoint_mismatch_before_the_parts_meet(pick_memory, shift):
+    """Before the attach, R_p is where the parts lie on the table (30 cm apart): not informative, not checked. R_n
+    is, and a part on its side is still caught."""
+    host = host_with(keypoint_plugin, "keypoint_expectations")
+    context = make_context(attach_run(pick_memory), 3, "MoveTo", ("active_above",))
+    expectations, verdicts = check(host, context, {"objects": observed(picked_states(shift))})
+    assert expectations[0].data["checked"] == ["r_n"] and expectations[0].data["position_tolerance"] is None
+    assert verdicts[0].matched, verdicts[0].message
+    _, verdicts = check(host, context, {"objects": observed(picked_states(shift, roll=math.pi / 2))})
+    assert not verdicts[0].matched and verdicts[0].evidence["failed"] == ["r_n"]
+
+
+def test_r_p_is_checked_where_the_parts_meet_and_everywhere_without_a_contact_distance(attach_memory, pick_memory):
+    plugin = keypoint_plugin.KeypointExpectations()
+    at_attach = plugin.bt_meta_expectations(make_context(attach_run(attach_memory), 3, "MoveTo", ("joint_above",)))
+    assert at_attach[0].data["checked"] == ["r_p", "r_n"]
+    everywhere = keypoint_plugin.KeypointExpectations(contact_distance=None)
+    expectation = everywhere.bt_meta_expectations(make_context(attach_run(pick_memory), 3, "MoveTo",
+                                                               ("active_above",)))[0]
+    assert not keypoint_plugin.compare(expectation, {"objects": observed(picked_states((0, 0.04, 0)))}).matched
+    with pytest.raises(ValueError, match="contact_distance must be >= 0 or None, got -1"):
+        keypoint_plugin.KeypointExpectations(contact_distance=-1)
+
+
 def test_configure_replaces_the_module_plugin(attach_memory):
     try:
         keypoint_plugin.configure(memory=attach_memory, angle_tolerance=None, position_tolerance=0.5)
@@ -464,3 +519,30 @@ def test_camera_perception_needs_a_camera():
 
     with pytest.raises(PerceptionConfigError, match="expected a mapping with a 'colours' key"):
         camera_plugin.CameraPerception(thresholds={"colour": {}})
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("family", "task_file", "variant"), [
+    ("magnetic", "magnetic_attach.yaml", "active_shifted"), ("housing", "housing_insertion.yaml", "parts_shifted")])
+def test_a_shifted_nominal_equivalent_scene_raises_nothing_with_keypoint_monitors(tmp_path, family, task_file,
+                                                                                  variant):
+    """Recorded nominal, then the parts (and board) moved a few cm: monitors at every task end, no mismatch."""
+    from bt_meta.demo.capture import Progress
+    from bt_meta.demo.runner import memory_environment, record_demonstration, run_variant
+    from bt_meta.demo.scenario import Demonstration, VariantRun
+    from bt_meta.meta import RefinementStore
+
+    path = tmp_path / "memory.sqlite"
+    progress = Progress(quiet=True)
+    with memory_environment(path):
+        memory = EpisodicMemory.open(path)
+        try:
+            assert record_demonstration(Demonstration(family, task_file, "nominal", 0), memory,
+                                        progress).status == "recorded"
+            with RefinementStore.open(path) as refinements:
+                outcome = run_variant(VariantRun(family, task_file, "nominal", variant, 0), memory, refinements,
+                                      progress, configuration="dual_kp_monitor", pictures=False)
+        finally:
+            memory.close()
+    assert outcome.report["status"] == "success", outcome.report["stop_reason"]
+    assert outcome.report["failures"] == [] and outcome.report["attempts"] == []

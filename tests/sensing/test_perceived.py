@@ -11,7 +11,7 @@ pytestmark = pytest.mark.slow
 def world():
     from bt_meta.campaign.episode import variant_world
     from bt_meta.campaign.families import family
-    from bt_meta.world.scenes import load_scene
+    from bt_meta.world.simulation.scenes import load_scene
 
     _, _, world = variant_world(family("letters_A").task_path(), "A", load_scene("letters_A").path, None, 0)
     yield world
@@ -62,7 +62,7 @@ def test_gripper_at_an_absolute_pose_is_sensed_and_an_object_relative_one_is_not
     from bt_meta.campaign.families import family
     from bt_meta.sensing.noise import SensingNoise
     from bt_meta.sensing.perceived import PerceivedState
-    from bt_meta.world.scenes import load_scene
+    from bt_meta.world.simulation.scenes import load_scene
 
     _, _, world = variant_world(family("magnetic").task_path(), "nominal", load_scene("magnetic_attach").path,
                                 None, 0)

@@ -7,7 +7,10 @@ toggles,
 ``mode: close`` / ``mode: open`` makes it a CloseGripper / OpenGripper primitive. After a release the skill lets the
 physics run a few ticks so the object comes to rest (and the magnetic attach rule, checked at every physics step,
 can join parts that meet). Fails with kind ``physical`` when there is nothing within reach, the named object is
-not the one held, or the object slipped out during the settling ticks.
+not the one held, or the object slipped out during the settling ticks; with kind ``collision`` (the gripper and
+the obstacle as the pair) when an object the robot did not put there and not joined to the part to grasp -- the
+named one, or the one the last ``MoveTo`` went above -- lies on it: the grasp would close on the obstacle, an
+empty grasp of the part.
 
 Offers:
 
@@ -73,6 +76,8 @@ class Grasp(SimSkill):
                     raise SkillAbort(FailureKind.PHYSICAL, f"grasp: the gripper holds {held!r}, not {self.object!r}",
                                      {"held": held, "expected": self.object})
                 world.release(self.arm)
+                placed = getattr(world, "placed_by_robot", None)
+                world.placed_by_robot = {*(placed or ()), held}  # the task put it there: part of its work
                 self.info.update(action="release", object=held)
             else:
                 if held is not None:
@@ -90,6 +95,14 @@ class Grasp(SimSkill):
     def _pick(self) -> str:
         world, sim = self.world, self.world.sim
         gripper = sim.link_transform(world.end_effector(self.arm))[:3, 3]
+        intended = self.object or getattr(world, "grasp_target", None)
+        if intended is not None and intended in sim.object_names():
+            obstacle = self._obstacle_over(intended)
+            if obstacle is not None:  # the approach ends on what lies on the part: closing would hold that instead
+                raise SkillAbort(FailureKind.COLLISION, f"grasp: {obstacle!r} lies on {intended!r}: the approach to "
+                                 f"it is obstructed", {"colliding_pair": [world.end_effector(self.arm), obstacle],
+                                                       "obstacle": obstacle, "target": intended,
+                                                       "gripper": rounded(gripper)})
         names = [self.object] if self.object is not None else list(sim.object_names())
         candidates = sorted(names, key=lambda n: float(np.linalg.norm(sim.object_transform(n)[:3, 3] - gripper)))
         for name in candidates:
@@ -103,6 +116,24 @@ class Grasp(SimSkill):
         what = f"{self.object!r} is" if self.object is not None else "nothing is"
         raise SkillAbort(FailureKind.PHYSICAL, f"grasp: {what} within {self.reach * 100:.0f} cm of the gripper",
                          evidence)
+
+    def _obstacle_over(self, target: str) -> str | None:
+        """An object resting on ``target`` around its centroid that is neither magnetically joined to it nor put
+        there by the robot (a part the task placed on it is lifted with it, as the verification's staging move
+        does), or ``None``."""
+        sim = self.world.sim
+        state = sim.object_state(target)
+        centre = sim.object_transform(target)[:3, 3]
+        low, high = sim.object_model(target).extent()
+        radius = 0.5 * float(min(high[0] - low[0], high[1] - low[1]))
+        joined = set(state.attached_to) | set(getattr(self.world, "placed_by_robot", None) or ())
+        for other in sim.object_names():
+            if other == target or other in joined or other in {sim.held(a) for a in sim.robot.arms}:
+                continue
+            position = sim.object_transform(other)[:3, 3]
+            if np.linalg.norm(position[:2] - centre[:2]) < radius and position[2] > centre[2]:
+                return other
+        return None
 
     def _finish(self) -> str:
         sim = self.world.sim

@@ -69,6 +69,8 @@ class MoveTo(SimSkill):
         if len(args) != 1:
             raise SkillAbort(FailureKind.INTERNAL, f"move_to takes a pose symbol (or 6 numbers), got {list(args)}")
         spec = self.world.pose_spec(args[0])
+        # what a following grasp is meant to close on (the grasp skill tells an obstacle on top of it apart)
+        self.world.grasp_target = self.world.object_name(str(spec["above"])) if "above" in spec else None
         if spec.get("touch") and "above" in spec:
             # A grasp pose: the fingers may touch the object they are about to close on.
             self.world.allow_hand(self.world.object_name(str(spec["above"])), self.arm)

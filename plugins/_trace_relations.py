@@ -1,0 +1,118 @@
+"""The current execution against the successful traces, step by step (paper, section 7.4, steps 1-2 of pose
+backtracking): R_p / R_n now and their means in the traces, where they deviate, and which steps moved a part.
+
+Offers:
+
+* :class:`StepRelation` -- one step's relations, current and expected, and whether they deviate
+* :func:`step_relations` -- every comparable step (only the relations informative there are judged)
+* :func:`moved`, :func:`moved_in_trace` -- did an object's pose change during a step (here, or in a trace)
+* :data:`MOVED_POSITION`, :data:`MOVED_ANGLE` -- what counts as moved
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from bt_meta_plugins._good_poses import state_pose as _state_pose
+
+from bt_meta.perception.keypoints import (
+    CONTACT_DISTANCE,
+    KeypointError,
+    expected_relation,
+    informative,
+    judge,
+    relation,
+)
+
+__all__ = ["MOVED_ANGLE", "MOVED_POSITION", "StepRelation", "moved", "moved_in_trace", "step_relations"]
+
+MOVED_POSITION = 0.005
+"""Metres: an object that moved more than this (or turned more than :data:`MOVED_ANGLE`) during a step had its
+pose set by it."""
+MOVED_ANGLE = 0.05
+
+
+@dataclass(frozen=True)
+class StepRelation:
+    """R_p / R_n after one step: now, and the traces' mean; ``deviates`` when outside the tolerances."""
+
+    step: int
+    action: str
+    r_p: float
+    r_n: float
+    expected_p: float
+    expected_n: float
+    traces: int
+    deviates: bool
+    spread_p: float = 0.0
+    spread_n: float = 0.0
+    """Standard deviations of R_p and R_n over the traces: how much the traces agree at this step."""
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"step": self.step, "action": self.action, "R_p": round(self.r_p, 5), "R_n": round(self.r_n, 4),
+                "expected_R_p": round(self.expected_p, 5), "expected_R_n": round(self.expected_n, 4),
+                "traces": self.traces, "deviates": self.deviates, "spread_R_p": round(self.spread_p, 5),
+                "spread_R_n": round(self.spread_n, 4)}
+
+
+def step_relations(
+    current: Mapping[int, Mapping[str, Any]],
+    traces: Sequence[Any],
+    active: str,
+    reference: str,
+    actions: Mapping[int, str],
+    *,
+    position_tolerance: float | None = 0.01,
+    angle_tolerance: float | None = math.radians(15.0),
+    contact_distance: float | None = CONTACT_DISTANCE,
+) -> list[StepRelation]:
+    """For every step of ``current`` (step -> object states) whose action (``actions``) the traces ran at the same
+    index: the current R_p / R_n, the traces' means, and whether they deviate (:func:`judge`) in the relations
+    informative there (:func:`~bt_meta.perception.keypoints.informative`: a part merely lying elsewhere does not
+    deviate)."""
+    rows = []
+    for step in sorted(current):
+        objects = current[step]
+        if active not in objects or reference not in objects:
+            continue
+        pairs = []
+        for trace in traces:
+            if step < len(trace.steps) and trace.steps[step].action == actions.get(step):
+                state = trace.steps[step].state
+                try:
+                    pairs.append((state.object(active), state.object(reference)))
+                except KeyError:
+                    continue
+        if not pairs:
+            continue
+        expected = expected_relation(pairs)
+        observed = relation(objects[active], objects[reference])
+        position, angle = informative(expected, position_tolerance=position_tolerance,
+                                      angle_tolerance=angle_tolerance, contact_distance=contact_distance)
+        verdict = judge(observed, expected, position_tolerance=position, angle_tolerance=angle)
+        rows.append(StepRelation(step, actions.get(step, ""), observed.r_p, observed.r_n, expected.r_p, expected.r_n,
+                                 expected.n, not verdict.matched, expected.r_p_std, expected.r_n_std))
+    return rows
+
+
+def _moved(before: Any, after: Any) -> bool:
+    a, b = _state_pose(before), _state_pose(after)
+    turned = math.acos(max(-1.0, min(1.0, (float(np.trace(a[:3, :3].T @ b[:3, :3])) - 1.0) / 2.0)))
+    return float(np.linalg.norm(a[:3, 3] - b[:3, 3])) > MOVED_POSITION or turned > MOVED_ANGLE
+
+
+def _moved_in_trace(trace: Any, step: int, active: str) -> bool:
+    if not 0 < step < len(trace.steps):
+        return False
+    try:
+        return _moved(trace.steps[step - 1].state.object(active), trace.steps[step].state.object(active))
+    except (KeyError, KeypointError):
+        return False
+
+
+moved = _moved
+moved_in_trace = _moved_in_trace

@@ -1,0 +1,299 @@
+"""Re-orientation repair: a part in an orientation no demonstrated pose can fix is turned over by regrasping.
+
+Pose backtracking (section 7.4) samples known-good poses from the traces; a part lying on its side or upside
+down may have none that is reachable or collision-free as it is held -- the limits section 7.5.2 names. This
+plugin is the symbolic repair a low-level expectation triggers (the dual encoding's point): when the part's
+attachment normal, as perceived now, is grossly off (more than :data:`GROSS_ANGLE`) from where the demonstrations
+had it at the start, it looks in the method library for a **re-orientation task** -- a task whose name starts with
+``Reorient`` and whose first parameter is the part -- and proposes to run it as many times as needed, then the
+problem's own task network again, from where the run stands. The task files that need it ship the methods (a
+regrasp: set the part down on another face, pick it again; ``trees/magnetic_attach.yaml``).
+
+How many times: each run of the task (planned one after the other: the method may differ, a held part is set
+down first) turns the part by the rotation between its last set-down pose and the top-down grasp (read from the
+world's pose grounding when it offers ``ground_pose``; else a quarter turn about the robot's x axis); the fewest
+runs that bring the normal within :data:`ALIGNED_ANGLE` of the demonstrated one.
+
+The proposal is a ``splice`` of the planned steps from the failed step on. Its evidence carries ``replay_plan``:
+the same re-orientation planned from the problem's initial state (the part's normal when the run started,
+``run.start_objects``), which the executor stores as the refinement (the failed attempt, its release and re-pick
+are not replayed on the next exposure). A held part whose method lets it go without a turn (a part jammed in an
+insertion) is only set down first (``keep_goal``: the goal is not rewritten): the turns are counted at the next
+failure, from how it landed.
+
+Offers:
+
+* :class:`Reorientation` -- the plugin as an object (memory, traces used, score)
+* :func:`reorientation_tasks` -- the domain's re-orientation tasks
+* :func:`quarter_turns` -- how many runs of a turn bring a normal to the wanted one
+* :func:`bt_meta_propose_repairs` -- the module-level hook (the ``reorientation`` entry point)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from bt_meta.bt.failures import FailureKind, RepairProposal
+from bt_meta.errors import BtMetaError
+from bt_meta.meta.proposals import SPLICE
+from bt_meta.perception.keypoints import KeypointError, keypoints_of
+from bt_meta.perception.recall import memory_for, root_task
+from bt_meta.plugins import ConfiguredPlugin, hookimpl
+from bt_meta.world.simulation.objects import rpy_to_matrix
+
+__all__ = ["Reorientation", "bt_meta_propose_repairs", "configure", "quarter_turns", "reorientation_tasks"]
+
+log = logging.getLogger("bt_meta.meta.reorientation")
+
+STRATEGY = "reorientation"
+PREFIX = "Reorient"
+KINDS = (FailureKind.VERIFICATION, FailureKind.UNEXPECTED_CONFIGURATION, FailureKind.COLLISION,
+         FailureKind.REACHABILITY)
+GROSS_ANGLE = math.radians(45.0)
+"""A normal further than this from the demonstrated one is an orientation no pose sampled near it can fix."""
+ALIGNED_ANGLE = math.radians(30.0)
+MAX_TURNS = 3
+TOP_DOWN = rpy_to_matrix(math.pi, 0.0, math.pi)
+"""The shipped groundings' grasp orientation (rpy 180, 0, 180): the turn is measured from it."""
+
+
+def reorientation_tasks(domain: Any, part_type: str | None = None) -> list[str]:
+    """Tasks of ``domain`` named ``Reorient...`` whose first parameter is a part (of ``part_type`` when given)."""
+    out = []
+    for name, task in domain.tasks.items():
+        if not name.startswith(PREFIX) or not task.parameters:
+            continue
+        types = getattr(task, "types", None) or ()
+        if part_type is not None and types and types[0] not in (None, part_type):
+            continue
+        out.append(name)
+    return sorted(out)
+
+
+def _angle(a: np.ndarray, b: np.ndarray) -> float:
+    return math.acos(max(-1.0, min(1.0, float(a @ b) / (float(np.linalg.norm(a) * np.linalg.norm(b)) or 1.0))))
+
+
+def quarter_turns(normal: Sequence[float], wanted: Sequence[float], turn: np.ndarray,
+                  limit: int = MAX_TURNS) -> int | None:
+    """The fewest applications (1..``limit``) of rotation ``turn`` that bring ``normal`` within
+    :data:`ALIGNED_ANGLE` of ``wanted``; ``None`` when none does."""
+    current = np.asarray(normal, float)
+    target = np.asarray(wanted, float)
+    for k in range(1, limit + 1):
+        current = turn @ current
+        if _angle(current, target) <= ALIGNED_ANGLE:
+            return k
+    return None
+
+
+def _about_x() -> np.ndarray:
+    return np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+
+class Reorientation:
+    """The repair plugin (see the module docstring)."""
+
+    def __init__(self, memory: Any = None, *, n: int = 5, score: float = 0.6) -> None:
+        if n < 1:
+            raise ValueError(f"n must be >= 1, got {n}")
+        self.memory = memory
+        self.n = n
+        self.score = score
+
+    # -- what the demonstrations and the world say ----------------------------------------------------------------
+
+    def demonstrated_normal(self, memory: Any, task: str, part: str) -> np.ndarray | None:
+        """The part's attachment normal (base frame) at the start of the last successful traces, averaged."""
+        normals = []
+        for trace in memory.last_traces(task, self.n):
+            for state in (trace.initial, *(s.state for s in trace.steps[:1])):
+                try:
+                    normals.append(keypoints_of(state.object(part))[1])
+                    break
+                except (KeyError, KeypointError):
+                    continue
+        if not normals:
+            return None
+        mean = np.mean(normals, axis=0)
+        norm = float(np.linalg.norm(mean))
+        return None if norm < 1e-9 else mean / norm
+
+    @staticmethod
+    def turn_of(world: Any, domain: Any, plan: Sequence[Sequence[str]]) -> np.ndarray:
+        """The rotation one re-orientation gives the held part: its set-down pose against the top-down grasp."""
+        ground = getattr(world, "ground_pose", None)
+        moves = [step[1] for step in plan if step[0] == "MoveTo" and len(step) > 1]
+        if ground is not None and moves:
+            try:
+                rotation = np.asarray(ground(str(moves[-1])), float)[:3, :3]
+                return rotation @ TOP_DOWN.T
+            except Exception as error:  # a world that cannot ground it now: the documented default
+                log.info("reorientation: set-down pose %s not grounded (%s); a quarter turn about x", moves[-1], error)
+        return _about_x()
+
+    # -- the hook ---------------------------------------------------------------------------------------------------
+
+    @hookimpl
+    def bt_meta_propose_repairs(self, failure: Any, context: Any) -> list[RepairProposal] | None:
+        if failure.kind not in KINDS:
+            return None
+        run = getattr(context, "run", None)
+        domain = getattr(run, "domain", None)
+        problem = getattr(run, "problem", None)
+        world = getattr(context, "world", None)
+        task = root_task(context)
+        if domain is None or problem is None or world is None or task is None:
+            return None
+        root = problem.tasks[0]
+        if len(root) < 2:
+            return None
+        part = str(root[1])
+        names = reorientation_tasks(domain)
+        if not names:
+            return None
+        to_world = getattr(world, "object_name", None)
+        try:
+            seen_name = str(to_world(part)) if to_world is not None else part
+        except Exception:
+            seen_name = part
+        memory = memory_for(context, self.memory)
+        if memory is None:
+            return None
+        wanted = self.demonstrated_normal(memory, task, seen_name)
+        observed = (world.observe() or {}).get("objects", {}).get(seen_name)
+        if wanted is None or observed is None:
+            return None
+        try:
+            normal = keypoints_of(observed)[1]
+        except KeypointError:
+            return None
+        off = _angle(normal, wanted)
+        history = failure.evidence.get("repair_history") or []
+        ours = [a for a in history if ((a.get("proposal") or {}).get("evidence") or {}).get("strategy") == STRATEGY]
+        if off <= GROSS_ANGLE and not ours:
+            return None  # the orientation is as demonstrated: not a re-orientation's business
+        state = world.symbolic_state()
+        held = (world.observe() or {}).get("held") or {}
+        evidence: dict[str, Any] = {"strategy": STRATEGY, "part": part, "object": seen_name,
+                                    "normal": [round(float(v), 4) for v in normal],
+                                    "demonstrated_normal": [round(float(v), 4) for v in wanted],
+                                    "off_degrees": round(math.degrees(off), 1)}
+        if held and seen_name not in held.values() and any(h is not None for h in held.values()):
+            log.info("reorientation: the gripper holds %s, not %s", held, part)
+            return None
+        localisation = failure.evidence.get("localisation") or {}
+        start = int(localisation.get("step", failure.step if failure.step is not None else 0))
+        end = max(len(failure.evidence.get("plan") or []), start + 1)
+        initial = self._initial_normal(run, seen_name)
+        for name in names:
+            settle = self._settle(world, domain, problem, state, name, part, run)
+            if settle is not None and off > GROSS_ANGLE:
+                # A held part is let go without a turn first (it may land any way: a jammed part springs free);
+                # the turns are counted once it lies where it can be seen, at the next failure.
+                evidence.update(method_task=name, turns=0, settle=True, keep_goal=True)
+                return [RepairProposal(
+                    SPLICE, self.score, f"let {part} go and set it down ({name}) to see how it lies: its normal is "
+                    f"{math.degrees(off):.0f} deg from the demonstrations'",
+                    changes={"start": start, "end": end, "actions": settle}, evidence=evidence)]
+            turns = self._turns(world, domain, problem, state, name, part, normal, wanted, run)
+            if turns is None:
+                log.info("reorientation: no number of %s brings the normal of %s to the demonstrated one", name, part)
+                continue
+            now = self._plan(domain, problem, state, [(name, part)] * turns + [tuple(t) for t in problem.tasks], run)
+            if now is None:
+                continue
+            replay = None
+            first = None if initial is None else self._turns(world, domain, problem, problem.state, name, part,
+                                                             initial, wanted, run)
+            if first is not None:  # the same repair from the start, for the refinement
+                replay = self._plan(domain, problem, problem.state,
+                                    [(name, part)] * first + [tuple(t) for t in problem.tasks], run)
+            evidence.update(method_task=name, turns=turns, replay_plan=replay)
+            return [RepairProposal(
+                SPLICE, self.score, f"re-orient {part} by {turns} x {name} (its normal is "
+                f"{math.degrees(off):.0f} deg from the demonstrations'), then {task} again",
+                changes={"start": start, "end": end, "actions": now}, evidence=evidence)]
+        return None
+
+    @staticmethod
+    def _initial_normal(run: Any, name: str) -> np.ndarray | None:
+        """The part's normal when the run started (the executor keeps the first observation on the run)."""
+        objects = getattr(run, "start_objects", None) or {}
+        try:
+            return keypoints_of(objects[name])[1] if name in objects else None
+        except KeypointError:
+            return None
+
+    def _settle(self, world: Any, domain: Any, problem: Any, state: Any, name: str, part: str, run: Any
+                ) -> list[list[str]] | None:
+        """The steps of ``name`` planned now when they let the held part go without turning it, else ``None``."""
+        tree = self._plan_tree(domain, problem, state, [(name, part)], run)
+        if tree is None:
+            return None
+        steps = [[n.task[0], *map(str, n.task[1:])] for n in tree.primitives()]
+        turn = self.turn_of(world, domain, steps)
+        if _angle(turn @ np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, 1.0])) > ALIGNED_ANGLE / 3:
+            return None
+        if _angle(turn @ np.array([1.0, 0.0, 0.0]), np.array([1.0, 0.0, 0.0])) > ALIGNED_ANGLE / 3:
+            return None
+        return steps
+
+    def _turns(self, world: Any, domain: Any, problem: Any, state: Any, name: str, part: str, normal: np.ndarray,
+               wanted: np.ndarray, run: Any) -> int | None:
+        """The fewest runs of task ``name`` (planned one after the other from ``state``: the method may differ per
+        run, e.g. a held part is set down first) whose turns bring ``normal`` within :data:`ALIGNED_ANGLE` of
+        ``wanted``; ``None`` when none up to :data:`MAX_TURNS` + 1 does."""
+        if _angle(np.asarray(normal, float), wanted) <= ALIGNED_ANGLE:
+            return 0
+        for k in range(1, MAX_TURNS + 2):
+            tree = self._plan_tree(domain, problem, state, [(name, part)] * k, run)
+            if tree is None:
+                return None
+            current = np.asarray(normal, float)
+            for root in tree.roots:
+                steps = [[n.task[0], *map(str, n.task[1:])] for n in tree.primitives(root)]
+                current = self.turn_of(world, domain, steps) @ current
+            if _angle(current, wanted) <= ALIGNED_ANGLE:
+                return k
+        return None
+
+    @staticmethod
+    def _plan(domain: Any, problem: Any, state: Any, tasks: list[tuple[str, ...]], run: Any,
+              goal: list[Any] | None = None) -> list[list[str]] | None:
+        tree = Reorientation._plan_tree(domain, problem, state, tasks, run, goal)
+        return None if tree is None else [[n.task[0], *map(str, n.task[1:])] for n in tree.primitives()]
+
+    @staticmethod
+    def _plan_tree(domain: Any, problem: Any, state: Any, tasks: list[tuple[str, ...]], run: Any,
+                   goal: list[Any] | None = None) -> Any:
+        from bt_meta.htn import plan
+
+        external = getattr(run, "external", None)
+        if goal is None:  # the problem's goal only when its own tasks are planned too
+            only_turns = all(str(t[0]).startswith(PREFIX) for t in tasks)
+            goal = [] if only_turns else list(getattr(problem, "goal", None) or [])
+        fresh = dataclasses.replace(problem, state=state, init=sorted(state), tasks=list(tasks), goal=goal)
+        try:
+            result = plan(domain, fresh, external=external, max_seconds=5.0)
+        except BtMetaError as error:
+            log.info("reorientation: planning %s failed: %s", tasks, error)
+            return None
+        if result.status != "success" or result.tree is None:
+            return None
+        return result.tree
+
+
+plugin = ConfiguredPlugin(Reorientation)
+configure = plugin.configure
+
+
+@hookimpl
+def bt_meta_propose_repairs(failure: Any, context: Any) -> list[RepairProposal] | None:
+    return plugin.current.bt_meta_propose_repairs(failure, context)

@@ -1,0 +1,171 @@
+"""Substitution of missing entities by spares on the table, on small hand-built letter scenes (fake world).
+
+The world reports the blocks it shows (``observe()["objects"]`` with shape and colour) and refuses to place a
+block it does not show (``unknown_entity``, as the simulator's place skill does). The plan is the problem's.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import bt_meta_plugins.object_substitution as substitution
+import pytest
+
+from bt_meta.htn import load_task_file, load_task_text
+from bt_meta.memory import EpisodicMemory
+from bt_meta.meta import Limits, MetaExecutor
+from bt_meta.resources import trees_dir
+from bt_meta.world.base import FAILURE, SkillFailure
+from bt_meta.world.fake import FakeWorld
+
+from .conftest import make_host
+from .test_object_substitution import A_STEPS, H_STEPS, letter_trace
+
+NOMINAL_A = {**{f"b{i}": ("1x1", "blue") for i in range(5)}, "b5": ("1x2", "blue")}
+
+
+class SceneWorld(FakeWorld):
+    """A fake world showing ``objects`` (name -> (shape, colour)); placing one it does not show fails."""
+
+    def __init__(self, domain: Any, problem: Any, objects: dict[str, tuple[str, str]], **kwargs: Any) -> None:
+        super().__init__(domain, problem, **kwargs)
+        self.objects = dict(objects)
+
+    def observe(self) -> dict[str, Any]:
+        return {"symbolic_state": self.symbolic_state(),
+                "objects": {n: {"name": n, "shape": s, "colour": c} for n, (s, c) in self.objects.items()}}
+
+    def skill(self, action: str) -> Any:
+        return AbsentBlock(self, super().skill(action)) if action == "place" else super().skill(action)
+
+
+class AbsentBlock:
+    """``place`` of a block the world does not show fails as ``unknown_entity``; any other runs the fake skill."""
+
+    def __init__(self, world: SceneWorld, skill: Any) -> None:
+        self.world = world
+        self.skill = skill
+        self.failure: SkillFailure | None = None
+        self.absent = False
+
+    def start(self, args: Any, ctx: Any = None) -> None:
+        self.absent = str(args[0]) not in self.world.objects
+        if self.absent:
+            self.failure = SkillFailure("unknown_entity", f"place: there is no block {args[0]!r} in the world",
+                                        {"object": str(args[0]), "present": sorted(self.world.objects)})
+        else:
+            self.skill.start(args, ctx)
+
+    def tick(self) -> str:
+        if self.absent:
+            return FAILURE
+        status = self.skill.tick()
+        self.failure = self.skill.failure
+        return status
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.skill, name)
+
+
+@pytest.fixture(scope="module")
+def letters():
+    return load_task_file(trees_dir() / "letters.yaml")
+
+
+def host(memory: Any = None) -> Any:
+    plugin = substitution.ObjectSubstitution(memory=memory)
+    return make_host(("object_substitution", plugin))
+
+
+def _run(task_file: Any, problem: Any, objects: dict[str, tuple[str, str]], memory: Any = None,
+         faults: tuple[str, ...] = ()) -> Any:
+    world = SceneWorld(task_file.domain, problem, objects, faults=list(faults))
+    report = MetaExecutor(task_file.domain, problem, world, host(memory), limits=Limits(max_attempts=3)).run()
+    return report, world
+
+
+@pytest.mark.parametrize("missing", ["b2", "b4"])  # a leg block and the apex
+def test_a_missing_block_is_replaced_by_a_spare_of_the_kind_its_method_needs(letters, missing):
+    objects = {n: v for n, v in NOMINAL_A.items() if n != missing}
+    objects.update({"s_red": ("1x1", "red"), "s_blue": ("1x1", "blue"), "s_big": ("1x2", "blue")})
+    report, _ = _run(letters, letters.problem("A"), objects)
+    assert report.ok, report.stop_reason
+    assert [a.proposal["action"] for a in report.attempts] == ["substitute"]
+    assert report.attempts[0].proposal["changes"]["mapping"] == {missing: "s_blue"}  # blue 1x1: the method says so
+    placed = [e["args"][0] for e in report.executed if e["status"] == "SUCCESS"]
+    assert "s_blue" in placed and missing not in placed and len(placed) == 6
+
+
+def test_colour_does_not_count_where_the_method_does_not_name_one():
+    task = load_task_text(COLOURLESS, "<colourless>")
+    problem = task.problem("two")
+    report, _ = _run(task, problem, {"b0": ("1x1", "blue"), "s_red": ("1x1", "red")})
+    assert report.ok, report.stop_reason
+    assert report.attempts[0].proposal["changes"]["mapping"] == {"b1": "s_red"}
+
+
+def test_no_spare_fits_no_substitution(letters):
+    objects = {n: v for n, v in NOMINAL_A.items() if n != "b2"}
+    objects.update({"s_red": ("1x1", "red"), "s_big": ("1x2", "blue")})
+    report, _ = _run(letters, letters.problem("A"), objects)
+    assert not report.ok
+    assert all(a.proposal["action"] != "substitute" for a in report.attempts)
+    assert report.reported[0]["kind"] == "unknown_entity"
+
+
+COLOURLESS = """
+domain:
+  name: colourless
+  types: [block]
+  predicates:
+    shape: [block, object]
+    colour: [block, object]
+    available: [block]
+    at: [block, object]
+  primitives:
+    place:
+      parameters: [?b - block, ?x]
+      precondition: available(?b)
+      add: [at(?b, ?x)]
+      delete: [available(?b)]
+  tasks:
+    row: []
+    cell: [?x]
+  methods:
+    - name: row_two
+      task: row()
+      subtasks: [cell(0), cell(1)]
+    - name: any_1x1
+      task: cell(?x)
+      precondition: available(?b) and shape(?b, 1x1)
+      subtasks: [place(?b, ?x)]
+problems:
+  two:
+    objects: {block: [b0, b1]}
+    init: [available(b0), shape(b0, 1x1), colour(b0, blue), available(b1), shape(b1, 1x1), colour(b1, blue)]
+    tasks: [row()]
+    goal: [at(b0, 0), at(b1, 1)]
+"""
+
+
+@pytest.fixture(scope="module")
+def letters_memory(letters, tmp_path_factory):
+    path = tmp_path_factory.mktemp("spares") / "memory.sqlite"
+    with EpisodicMemory.open(path) as memory:
+        memory.write(letter_trace(letters, "A", A_STEPS, 1000.0))
+        memory.write(letter_trace(letters, "H", H_STEPS, 2000.0))
+    memory = EpisodicMemory.open(path, readonly=True)
+    yield memory
+    memory.close()
+
+
+def test_one_1x2_stands_in_for_two_1x1_after_its_placement_collides(letters, letters_memory):
+    """H's bar was demonstrated with two 1x1 blocks; the scene has one blue 1x2 (b6) and no b7. Placing the 1x2
+    where a 1x1 goes collides; substitution splices A's bar (one 1x2 at 1.5) for H's two placements."""
+    objects = {f"b{i}": ("1x1", "blue") for i in range(6)}
+    objects["b6"] = ("1x2", "blue")
+    report, _ = _run(letters, letters.problem("H"), objects, letters_memory, faults=("place(b6, 1, 1)=fail:collision",))
+    assert report.ok, report.stop_reason
+    assert [(a.kind, a.proposal["action"]) for a in report.attempts] == [("collision", "splice")]
+    assert report.attempts[0].proposal["changes"]["actions"] == [["place", "b6", "1.5", "1"]]
+    assert report.plan[-1] == ["place", "b6", "1.5", "1"] and all("b7" not in step for step in report.plan)

@@ -181,15 +181,16 @@ def _replace_shape(draw: _Draw, p: Perturbation, obj: Placed) -> dict[str, Any] 
         if not partners:
             return None
         partner = partners[int(draw.rng.integers(len(partners)))]
+        block = replace(obj, type="megablok_1x2")
+        gone = [obj.name, partner.name]
+        spot = (block.x, block.y) if draw.free(block.x, block.y, block.type, ignore=gone,
+                                                near_targets=True) else draw.sample_free(block.type, FREE_REGION,
+                                                                                          ignore=gone)
+        if spot is None:
+            return None  # nothing changed: the partner stays (a variant must hold what its changes say)
         del draw.objects[draw.index(partner.name)]  # type: ignore[arg-type]
         i = draw.index(obj.name)
         assert i is not None
-        block = replace(obj, type="megablok_1x2")
-        spot = (block.x, block.y) if draw.free(block.x, block.y, block.type, ignore=[obj.name],
-                                                near_targets=True) else draw.sample_free(block.type, FREE_REGION,
-                                                                                          ignore=[obj.name])
-        if spot is None:
-            return None
         draw.objects[i] = replace(block, x=spot[0], y=spot[1])
         return {"kind": "replace_shape", "objects": [obj.name, partner.name], "into": [obj.name]}
     return None

@@ -54,3 +54,20 @@ def test_perturbations_do_what_they_say():
                 assert moved is None or moved.x >= 0.85 or any(
                     c.get("object") == change["object"] for c in changes if c is not change)
     assert kinds == {"shift", "turn", "rotate", "colour", "replace_shape", "remove", "distractor", "out_of_reach"}
+
+
+
+def test_a_shape_replacement_with_no_room_changes_nothing():
+    """A 1x1 and a partner become one 1x2 only where the 1x2 fits: with no room, the partner stays on the table (it
+    was taken away anyway, and a letter with a spare ended one block short of what its label said)."""
+    import numpy as np
+
+    from bt_meta.campaign.generator import _Draw, _replace_shape
+
+    _, spec, nominal = _setup()
+    replace_shape = next(p for p in spec.perturbations if p.kind == "replace_shape")
+    no_room = ((0.0, 0.01), (0.0, 0.01))  # a table nothing fits on
+    draw = _Draw(nominal, [], np.random.default_rng(0), no_room)
+    b0 = next(o for o in draw.objects if o.name == "b0")
+    assert _replace_shape(draw, replace_shape, b0) is None
+    assert draw.objects == list(nominal)

@@ -62,7 +62,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from bt_meta_plugins._decompositions import Decomposition, Library, bind, why_not
@@ -160,6 +160,14 @@ def _done_targets(plan: Sequence[Mapping[str, Any]]) -> set[tuple[str, ...]]:
             args = [str(a) for a in step["args"]]
             targets.add((str(step["action"]), *args[1:]))
     return targets
+
+
+def _without_placed(vector: MismatchVector, plan: Sequence[Mapping[str, Any]]) -> MismatchVector:
+    """``vector`` without the unknown entities an executed step already moved (a stand-in placed earlier): taking
+    one again would undo that step's work, and a letter drawn so has a hole where it was."""
+    placed = {str(a) for step in plan if step.get("done") for a in step.get("args") or []}
+    unknown = tuple(e for e in vector.unknown if e.name not in placed)
+    return vector if len(unknown) == len(vector.unknown) else replace(vector, unknown=unknown)
 
 
 def _names_missing(failure: Any, vector: MismatchVector) -> bool:
@@ -404,6 +412,7 @@ class ObjectSubstitution:
         if failure.kind in _STEP_KINDS and not _names_missing(failure, vector):
             return None  # a motion or grasp failure of a step whose entities are as the plan assumes
         plan = failure.evidence.get("plan") or []
+        vector = _without_placed(vector, plan)
         proposals = spare_proposals(vector, failure, context) if self.spares else []
         memory = memory_for(context, self.memory) if vector.unknown else None
         if memory is not None:

@@ -169,3 +169,17 @@ def test_one_1x2_stands_in_for_two_1x1_after_its_placement_collides(letters, let
     assert [(a.kind, a.proposal["action"]) for a in report.attempts] == [("collision", "splice")]
     assert report.attempts[0].proposal["changes"]["actions"] == [["place", "b6", "1.5", "1"]]
     assert report.plan[-1] == ["place", "b6", "1.5", "1"] and all("b7" not in step for step in report.plan)
+
+
+def test_a_stand_in_the_plan_already_placed_is_not_taken_again(letters, letters_memory):
+    """Two blocks missing, one spare: the spare stands in for the first; the second cannot be drawn (the letter is
+    one block short), and neither the spares nor the memory's matches may take the placed spare from its cell."""
+    objects = {n: v for n, v in NOMINAL_A.items() if n not in ("b1", "b4")}
+    objects["s_blue"] = ("1x1", "blue")
+    report, _ = _run(letters, letters.problem("A"), objects, letters_memory)
+    assert not report.ok, "one spare cannot stand in for two blocks"
+    bound = [v for a in report.attempts for v in (a.proposal.get("changes", {}).get("mapping") or {}).values()]
+    bound += [x for a in report.attempts for call in a.proposal.get("changes", {}).get("actions") or [] for x in call]
+    assert bound.count("s_blue") == 1, report.attempts
+    placed = [e["args"][0] for e in report.executed if e["status"] == "SUCCESS" and e["action"] == "place"]
+    assert placed.count("s_blue") == 1

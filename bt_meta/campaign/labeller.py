@@ -4,7 +4,8 @@ The variant's scene is built in pybullet and settled; then, in this order (the f
 
 1. ``unrepairable`` -- the objects on the table cannot make the goal. Letters: the letter's cells (from the
    nominal plan: every ``place`` with its block's shape) need ``U`` units; with ``n1`` 1x1 and ``n2`` 1x2 blocks
-   present and at most ``M`` disjoint pairs of neighbouring cells a 1x2 can cover, the letter can be drawn iff
+   present and at most ``M`` disjoint pairs of neighbouring cells a 1x2 can cover (side by side along the
+   letter's x: the place skill lays a 1x2 that way), the letter can be drawn iff
    ``n1 + 2 min(n2, M) >= U``. Other families: every object the problem names is present with its type, or a
    spare of that type is.
 2. ``limit:reachability`` / ``limit:collision`` -- kinematics and collision checks on the true scene: for every
@@ -72,9 +73,10 @@ def letter_cells(plan: Iterable[Any], shapes: dict[str, str]) -> list[tuple[floa
 
 
 def max_pairs(cells: Sequence[tuple[float, float]]) -> int:
-    """The most disjoint pairs of neighbouring cells (one lb apart): where 1x2 blocks can stand in."""
+    """The most disjoint pairs of neighbouring cells a 1x2 can cover: one lb apart along the letter's x, as the
+    place skill lays a 1x2 (a leg's cells, one above the other, take 1x1 blocks only)."""
     edges = [(i, j) for i in range(len(cells)) for j in range(i + 1, len(cells))
-             if abs(math.dist(cells[i], cells[j]) - 1.0) < 1e-6]
+             if abs(cells[i][1] - cells[j][1]) < 1e-6 and abs(abs(cells[i][0] - cells[j][0]) - 1.0) < 1e-6]
 
     def best(used: frozenset[int], start: int) -> int:
         top = 0

@@ -15,7 +15,9 @@ def test_letter_cells_and_pairs_of_A():
              ("b4", "1.5", "2")]]
     cells = letter_cells(plan, {"b5": "1x2"})
     assert sorted(cells) == sorted([(0, 0), (0, 1), (3, 0), (3, 1), (1, 1), (2, 1), (1.5, 2)])
-    assert max_pairs(cells) == 3  # two legs and the bar; the apex stands alone
+    assert max_pairs(cells) == 2  # along x only (a 1x2 lies along the letter's x): l1+bar-left, bar-right+r1
+    h_cells = [(0, 0), (0, 1), (0, 2), (3, 0), (3, 1), (3, 2), (1, 1), (2, 1)]
+    assert max_pairs(h_cells) == 2  # H's legs stand upright: no 1x2 covers two of a leg's cells
     assert letters_feasible(7, 3, 5, 1) and letters_feasible(7, 3, 7, 0) and letters_feasible(7, 3, 1, 3)
     assert not letters_feasible(7, 3, 4, 1) and not letters_feasible(7, 3, 0, 4)
 

@@ -110,8 +110,10 @@ def _pool_results(tasks: Sequence[dict[str, Any]], workers: int) -> Iterator[dic
         for future in as_completed(futures):
             yield future.result()
     finally:
+        # Taken before shutdown, which drops the pool's process table (None afterwards).
+        processes = list((getattr(pool, "_processes", None) or {}).values())
         pool.shutdown(wait=False, cancel_futures=True)
-        for process in list(getattr(pool, "_processes", {}).values()):  # episodes in flight are run again later
+        for process in processes:  # episodes in flight are run again later
             process.terminate()
 
 

@@ -45,8 +45,11 @@ def test_sigkill_then_resume_loses_nothing_and_counts_nothing_twice(campaign, tm
     process = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 300
     while time.monotonic() < deadline and process.poll() is None:
-        if (folder / "campaign.sqlite").exists() and len(_rows(folder)) >= 1:
-            break
+        try:
+            if (folder / "campaign.sqlite").exists() and len(_rows(folder)) >= 1:
+                break
+        except sqlite3.OperationalError:  # the file is there, its table not yet
+            pass
         time.sleep(0.2)
     assert process.poll() is None, "the run ended before it could be killed"
     os.kill(process.pid, signal.SIGKILL)
@@ -72,6 +75,18 @@ def test_sigkill_then_resume_loses_nothing_and_counts_nothing_twice(campaign, tm
     assert summary["episodes"] == 4 and summary["table"][0]["wilson95"][0] <= summary["table"][0]["rate"]
     text = (folder / "report.html").read_text()
     assert "Wilson 95 %" in text and "Confusion" in text and "<svg" in text
+
+
+def test_a_two_worker_pool_finishes_cleanly_with_json(campaign, tmp_path):
+    """The local pool's shutdown terminates what is in flight; once every episode is done that is nothing, and the
+    command exits 0 with its JSON (it raised after the last episode when the pool had dropped its process table)."""
+    folder = tmp_path / "C"
+    shutil.copytree(campaign, folder)
+    result = subprocess.run(_cli("run", str(folder), "--configurations", "retry", "--workers", "2", "--json",
+                                 "--no-progress"), capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-2000:]
+    payload = json.loads(result.stdout)
+    assert len(payload["episodes"]) == 2 and len(_rows(folder)) == 2
 
 
 def test_ray_gives_the_same_outcomes_as_the_pool(campaign, tmp_path):

@@ -1,0 +1,231 @@
+"""A Groot2 monitoring server for a py_trees tree, answering as BehaviorTree.CPP's ``Groot2Publisher`` does.
+
+Two ZeroMQ sockets, as in BehaviorTree.CPP: a REP socket on ``tcp://*:PORT`` answers Groot2's requests and a PUB
+socket on ``PORT+1`` is bound for the notifications BehaviorTree.CPP sends there. Requests are served by a
+background thread (100 ms receive timeout, so closing is prompt); the tree ticks in the caller's thread and the
+server only reads what the :class:`~bt_meta.bt.groot2.observer.StatusObserver` reports, under a lock.
+
+Replies (first part: the request header echoed, protocol 2, the tree's 16-byte id):
+
+* FULLTREE -- the XML of :func:`~bt_meta.bt.groot2.tree_xml.full_tree_xml`
+* STATUS -- ``uint16`` uid + ``uint8`` status per node in BehaviorTree.CPP's order; a node reset to IDLE shows
+  ``10 + its previous status``
+* BLACKBOARD (2 parts: ``name;name;...``) -- MessagePack of ``{subtree: {key: value}}`` for the named subtrees
+* TOGGLE_RECORDING (``start``/``stop``), GET_TRANSITIONS -- recorded 9-byte transitions (last 1000)
+* HOOKS_DUMP -- ``[]``; REMOVE_ALL_HOOKS / DISABLE_ALL_HOOKS -- header only (there are never hooks)
+* HOOK_INSERT / HOOK_REMOVE / BREAKPOINT_UNLOCK -- an error reply: bt-meta does not implement breakpoints
+* a header that is not 6 bytes -- ``error`` / ``wrong request header``; an unknown letter -- ``error`` /
+  ``Request not recognized``; a 1-part BLACKBOARD -- ``error`` / ``must be 2 parts message``
+
+Offers:
+
+* :class:`Groot2Server` -- ``Groot2Server(tree, observer, port)``; :meth:`~Groot2Server.close`
+* :class:`Groot2PortError` -- a port that is invalid or in use (user input: the CLI exits 2)
+* :data:`DEFAULT_PORT` -- 1667, Groot2's and BehaviorTree.CPP's default
+"""
+
+from __future__ import annotations
+
+import collections
+import threading
+from typing import Any
+
+import zmq
+
+from bt_meta.bt.groot2 import msgpack
+from bt_meta.bt.groot2.observer import StatusObserver, now_usec
+from bt_meta.bt.groot2.protocol import (
+    NodeStatus,
+    ProtocolError,
+    RequestHeader,
+    RequestType,
+    Transition,
+    idle_code,
+    pack_reply_header,
+    pack_status_buffer,
+    pack_transition,
+    tree_uuid,
+)
+from bt_meta.bt.groot2.published_tree import PublishedTree
+from bt_meta.bt.groot2.tree_xml import full_tree_xml
+from bt_meta.errors import UserInputError
+
+DEFAULT_PORT = 1667
+_RECV_TIMEOUT_MS = 100
+_SEND_TIMEOUT_MS = 1000
+_RECORDED_TRANSITIONS = 1000
+_NO_BREAKPOINTS = "breakpoints are not supported by bt-meta's Groot2 server"
+
+
+class Groot2PortError(UserInputError):
+    """A ``--groot2`` port that is out of range or already in use."""
+
+
+def check_port(port: int) -> int:
+    """Groot2 uses PORT and PORT+1: both must be valid TCP ports."""
+    if not isinstance(port, int) or isinstance(port, bool) or not 1 <= port <= 65534:
+        raise Groot2PortError(f"Groot2 port {port!r} is invalid: expected 1..65534 (it uses PORT and PORT+1)",
+                              "--groot2")
+    return port
+
+
+class Groot2Server:
+    """Serves one published tree until :meth:`close`."""
+
+    def __init__(self, tree: PublishedTree, observer: StatusObserver, port: int = DEFAULT_PORT,
+                 *, seed: int | None = None, host: str = "*") -> None:
+        self.tree = tree
+        self.port = check_port(port)
+        self.tree_xml = full_tree_xml(tree)
+        self.tree_id = tree_uuid(seed)
+        self._order = [node.uid for node in tree.status_order()]
+        self._status: dict[int, int] = {uid: int(NodeStatus.IDLE) for uid in self._order}
+        self._lock = threading.Lock()
+        self._recording = False
+        self._recording_start = 0
+        self._recorded: collections.deque[Transition] = collections.deque(maxlen=_RECORDED_TRANSITIONS)
+        self._context = zmq.Context()
+        self._server = self._context.socket(zmq.REP)
+        self._publisher = self._context.socket(zmq.PUB)
+        for sock in (self._server, self._publisher):
+            sock.setsockopt(zmq.LINGER, 0)
+            sock.setsockopt(zmq.RCVTIMEO, _RECV_TIMEOUT_MS)
+            sock.setsockopt(zmq.SNDTIMEO, _SEND_TIMEOUT_MS)
+        try:
+            self._bind(self._server, host, port)
+            self._bind(self._publisher, host, port + 1)
+        except Groot2PortError:
+            self._shutdown_sockets()
+            raise
+        self._active = True
+        observer.subscribe(self.record)
+        self._thread = threading.Thread(target=self._serve, name=f"groot2-server-{port}", daemon=True)
+        self._thread.start()
+
+    def _bind(self, sock: zmq.Socket, host: str, port: int) -> None:
+        try:
+            sock.bind(f"tcp://{host}:{port}")
+        except zmq.ZMQError as error:
+            reason = "already in use" if error.errno == zmq.EADDRINUSE else error.strerror
+            raise Groot2PortError(f"Groot2 port {port} cannot be opened: {reason} (Groot2 needs PORT and PORT+1)",
+                                  "--groot2") from None
+
+    # -- what the tree reports ----------------------------------------------------------------------------------
+
+    def record(self, timestamp_usec: int, uid: int, previous: NodeStatus, status: NodeStatus) -> None:
+        """A :class:`StatusObserver` callback (BehaviorTree.CPP's ``Groot2Publisher::callback``)."""
+        with self._lock:
+            self._status[uid] = idle_code(previous) if status == NodeStatus.IDLE else int(status)
+            if self._recording:
+                self._recorded.append(Transition(timestamp_usec - self._recording_start, uid, status))
+
+    def status_buffer(self) -> bytes:
+        with self._lock:
+            return pack_status_buffer((uid, self._status[uid]) for uid in self._order)
+
+    def blackboard_dump(self, names: str) -> bytes:
+        dump: dict[str, Any] = {}
+        for name in names.split(";"):
+            subtree = self.tree.subtree_named(name)
+            if subtree is None:
+                continue
+            for _attempt in range(5):  # the tree may write the blackboard while we read it
+                try:
+                    entries = self.tree.blackboard(subtree)
+                    break
+                except RuntimeError:
+                    continue
+            else:
+                entries = {}
+            dump[name] = entries or None
+        return msgpack.packb(dump or None)
+
+    # -- the request loop ---------------------------------------------------------------------------------------
+
+    def _serve(self) -> None:
+        while self._active:
+            try:
+                request = self._server.recv_multipart()
+            except zmq.Again:
+                continue
+            except zmq.ZMQError:
+                break
+            reply = self.answer(request)
+            try:
+                self._server.send_multipart(reply)
+            except zmq.ZMQError:
+                if not self._active:
+                    break
+
+    def answer(self, request: list[bytes]) -> list[bytes]:
+        """The reply parts for one request (also usable without sockets)."""
+        try:
+            header = RequestHeader.unpack(request[0])
+        except ProtocolError as error:
+            return [b"error", str(error).encode()]
+        head = pack_reply_header(header, self.tree_id)
+        try:
+            kind = RequestType(header.type)
+        except ValueError:
+            kind = RequestType.UNDEFINED
+        try:
+            return self._answer(kind, head, request)
+        except Exception as error:  # a reply must always go out on a REP socket; BT.CPP sends what() back
+            return [b"error", str(error).encode()]
+
+    def _answer(self, kind: RequestType, head: bytes, request: list[bytes]) -> list[bytes]:
+        two_parts = kind in (RequestType.BLACKBOARD, RequestType.HOOK_INSERT, RequestType.HOOK_REMOVE,
+                             RequestType.BREAKPOINT_UNLOCK, RequestType.TOGGLE_RECORDING)
+        if two_parts and len(request) != 2:
+            return [b"error", b"must be 2 parts message"]
+        if kind == RequestType.FULLTREE:
+            return [head, self.tree_xml.encode("utf-8")]
+        if kind == RequestType.STATUS:
+            return [head, self.status_buffer()]
+        if kind == RequestType.BLACKBOARD:
+            return [head, self.blackboard_dump(request[1].decode("utf-8", errors="replace"))]
+        if kind in (RequestType.HOOK_INSERT, RequestType.HOOK_REMOVE, RequestType.BREAKPOINT_UNLOCK):
+            return [b"error", _NO_BREAKPOINTS.encode()]
+        if kind == RequestType.HOOKS_DUMP:
+            return [head, b"[]"]
+        if kind in (RequestType.REMOVE_ALL_HOOKS, RequestType.DISABLE_ALL_HOOKS):
+            return [head]
+        if kind == RequestType.TOGGLE_RECORDING:
+            command = request[1].decode("utf-8", errors="replace")
+            if command == "start":
+                with self._lock:
+                    self._recording_start = now_usec()
+                    self._recorded.clear()
+                    self._recording = True
+                return [head, str(now_usec()).encode()]
+            if command == "stop":
+                with self._lock:
+                    self._recording = False
+            return [head]
+        if kind == RequestType.GET_TRANSITIONS:
+            with self._lock:
+                recorded, self._recorded = self._recorded, collections.deque(maxlen=_RECORDED_TRANSITIONS)
+            return [head, b"".join(pack_transition(t) for t in recorded)]
+        return [b"error", b"Request not recognized"]
+
+    # -- lifetime -----------------------------------------------------------------------------------------------
+
+    def _shutdown_sockets(self) -> None:
+        self._server.close(linger=0)
+        self._publisher.close(linger=0)
+        self._context.term()
+
+    def close(self) -> None:
+        """Stop serving and release both ports (within about 100 ms)."""
+        if not getattr(self, "_active", False):
+            return
+        self._active = False
+        self._thread.join(timeout=5)
+        self._shutdown_sockets()
+
+    def __enter__(self) -> Groot2Server:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+

@@ -94,7 +94,7 @@ def test_status_codes_and_idle_after_a_status() -> None:
     assert [status_code(s) for s in (Status.INVALID, Status.RUNNING, Status.SUCCESS, Status.FAILURE)] == [0, 1, 2, 3]
     assert [idle_code(s) for s in (NodeStatus.RUNNING, NodeStatus.SUCCESS, NodeStatus.FAILURE)] == [11, 12, 13]
     assert pack_status_buffer([(1, 2), (258, 13)]) == bytes([1, 0, 2, 2, 1, 13])
-    with pytest.raises(ProtocolError, match="no BehaviorTree.CPP equivalent"):
+    with pytest.raises(ProtocolError, match=r"no BehaviorTree\.CPP equivalent"):
         status_code("DONE")
 
 
@@ -109,7 +109,8 @@ def test_transitions_are_48_bit_time_uid_status() -> None:
 
 def test_msgpack_matches_nlohmann_json() -> None:
     # BehaviorTree.CPP 4.8.2's reply to BLACKBOARD "MainTree;Sub::4" after SetBlackboard x=3 (read off the wire).
-    assert msgpack.packb({"MainTree": {"x": "3"}, "Sub::4": None}).hex() == "82a84d61696e5472656581a178a133a65375623a3a34c0"
+    golden = "82a84d61696e5472656581a178a133a65375623a3a34c0"
+    assert msgpack.packb({"MainTree": {"x": "3"}, "Sub::4": None}).hex() == golden
     assert msgpack.packb(None) == b"\xc0"
     assert msgpack.packb([True, False, 127, 128, -32, -33, 65536]) == bytes.fromhex("97c3c27fcc80e0d0dfce00010000")
     assert msgpack.packb(0.5) == b"\xca" + struct.pack(">f", 0.5)  # float32 when exact, as nlohmann does

@@ -4,12 +4,13 @@ Offers:
 
 * :func:`register` -- adds ``tick FILE [--problem P] [--task-file T] [--policy] [--world fake] [--ticks N]
   [--ticks-per-skill K] [--fault SPEC ...] [--seed N] [--world-option K=V ...] [--keep-ticking] [--plugins DIR]
-  [--json]``
+  [--json] [--groot2 [PORT]] [--groot2-host ADDRESS] [--hold] [--btlog FILE]``
 
 FILE is a YAML task file (planned, then compiled) or a tree XML (its primitives come from ``--task-file``, by default
 the ``.yaml`` next to it). Ticking stops when the root finishes unless ``--keep-ticking``. Each tick prints the root
 status and the status of every primitive and guard ticked; failures are printed with kind, node and evidence.
 Exit status 0 when the root succeeded or is still running, 1 when it failed, 2 on bad input.
+``--groot2``/``--btlog``: the run is visible live in Groot2 and/or logged for its replay (see docs/groot2.md).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from typing import Any
 from py_trees.common import Status
 
 from bt_meta.commands._common import print_json, shown_in_trace
+from bt_meta.commands._groot2_args import add_groot2_arguments, check_groot2_arguments, start_groot2
 from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
 from bt_meta.errors import UserInputError
 
@@ -41,6 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--keep-ticking", action="store_true", help="keep ticking after the root finished")
     parser.add_argument("--json", action="store_true", help="print one JSON object with every tick")
     add_plugin_arguments(parser)
+    add_groot2_arguments(parser)
     parser.set_defaults(func=run)
 
 
@@ -52,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserInputError("--ticks must be at least 1")
     if args.ticks_per_skill < 1:
         raise UserInputError("--ticks-per-skill must be at least 1")
+    check_groot2_arguments(args)
     faults = [Fault.parse(spec) for spec in args.fault]
     world_options: dict[str, Any] = {"seed": args.seed}
     for item in args.world_option:
@@ -64,11 +68,13 @@ def run(args: argparse.Namespace) -> int:
                                     world=args.world, faults=faults, ticks_per_skill=args.ticks_per_skill,
                                     world_options=world_options, plugins=plugins)
     shown = {b.name for b in harness.root.iterate() if shown_in_trace(b)}
+    groot2 = start_groot2(args, harness)
     ticks: list[dict[str, Any]] = []
     status = Status.INVALID
     reported = 0
     for _ in range(args.ticks):
         status = harness.tick()
+        groot2.after_tick(status)
         # Show a monitored action with its monitor's verdict (what the tree saw).
         seen = harness.statuses()
         nodes = {name: seen.get(f"Monitor<{name}>", value) for name, value in seen.items() if name in shown}
@@ -99,5 +105,6 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(f"{status.value} after {harness.run.tick_count} ticks, {len(harness.failures)} failures; "
               f"belief state: {len(final_state)} atoms")
+    groot2.finish()
     harness.close()
     return 1 if status is Status.FAILURE else 0

@@ -10,10 +10,6 @@ Modules:
 * :mod:`~bt_meta.bt.groot2.server` -- the ZeroMQ REP/PUB server (``Groot2Publisher``)
 * :mod:`~bt_meta.bt.groot2.btlog` -- ``.btlog`` files (``FileLogger2``)
 * :mod:`~bt_meta.bt.groot2.session` -- all of it for one run (``--groot2``, ``--hold``, ``--btlog``)
+
+Nothing is imported here, so the CLI can read the default port without loading ZeroMQ.
 """
-
-from __future__ import annotations
-
-from bt_meta.bt.groot2.session import Groot2Session, check_options
-
-__all__ = ["Groot2Session", "check_options"]

@@ -9,7 +9,7 @@ numbers; a node that went back to IDLE is shown as ``10 + previous status`` so G
 Offers:
 
 * :class:`RequestType` -- the request letters (FULLTREE ``T``, STATUS ``S``, BLACKBOARD ``B``, hooks, recording)
-* :data:`PROTOCOL_ID`, :data:`REQUEST_HEADER_SIZE`, :data:`REPLY_HEADER_SIZE`
+* :data:`PROTOCOL_ID`, :data:`DEFAULT_PORT`, :data:`REQUEST_HEADER_SIZE`, :data:`REPLY_HEADER_SIZE`
 * :class:`RequestHeader` -- :meth:`~RequestHeader.pack` / :meth:`~RequestHeader.unpack`
 * :func:`pack_reply_header` -- request header + tree id
 * :func:`tree_uuid` -- the 16 bytes identifying one published tree (seeded)
@@ -33,6 +33,7 @@ from py_trees.common import Status
 from bt_meta.errors import BtMetaError
 
 PROTOCOL_ID = 2
+DEFAULT_PORT = 1667  # Groot2's and BehaviorTree.CPP's default server port
 REQUEST_HEADER_SIZE = 6
 REPLY_HEADER_SIZE = REQUEST_HEADER_SIZE + 16
 _HEADER = struct.Struct("<BBI")

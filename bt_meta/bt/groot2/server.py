@@ -21,7 +21,6 @@ Offers:
 
 * :class:`Groot2Server` -- ``Groot2Server(tree, observer, port)``; :meth:`~Groot2Server.close`
 * :class:`Groot2PortError` -- a port that is invalid or in use (user input: the CLI exits 2)
-* :data:`DEFAULT_PORT` -- 1667, Groot2's and BehaviorTree.CPP's default
 """
 
 from __future__ import annotations
@@ -35,6 +34,7 @@ import zmq
 from bt_meta.bt.groot2 import msgpack
 from bt_meta.bt.groot2.observer import StatusObserver, now_usec
 from bt_meta.bt.groot2.protocol import (
+    DEFAULT_PORT,
     NodeStatus,
     ProtocolError,
     RequestHeader,
@@ -50,7 +50,6 @@ from bt_meta.bt.groot2.published_tree import PublishedTree
 from bt_meta.bt.groot2.tree_xml import full_tree_xml
 from bt_meta.errors import UserInputError
 
-DEFAULT_PORT = 1667
 _RECV_TIMEOUT_MS = 100
 _SEND_TIMEOUT_MS = 1000
 _RECORDED_TRANSITIONS = 1000

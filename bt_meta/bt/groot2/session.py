@@ -51,14 +51,16 @@ class Groot2Session:
 
     @classmethod
     def start(cls, root: py_trees.behaviour.Behaviour, *, registry: NodeRegistry | None = None,
-              port: int | None = None, btlog: str | Path | None = None, seed: int | None = None) -> Groot2Session:
+              port: int | None = None, btlog: str | Path | None = None, host: str = "*",
+              seed: int | None = None) -> Groot2Session:
+        """Number and observe ``root``; serve it on ``host:port`` and/or log it to ``btlog`` (either may be None)."""
         check_options(port, btlog)
         tree = PublishedTree.build(root, registry=registry)
         observer = StatusObserver(tree)
         server = log = None
         try:
             if port is not None:
-                server = Groot2Server(tree, observer, port, seed=seed)
+                server = Groot2Server(tree, observer, port, seed=seed, host=host)
             if btlog is not None:
                 log = BtlogWriter(btlog, server.tree_xml if server is not None else full_tree_xml(tree))
                 observer.subscribe(log.record)

@@ -1,0 +1,236 @@
+"""``bt-meta tick/run --groot2 [PORT] --hold --btlog FILE`` end to end, against BehaviorTree.CPP where it can run.
+
+The live tests start ``bt-meta tick`` as a process serving on 127.0.0.1, ask it what Groot2 asks and compare with
+BehaviorTree.CPP's ``Groot2Publisher`` for the same tree after the same ticks; ``--hold`` must end cleanly (exit 0,
+no traceback) on SIGTERM and on Ctrl-C. Every wait is bounded.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import time
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import behaviortreepy as btpy
+import pytest
+import zmq
+
+from bt_meta.bt.groot2.btlog import read_btlog
+from bt_meta.cli import main
+
+TREE = """<root BTCPP_format="4" main_tree_to_execute="MainTree">
+  <BehaviorTree ID="MainTree">
+    <Sequence name="top">
+      <SetBlackboard output_key="n" value="2"/>
+      <Repeat num_cycles="{n}"><AlwaysSuccess/></Repeat>
+      <SubTree ID="Part" n="{n}"/>
+      <Fallback><AlwaysFailure/><Inverter><AlwaysFailure name="no"/></Inverter></Fallback>
+    </Sequence>
+  </BehaviorTree>
+  <BehaviorTree ID="Part">
+    <ReactiveSequence><SetBlackboard output_key="mine" value="hello"/><AlwaysSuccess name="done"/></ReactiveSequence>
+  </BehaviorTree>
+</root>
+"""
+TIMEOUT_MS = 3000
+
+
+def free_port() -> int:
+    for _ in range(200):
+        with socket.socket() as probe:
+            probe.bind(("127.0.0.1", 0))
+            port = probe.getsockname()[1]
+        if port >= 65000:
+            continue
+        with socket.socket() as second:
+            try:
+                second.bind(("127.0.0.1", port + 1))
+            except OSError:
+                continue
+        return port
+    raise RuntimeError("no free port pair")
+
+
+def request(context: zmq.Context, port: int, letter: str, *extra: bytes, attempts: int = 40) -> list[bytes]:
+    """One Groot2 request, retried with a fresh socket until the server is up (at most ``attempts`` x 0.25 s)."""
+    for _ in range(attempts):
+        sock = context.socket(zmq.REQ)
+        sock.setsockopt(zmq.LINGER, 0)
+        sock.setsockopt(zmq.RCVTIMEO, 250)
+        sock.setsockopt(zmq.SNDTIMEO, TIMEOUT_MS)
+        sock.connect(f"tcp://127.0.0.1:{port}")
+        try:
+            sock.send_multipart([struct.pack("<BBI", 2, ord(letter), 42), *extra])
+            return sock.recv_multipart()
+        except zmq.Again:
+            continue
+        finally:
+            sock.close(linger=0)
+    raise AssertionError(f"no reply on port {port}")
+
+
+def canonical(element: ET.Element) -> tuple:
+    return element.tag, tuple(sorted(element.attrib.items())), tuple(canonical(child) for child in element)
+
+
+def trees_of(text: bytes) -> list[tuple]:
+    return [canonical(tree) for tree in ET.fromstring(text).findall("BehaviorTree")]
+
+
+def start_tick(tree: Path, port: int, *extra: str) -> subprocess.Popen:
+    command = [sys.executable, "-m", "bt_meta.cli", "tick", str(tree), "--world", "fake", "--ticks", "1",
+               "--groot2", str(port), "--groot2-host", "127.0.0.1", "--hold", *extra]
+    return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def stop(process: subprocess.Popen, signum: int) -> tuple[int, str, str]:
+    process.send_signal(signum)
+    try:
+        out, err = process.communicate(timeout=20)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        out, err = process.communicate(timeout=10)
+        raise AssertionError(f"bt-meta did not stop on signal {signum}: {err}") from None
+    return process.returncode, out, err
+
+
+@pytest.fixture
+def context():
+    ctx = zmq.Context()
+    yield ctx
+    ctx.term()
+
+
+@pytest.fixture
+def tree_file(tmp_path: Path) -> Path:
+    path = tmp_path / "tree.xml"
+    path.write_text(TREE, encoding="utf-8")
+    return path
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_tick_serves_what_btcpp_serves_and_holds_until_a_signal(
+    signum: int, context: zmq.Context, tree_file: Path, tmp_path: Path
+) -> None:
+    port = free_port()
+    log = tmp_path / "run.btlog"
+    process = start_tick(tree_file, port, "--btlog", str(log))
+    try:
+        ours = {letter: request(context, port, letter, *extra)
+                for letter, extra in (("T", ()), ("S", ()), ("B", (b"MainTree;Part::5",)))}
+    finally:
+        code, out, err = stop(process, signum)
+    assert code == 0, err
+    assert "Traceback" not in err and "serving the finished tree on port" in err
+    assert "SUCCESS after 1 ticks" in out
+
+    tree = btpy.BehaviorTreeFactory().create_tree_from_text(TREE)
+    btcpp_port = free_port()
+    publisher = btpy.Groot2Publisher(tree, btcpp_port)
+    logger_path = tmp_path / "btcpp.btlog"
+    logger = btpy.FileLogger(tree, str(logger_path))
+    time.sleep(0.02)  # let BT.CPP 4.8.2's log writer thread start (it drops what comes before)
+    assert tree.tick_once().name == "SUCCESS"  # bt-meta's tick is BT.CPP's tickOnce (re-ticks on wake-up)
+    theirs = {letter: request(context, btcpp_port, letter, *extra)
+              for letter, extra in (("T", ()), ("S", ()), ("B", (b"MainTree;Part::5",)))}
+    time.sleep(0.1)
+    theirs_log = read_btlog(logger_path)
+    del logger, publisher
+
+    for letter in "TSB":
+        assert ours[letter][0][:6] == theirs[letter][0][:6]
+    assert trees_of(ours["T"][1]) == trees_of(theirs["T"][1])
+    assert ours["S"][1] == theirs["S"][1]  # uid + status of every node, IDLE_FROM_* included
+    assert ours["B"][1] == theirs["B"][1]  # {"MainTree": {"n": 2}, "Part::5": {"mine": "hello"}} as MessagePack
+    ours_log = read_btlog(log)
+    assert [(t.uid, t.status) for t in ours_log.transitions] == [(t.uid, t.status) for t in theirs_log.transitions]
+    assert trees_of(ours_log.tree_xml.encode()) == trees_of(theirs["T"][1])
+
+
+def test_btlog_written_by_tick_without_a_server(tree_file: Path, tmp_path: Path, capsys) -> None:
+    log = tmp_path / "only.btlog"
+    assert main(["tick", str(tree_file), "--world", "fake", "--ticks", "2", "--btlog", str(log)]) == 0
+    written = read_btlog(log)
+    assert ET.fromstring(written.tree_xml).find("BehaviorTree").get("_fullpath") == ""
+    assert written.transitions[0].uid == 1 and written.transitions[-1].uid == 1  # root RUNNING ... root IDLE
+    assert len(written.transitions) > 10
+
+
+def test_port_in_use_is_a_clear_error_naming_it(tree_file: Path, capsys) -> None:
+    port = free_port()
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", port))
+        busy.listen()
+        code = main(["tick", str(tree_file), "--world", "fake", "--ticks", "1", "--groot2", str(port),
+                     "--groot2-host", "127.0.0.1"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert f"Groot2 port {port} cannot be opened: already in use" in err
+    assert "Traceback" not in err
+
+
+@pytest.mark.parametrize("port", ["0", "65535", "70000", "-3"])
+def test_invalid_port_is_a_clear_error(port: str, tree_file: Path, capsys) -> None:
+    code = main(["tick", str(tree_file), "--world", "fake", "--groot2", port])
+    err = capsys.readouterr()
+    assert code == 2
+    assert f"Groot2 port {port} is invalid: expected 1..65534" in err.err
+    assert "tick" not in err.out  # refused before any work
+
+
+def test_port_that_is_not_a_number_is_refused_by_the_parser(tree_file: Path, capsys) -> None:
+    with pytest.raises(SystemExit) as stopped:
+        main(["tick", str(tree_file), "--groot2", "ninety"])
+    assert stopped.value.code == 2
+    assert "--groot2: invalid int value: 'ninety'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("name", "message"),
+    [
+        ("missing/run.btlog", "cannot write the log: folder"),
+        ("run.log", "a Groot2 log file must end in .btlog"),
+        (".", "a Groot2 log file must end in .btlog"),
+    ],
+)
+def test_unusable_btlog_path_is_refused_before_any_work(
+    name: str, message: str, tree_file: Path, tmp_path: Path, capsys
+) -> None:
+    target = tmp_path / name
+    code = main(["tick", str(tree_file), "--world", "fake", "--btlog", str(target)])
+    captured = capsys.readouterr()
+    assert code == 2
+    assert message in captured.err and str(target) in captured.err
+    assert captured.out == ""  # nothing ticked
+    assert not target.is_file()
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root can write anywhere")
+def test_read_only_folder_is_refused(tree_file: Path, tmp_path: Path, capsys) -> None:
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    folder.chmod(0o500)
+    try:
+        code = main(["tick", str(tree_file), "--world", "fake", "--btlog", str(folder / "x.btlog")])
+    finally:
+        folder.chmod(0o700)
+    assert code == 2
+    assert "permission denied" in capsys.readouterr().err
+
+
+def test_hold_needs_a_server(tree_file: Path, capsys) -> None:
+    assert main(["tick", str(tree_file), "--world", "fake", "--hold"]) == 2
+    assert "--hold: --hold keeps the Groot2 server up: it needs --groot2" in capsys.readouterr().err
+
+
+def test_run_refuses_groot2_with_repair(tmp_path: Path, capsys) -> None:
+    code = main(["run", str(tmp_path / "tasks.yaml"), "--repair", "--groot2", str(free_port())])
+    assert code == 2
+    assert "--repair replaces it as it repairs" in capsys.readouterr().err

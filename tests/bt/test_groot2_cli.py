@@ -234,3 +234,17 @@ def test_run_refuses_groot2_with_repair(tmp_path: Path, capsys) -> None:
     code = main(["run", str(tmp_path / "tasks.yaml"), "--repair", "--groot2", str(free_port())])
     assert code == 2
     assert "--repair replaces it as it repairs" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_run_in_the_simulator_writes_a_btlog(tmp_path: Path, capsys) -> None:
+    log = tmp_path / "A.btlog"
+    tasks = Path(__file__).resolve().parents[2] / "trees" / "letters.yaml"
+    assert main(["run", str(tasks), "--problem", "A", "--btlog", str(log)]) == 0
+    written = read_btlog(log)
+    places = [e for e in ET.fromstring(written.tree_xml).iter() if e.tag == "place"]
+    assert len(places) == 6 and all(e.get("_uid") for e in places)  # blocks b0..b5
+    place_uids = {int(e.get("_uid")) for e in places}
+    succeeded = {t.uid for t in written.transitions if t.status == 2}
+    assert place_uids <= succeeded  # every placement ran to SUCCESS
+    assert (written.transitions[-1].uid, written.transitions[-1].status) == (1, 0)  # the root, reset after success

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import gc
 import importlib.util
+import json
 import socket
 import struct
 import sys
@@ -104,6 +105,7 @@ def our_tree(generated):
 
         registry.register(NodeType(name, "Action", [], factory))
     root = load_tree_text(generated.xml, registry)
+    root.test_log = log  # what the scripted leaves did (ticks and halts), for the hook tests
     return root, PublishedTree.build(root, registry=registry)
 
 
@@ -123,10 +125,13 @@ class Pair:
         self.btcpp = Client(context, btcpp_port)
         self.ours = Client(context, self.server.port)
 
-    def tick(self) -> None:
-        self.btcpp_step()
+    def tick(self) -> tuple[list, list]:
+        """Tick both; returns what the scripted leaves did on each side during that tick."""
+        _status, btcpp_events = self.btcpp_step()
+        self.root.test_log.clear()
         status = tick_exactly_once(self.root) if self.mode == "exactly_once" else tick_once(self.root)
         self.observer.tick_finished(status)
+        return btcpp_events, list(self.root.test_log)
 
     def both(self, letter: str, *extra: bytes) -> tuple[list[bytes], list[bytes]]:
         return self.btcpp.request(letter, *extra), self.ours.request(letter, *extra)
@@ -289,3 +294,38 @@ def test_btlog_transitions_equal_btcpp_file_logger(mode: str, tmp_path: Path) ->
 def test_btlog_transitions_equal_btcpp_file_logger_sweep(mode: str, tmp_path: Path) -> None:
     for seed in range(8, 200):
         compare_btlog(seed, mode, tmp_path)
+
+
+def replace_hook(uid: int, status: str, once: bool = False) -> bytes:
+    return json.dumps({"uid": uid, "position": 0, "mode": 1, "enabled": True, "once": once,
+                       "desired_status": status}).encode()
+
+
+def test_replace_hooks_change_ticks_as_in_btcpp(context: zmq.Context) -> None:
+    """Groot2's "replace" hook (mode 1): the node returns the given status without ticking, on both engines."""
+    for seed in (0, 4, 7, 10):
+        pair = Pair(seed, context)
+        try:
+            leaves = [node.uid for node in pair.tree.nodes if not node.children and node.name.startswith("L")]
+            assert len(leaves) >= 2, pair.generated.xml
+            for uid, status, once in ((leaves[0], "FAILURE", False), (leaves[1], "SUCCESS", True)):
+                btcpp, ours = pair.both("I", replace_hook(uid, status, once))
+                assert ours[1:] == btcpp[1:] == []
+            btcpp, ours = pair.both("D")
+            assert json.loads(ours[1]) == sorted(json.loads(btcpp[1]), key=lambda h: h["uid"])
+            hooked = pair.tree.nodes[leaves[0] - 1].name
+            for tick in range(6):
+                btcpp_events, our_events = pair.tick()
+                assert our_events == btcpp_events
+                assert hooked not in {name for name, _event in our_events}  # replaced: never ticked
+                btcpp, ours = pair.both("S")
+                assert ours[1] == btcpp[1], f"seed {seed} tick {tick}\n{pair.generated.xml}"
+            for letter, payload in (("R", {"uid": leaves[0], "position": 0}), ("R", {"uid": leaves[0], "position": 0}),
+                                    ("U", {"uid": 999, "position": 0, "desired_status": "SUCCESS",
+                                           "remove_when_done": True})):
+                btcpp, ours = pair.both(letter, json.dumps(payload).encode())
+                assert ours[1:] == btcpp[1:] if ours[0] != b"error" else ours == btcpp, letter
+            btcpp, ours = pair.both("D")
+            assert ours[1:] == btcpp[1:]
+        finally:
+            pair.close()

@@ -3,8 +3,9 @@
 BehaviorTree.CPP notifies its loggers from ``setStatus``/``resetStatus`` whenever a node's status changes,
 including the quiet reset to IDLE a parent does when it finishes -- a status read after the tick would miss those
 (a child that ran and was reset looks untouched). py_trees assigns ``behaviour.status`` directly, so the observer
-puts a ``status`` property on each observed behaviour: every assignment that changes the value is reported with
-BehaviorTree.CPP's status numbers, the node's uid and a wall-clock timestamp, in the order it happened.
+puts a ``status`` property on each observed behaviour: every assignment that changes what BehaviorTree.CPP would
+show is reported with BehaviorTree.CPP's status numbers, the node's uid and a wall-clock timestamp, in the order
+it happened. The same subclass runs Groot2's hooks (:mod:`~bt_meta.bt.groot2.hooks`) around each node's tick.
 
 The property lives in a subclass made per behaviour class, named like the original; :meth:`StatusObserver.close`
 restores the original classes (``type(b) is X`` checks hold again afterwards).
@@ -25,10 +26,13 @@ from typing import Any
 
 import py_trees
 
+from bt_meta.bt.groot2.hooks import POST, PRE, HookTable
 from bt_meta.bt.groot2.protocol import NodeStatus, status_code
 from bt_meta.bt.groot2.published_tree import PublishedTree
 
 Callback = Callable[[int, int, NodeStatus, NodeStatus], None]
+_TO_PY_TREES = {NodeStatus.SUCCESS: py_trees.common.Status.SUCCESS, NodeStatus.FAILURE: py_trees.common.Status.FAILURE}
+_HOOKABLE = (py_trees.common.Status.INVALID, py_trees.common.Status.RUNNING)
 _OBSERVED: dict[type, type] = {}
 _LOCK = threading.Lock()
 
@@ -53,8 +57,28 @@ def _observed_class(cls: type) -> type:
             if observer is not None:
                 observer.assigned(self, value)
 
+        original_tick = cls.tick
+
+        def tick(self: Any) -> Any:
+            observer = self.__dict__.get("_groot2_observer")
+            hooks = observer.hooks if observer is not None else None
+            if not hooks:
+                return (yield from original_tick(self))
+            uid = observer.uid_of(self)
+            replaced = hooks.run(PRE, uid) if self.__dict__.get("status") in _HOOKABLE else None
+            if replaced is not None:  # Groot2 decided the result: the node itself does not tick
+                self.status = _TO_PY_TREES[replaced]
+                yield self
+            else:
+                yield from original_tick(self)
+            after = hooks.run(POST, uid)
+            if after is not None:
+                self.status = _TO_PY_TREES[after]
+            return None
+
         made = type(cls.__name__, (cls,), {
             "status": property(get_status, set_status),
+            "tick": tick,
             "__module__": cls.__module__,
             "__qualname__": cls.__qualname__,
             "_groot2_original_class": cls,
@@ -70,6 +94,8 @@ class StatusObserver:
         self.tree = tree
         self.clock = clock
         self._subscribers: list[Callback] = []
+        # Groot2's breakpoints and replacements, consulted around every observed node's tick (set by the server).
+        self.hooks: HookTable | None = None
         self._uids: dict[int, int] = {}
         # The status BehaviorTree.CPP would hold per uid: py_trees' own, except for the root reset after a tick.
         self._shown: dict[int, NodeStatus] = {}
@@ -85,6 +111,9 @@ class StatusObserver:
         self._uids[id(behaviour)] = uid
         self._shown[uid] = status_code(behaviour.__dict__.get("status"))
         self._attached.append(behaviour)
+
+    def uid_of(self, behaviour: py_trees.behaviour.Behaviour) -> int:
+        return self._uids[id(behaviour)]
 
     def subscribe(self, callback: Callback) -> None:
         self._subscribers.append(callback)

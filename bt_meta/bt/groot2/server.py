@@ -12,8 +12,9 @@ Replies (first part: the request header echoed, protocol 2, the tree's 16-byte i
   ``10 + its previous status``
 * BLACKBOARD (2 parts: ``name;name;...``) -- MessagePack of ``{subtree: {key: value}}`` for the named subtrees
 * TOGGLE_RECORDING (``start``/``stop``), GET_TRANSITIONS -- recorded 9-byte transitions (last 1000)
-* HOOKS_DUMP -- ``[]``; REMOVE_ALL_HOOKS / DISABLE_ALL_HOOKS -- header only (there are never hooks)
-* HOOK_INSERT / HOOK_REMOVE / BREAKPOINT_UNLOCK -- an error reply: bt-meta does not implement breakpoints
+* HOOK_INSERT / HOOK_REMOVE / BREAKPOINT_UNLOCK / REMOVE_ALL_HOOKS / DISABLE_ALL_HOOKS -- breakpoints and node
+  replacement (:mod:`~bt_meta.bt.groot2.hooks`); HOOKS_DUMP -- the hooks as JSON. A breakpoint reached is announced
+  on the PUB socket (BREAKPOINT_REACHED header, then the uid as text); ``Node ID not found`` for an unknown hook
 * a header that is not 6 bytes -- ``error`` / ``wrong request header``; an unknown letter -- ``error`` /
   ``Request not recognized``; a 1-part BLACKBOARD -- ``error`` / ``must be 2 parts message``
 
@@ -26,12 +27,16 @@ Offers:
 from __future__ import annotations
 
 import collections
+import contextlib
+import random
 import threading
+import time
 from typing import Any
 
 import zmq
 
 from bt_meta.bt.groot2 import msgpack
+from bt_meta.bt.groot2.hooks import HookError, HookTable
 from bt_meta.bt.groot2.observer import StatusObserver, now_usec
 from bt_meta.bt.groot2.protocol import (
     DEFAULT_PORT,
@@ -53,7 +58,7 @@ from bt_meta.errors import UserInputError
 _RECV_TIMEOUT_MS = 100
 _SEND_TIMEOUT_MS = 1000
 _RECORDED_TRANSITIONS = 1000
-_NO_BREAKPOINTS = "breakpoints are not supported by bt-meta's Groot2 server"
+_HEARTBEAT_S = 5.0  # BehaviorTree.CPP's max_heartbeat_delay: no request for this long disables every hook
 
 
 class Groot2PortError(UserInputError):
@@ -97,6 +102,12 @@ class Groot2Server:
             self._shutdown_sockets()
             raise
         self._active = True
+        self._last_request = time.monotonic()
+        self._heartbeat = True
+        self._rng = random.Random(seed)
+        self.hooks = HookTable({node.uid for node in tree.nodes}, self._announce_breakpoint)
+        observer.hooks = self.hooks
+        self._observer = observer
         observer.subscribe(self.record)
         self._thread = threading.Thread(target=self._serve, name=f"groot2-server-{port}", daemon=True)
         self._thread.start()
@@ -141,14 +152,29 @@ class Groot2Server:
 
     # -- the request loop ---------------------------------------------------------------------------------------
 
+    def _announce_breakpoint(self, uid: int) -> None:
+        """BREAKPOINT_REACHED on the PUB socket (called by the ticking thread, the only one using that socket)."""
+        header = RequestHeader(self._rng.getrandbits(32), RequestType.BREAKPOINT_REACHED).pack()
+        with contextlib.suppress(zmq.ZMQError):  # the breakpoint still waits for its unlock
+            self._publisher.send_multipart([header, str(uid).encode()])
+
+    def _check_heartbeat(self) -> None:
+        alive = time.monotonic() - self._last_request < _HEARTBEAT_S
+        if alive != self._heartbeat:
+            self._heartbeat = alive
+            self.hooks.enable_all(alive)
+
     def _serve(self) -> None:
         while self._active:
             try:
                 request = self._server.recv_multipart()
             except zmq.Again:
+                self._check_heartbeat()
                 continue
             except zmq.ZMQError:
                 break
+            self._last_request = time.monotonic()
+            self._check_heartbeat()
             reply = self.answer(request)
             try:
                 self._server.send_multipart(reply)
@@ -184,10 +210,20 @@ class Groot2Server:
         if kind == RequestType.BLACKBOARD:
             return [head, self.blackboard_dump(request[1].decode("utf-8", errors="replace"))]
         if kind in (RequestType.HOOK_INSERT, RequestType.HOOK_REMOVE, RequestType.BREAKPOINT_UNLOCK):
-            return [b"error", _NO_BREAKPOINTS.encode()]
+            change = {RequestType.HOOK_INSERT: self.hooks.insert, RequestType.HOOK_REMOVE: self.hooks.remove,
+                      RequestType.BREAKPOINT_UNLOCK: self.hooks.unlock}[kind]
+            try:
+                change(request[1])
+            except HookError as error:
+                return [b"error", str(error).encode()]
+            return [head]
         if kind == RequestType.HOOKS_DUMP:
-            return [head, b"[]"]
-        if kind in (RequestType.REMOVE_ALL_HOOKS, RequestType.DISABLE_ALL_HOOKS):
+            return [head, self.hooks.dump()]
+        if kind == RequestType.REMOVE_ALL_HOOKS:
+            self.hooks.remove_all()
+            return [head]
+        if kind == RequestType.DISABLE_ALL_HOOKS:
+            self.hooks.enable_all(False)
             return [head]
         if kind == RequestType.TOGGLE_RECORDING:
             command = request[1].decode("utf-8", errors="replace")
@@ -219,6 +255,9 @@ class Groot2Server:
         if not getattr(self, "_active", False):
             return
         self._active = False
+        self.hooks.close()
+        if self._observer.hooks is self.hooks:
+            self._observer.hooks = None
         self._thread.join(timeout=5)
         self._shutdown_sockets()
 

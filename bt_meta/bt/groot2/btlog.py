@@ -26,11 +26,14 @@ from pathlib import Path
 from typing import BinaryIO
 
 from bt_meta.bt.groot2.observer import now_usec
-from bt_meta.bt.groot2.protocol import NodeStatus, Transition, pack_transition, unpack_transitions
+from bt_meta.bt.groot2.protocol import NodeStatus, Transition, unpack_transitions
 from bt_meta.errors import UserInputError
 
 MAGIC = b"BTCPP4-FileLogger2"
 PROTOCOL = 1
+# A transition record is 48 bits of time, 16 of uid, 8 of status: one uint64 (time | uid << 48) and one byte.
+_RECORD = struct.Struct("<QB").pack
+_TIME_MASK = (1 << 48) - 1
 
 
 class BtlogError(UserInputError):
@@ -64,23 +67,25 @@ class BtlogWriter:
         xml = tree_xml.encode("utf-8")
         self.start_usec = now_usec() if start_usec is None else start_usec
         self._lock = threading.Lock()
+        self._pending = bytearray()
         self._file.write(MAGIC + bytes([PROTOCOL]) + struct.pack("<i", len(xml)) + xml
                          + struct.pack("<q", self.start_usec))
         self.count = 0
 
     def record(self, timestamp_usec: int, uid: int, _previous: NodeStatus, status: NodeStatus) -> None:
-        with self._lock:
-            if self._file is None:
-                return
-            self._file.write(pack_transition(Transition(timestamp_usec - self.start_usec, uid, status)))
-            self.count += 1
+        """Queue one transition (the ticking thread calls this; :meth:`flush` writes the queue)."""
+        self._pending += _RECORD(((timestamp_usec - self.start_usec) & _TIME_MASK) | (uid << 48), status)
+        self.count += 1
 
     def flush(self) -> None:
         with self._lock:
             if self._file is not None:
+                pending, self._pending = self._pending, bytearray()
+                self._file.write(pending)
                 self._file.flush()
 
     def close(self) -> None:
+        self.flush()
         with self._lock:
             if self._file is not None:
                 self._file.close()

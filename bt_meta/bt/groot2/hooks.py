@@ -90,9 +90,11 @@ def _parse(text: bytes) -> Any:
 class HookTable:
     """The hooks of one tree, shared by the server thread (requests) and the ticking thread (:meth:`run`)."""
 
-    def __init__(self, uids: set[int], notify: Callable[[int], None]) -> None:
+    def __init__(self, uids: set[int], notify: Callable[[int], None],
+                 on_insert: Callable[[int], None] = lambda _uid: None) -> None:
         self.uids = uids
         self.notify = notify
+        self.on_insert = on_insert
         self._hooks: dict[tuple[int, int], Hook] = {}
         self._lock = threading.Lock()
         self.closed = False
@@ -114,6 +116,7 @@ class HookTable:
             with self._lock:
                 hook = self._hooks.get((fresh.position, fresh.uid))
                 if hook is None:
+                    self.on_insert(fresh.uid)
                     self._hooks[(fresh.position, fresh.uid)] = fresh
                     continue
             with hook.wakeup:

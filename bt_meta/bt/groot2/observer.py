@@ -3,11 +3,12 @@
 BehaviorTree.CPP notifies its loggers from ``setStatus``/``resetStatus`` whenever a node's status changes,
 including the quiet reset to IDLE a parent does when it finishes -- a status read after the tick would miss those
 (a child that ran and was reset looks untouched). py_trees assigns ``behaviour.status`` directly, so the observer
-puts a ``status`` property on each observed behaviour: every assignment that changes what BehaviorTree.CPP would
-show is reported with BehaviorTree.CPP's status numbers, the node's uid and a wall-clock timestamp, in the order
-it happened. The same subclass runs Groot2's hooks (:mod:`~bt_meta.bt.groot2.hooks`) around each node's tick.
+gives each observed behaviour a subclass whose ``__setattr__`` watches ``status``: every assignment that changes
+what BehaviorTree.CPP would show is reported with BehaviorTree.CPP's status numbers, the node's uid and a
+wall-clock timestamp, in the order it happened. For nodes Groot2 puts a hook on, the subclass also runs the hooks
+(:mod:`~bt_meta.bt.groot2.hooks`) around the node's tick.
 
-The property lives in a subclass made per behaviour class, named like the original; :meth:`StatusObserver.close`
+The subclass is made once per behaviour class and named like the original; :meth:`StatusObserver.close`
 restores the original classes (``type(b) is X`` checks hold again afterwards).
 
 Offers:
@@ -33,7 +34,7 @@ from bt_meta.bt.groot2.published_tree import PublishedTree
 Callback = Callable[[int, int, NodeStatus, NodeStatus], None]
 _TO_PY_TREES = {NodeStatus.SUCCESS: py_trees.common.Status.SUCCESS, NodeStatus.FAILURE: py_trees.common.Status.FAILURE}
 _HOOKABLE = (py_trees.common.Status.INVALID, py_trees.common.Status.RUNNING)
-_OBSERVED: dict[type, type] = {}
+_OBSERVED: dict[tuple[type, bool], type] = {}
 _LOCK = threading.Lock()
 
 
@@ -41,49 +42,59 @@ def now_usec() -> int:
     return time.time_ns() // 1000
 
 
-def _observed_class(cls: type) -> type:
-    """A subclass of ``cls`` whose ``status`` attribute reports changes to ``self._groot2_observer``."""
+def _observed_class(cls: type, hooked: bool) -> type:
+    """A subclass of ``cls`` whose ``status`` assignments are reported; ``hooked`` also runs Groot2's hooks.
+
+    Only nodes Groot2 put a hook on get the hooked variant (an extra generator level per tick).
+    """
     with _LOCK:
-        made = _OBSERVED.get(cls)
+        made = _OBSERVED.get((cls, hooked))
         if made is not None:
             return made
 
-        def get_status(self: Any) -> Any:
-            return self.__dict__.get("status")
+        original_setattr = cls.__setattr__
 
-        def set_status(self: Any, value: Any) -> None:
-            self.__dict__["status"] = value
-            observer = self.__dict__.get("_groot2_observer")
-            if observer is not None:
-                observer.assigned(self, value)
+        def setattr_observed(self: Any, name: str, value: Any) -> None:
+            # Only writes pay (reads of ``status`` stay plain attribute reads, which bt-meta's nodes do a lot).
+            if name != "status":
+                original_setattr(self, name, value)
+                return
+            state = self.__dict__
+            state["status"] = value
+            shown = state.get("_groot2_shown", value)
+            if value is not shown:  # re-assigning the same status costs one comparison
+                state["_groot2_shown"] = value
+                state["_groot2_observer"].changed(state["_groot2_uid"], shown, value)
 
-        original_tick = cls.tick
-
-        def tick(self: Any) -> Any:
-            observer = self.__dict__.get("_groot2_observer")
-            hooks = observer.hooks if observer is not None else None
-            if not hooks:
-                return (yield from original_tick(self))
-            uid = observer.uid_of(self)
-            replaced = hooks.run(PRE, uid) if self.__dict__.get("status") in _HOOKABLE else None
-            if replaced is not None:  # Groot2 decided the result: the node itself does not tick
-                self.status = _TO_PY_TREES[replaced]
-                yield self
-            else:
-                yield from original_tick(self)
-            after = hooks.run(POST, uid)
-            if after is not None:
-                self.status = _TO_PY_TREES[after]
-            return None
-
-        made = type(cls.__name__, (cls,), {
-            "status": property(get_status, set_status),
-            "tick": tick,
+        namespace: dict[str, Any] = {
+            "__setattr__": setattr_observed,
             "__module__": cls.__module__,
             "__qualname__": cls.__qualname__,
             "_groot2_original_class": cls,
-        })
-        _OBSERVED[cls] = made
+        }
+        if hooked:
+            original_tick = cls.tick
+
+            def tick(self: Any) -> Any:
+                observer = self.__dict__.get("_groot2_observer")
+                hooks = observer.hooks if observer is not None else None
+                if not hooks:
+                    return (yield from original_tick(self))
+                uid = self.__dict__["_groot2_uid"]
+                replaced = hooks.run(PRE, uid) if self.__dict__.get("status") in _HOOKABLE else None
+                if replaced is not None:  # Groot2 decided the result: the node itself does not tick
+                    self.status = _TO_PY_TREES[replaced]
+                    yield self
+                else:
+                    yield from original_tick(self)
+                after = hooks.run(POST, uid)
+                if after is not None:
+                    self.status = _TO_PY_TREES[after]
+                return None
+
+            namespace["tick"] = tick
+        made = type(cls.__name__, (cls,), namespace)
+        _OBSERVED[(cls, hooked)] = made
         return made
 
 
@@ -94,42 +105,41 @@ class StatusObserver:
         self.tree = tree
         self.clock = clock
         self._subscribers: list[Callback] = []
-        # Groot2's breakpoints and replacements, consulted around every observed node's tick (set by the server).
+        # Groot2's breakpoints and replacements, consulted around hooked nodes' ticks (set by the server).
         self.hooks: HookTable | None = None
-        self._uids: dict[int, int] = {}
-        # The status BehaviorTree.CPP would hold per uid: py_trees' own, except for the root reset after a tick.
-        self._shown: dict[int, NodeStatus] = {}
-        self._attached: list[py_trees.behaviour.Behaviour] = []
+        self._by_uid: dict[int, py_trees.behaviour.Behaviour] = {}
         for node in tree.nodes:
             self._attach(node.behaviour, node.uid)
 
     def _attach(self, behaviour: py_trees.behaviour.Behaviour, uid: int) -> None:
         if "_groot2_observer" in behaviour.__dict__:
             raise ValueError(f"behaviour {behaviour.name!r} is already observed")
-        behaviour.__class__ = _observed_class(type(behaviour))
-        behaviour.__dict__["_groot2_observer"] = self
-        self._uids[id(behaviour)] = uid
-        self._shown[uid] = status_code(behaviour.__dict__.get("status"))
-        self._attached.append(behaviour)
+        state = behaviour.__dict__
+        # What BehaviorTree.CPP would show: py_trees' own status, except for the root reset after a tick.
+        state["_groot2_shown"] = state.get("status")
+        state["_groot2_uid"] = uid
+        state["_groot2_observer"] = self
+        behaviour.__class__ = _observed_class(type(behaviour), hooked=False)
+        self._by_uid[uid] = behaviour
 
-    def uid_of(self, behaviour: py_trees.behaviour.Behaviour) -> int:
-        return self._uids[id(behaviour)]
+    def hook_node(self, uid: int) -> None:
+        """Run Groot2's hooks around this node's tick from now on (called when a hook is inserted)."""
+        behaviour = self._by_uid.get(uid)
+        if behaviour is not None:
+            original = type(behaviour)._groot2_original_class  # type: ignore[attr-defined]
+            behaviour.__class__ = _observed_class(original, hooked=True)
 
     def subscribe(self, callback: Callback) -> None:
         self._subscribers.append(callback)
 
-    def assigned(self, behaviour: py_trees.behaviour.Behaviour, value: Any) -> None:
-        """``behaviour.status = value`` happened: report it if it changes what BehaviorTree.CPP would show."""
-        self._report(self._uids[id(behaviour)], status_code(value))
-
-    def _report(self, uid: int, after: NodeStatus) -> None:
-        before = self._shown[uid]
-        if before == after:
+    def changed(self, uid: int, before: Any, after: Any) -> None:
+        """A node's shown status changed from ``before`` to ``after`` (py_trees statuses): tell the subscribers."""
+        old, new = status_code(before), status_code(after)
+        if old == new:
             return
-        self._shown[uid] = after
         stamp = self.clock()
-        for callback in list(self._subscribers):
-            callback(stamp, uid, before, after)
+        for callback in self._subscribers:
+            callback(stamp, uid, old, new)
 
     def tick_finished(self, status: Any) -> None:
         """BehaviorTree.CPP's ``Tree::tickRoot`` resets a root that finished: report the root going back to IDLE.
@@ -137,16 +147,20 @@ class StatusObserver:
         py_trees' root keeps its SUCCESS/FAILURE (bt-meta reads it); only what Groot2 is told changes.
         """
         if status_code(status) in (NodeStatus.SUCCESS, NodeStatus.FAILURE):
-            self._report(self.tree.root.uid, NodeStatus.IDLE)
+            root = self._by_uid[self.tree.root.uid]
+            shown = root.__dict__["_groot2_shown"]
+            root.__dict__["_groot2_shown"] = py_trees.common.Status.INVALID
+            self.changed(self.tree.root.uid, shown, py_trees.common.Status.INVALID)
 
     def close(self) -> None:
         """Stop observing and give every behaviour its own class back."""
-        for behaviour in self._attached:
-            behaviour.__dict__.pop("_groot2_observer", None)
+        for behaviour in self._by_uid.values():
             original = getattr(type(behaviour), "_groot2_original_class", None)
             if original is not None:
                 behaviour.__class__ = original
-        self._attached.clear()
+            for key in ("_groot2_observer", "_groot2_shown", "_groot2_uid"):
+                behaviour.__dict__.pop(key, None)
+        self._by_uid.clear()
         self._subscribers.clear()
 
     def __enter__(self) -> StatusObserver:

@@ -115,9 +115,13 @@ _FROM_PY_TREES = {
 }
 
 
+# Keyed by identity: py_trees' Status members hash in Python, which is slow on the per-transition path.
+_BY_IDENTITY = {id(status): code for status, code in _FROM_PY_TREES.items()}
+
+
 def status_code(status: object) -> NodeStatus:
     """BehaviorTree.CPP's number for a py_trees status (INVALID is IDLE); a status named SKIPPED maps to 4."""
-    code = _FROM_PY_TREES.get(status)  # type: ignore[call-overload]
+    code = _BY_IDENTITY.get(id(status))
     if code is not None:
         return code
     name = str(getattr(status, "name", status)).upper()

@@ -82,8 +82,10 @@ class Groot2Server:
         self.port = check_port(port)
         self.tree_xml = full_tree_xml(tree)
         self.tree_id = tree_uuid(seed)
-        self._order = [node.uid for node in tree.status_order()]
-        self._status: dict[int, int] = {uid: int(NodeStatus.IDLE) for uid in self._order}
+        order = [node.uid for node in tree.status_order()]
+        # BehaviorTree.CPP's status buffer: uid + status per node; the status byte of each uid is updated in place.
+        self._buffer = bytearray(pack_status_buffer((uid, int(NodeStatus.IDLE)) for uid in order))
+        self._offset = {uid: 3 * index + 2 for index, uid in enumerate(order)}
         self._lock = threading.Lock()
         self._recording = False
         self._recording_start = 0
@@ -105,7 +107,7 @@ class Groot2Server:
         self._last_request = time.monotonic()
         self._heartbeat = True
         self._rng = random.Random(seed)
-        self.hooks = HookTable({node.uid for node in tree.nodes}, self._announce_breakpoint)
+        self.hooks = HookTable({node.uid for node in tree.nodes}, self._announce_breakpoint, observer.hook_node)
         observer.hooks = self.hooks
         self._observer = observer
         observer.subscribe(self.record)
@@ -124,14 +126,14 @@ class Groot2Server:
 
     def record(self, timestamp_usec: int, uid: int, previous: NodeStatus, status: NodeStatus) -> None:
         """A :class:`StatusObserver` callback (BehaviorTree.CPP's ``Groot2Publisher::callback``)."""
-        with self._lock:
-            self._status[uid] = idle_code(previous) if status == NodeStatus.IDLE else int(status)
-            if self._recording:
+        # One byte store: atomic for the server thread copying the buffer, so no lock on the hot path.
+        self._buffer[self._offset[uid]] = idle_code(previous) if status == NodeStatus.IDLE else status
+        if self._recording:
+            with self._lock:
                 self._recorded.append(Transition(timestamp_usec - self._recording_start, uid, status))
 
     def status_buffer(self) -> bytes:
-        with self._lock:
-            return pack_status_buffer((uid, self._status[uid]) for uid in self._order)
+        return bytes(self._buffer)
 
     def blackboard_dump(self, names: str) -> bytes:
         dump: dict[str, Any] = {}

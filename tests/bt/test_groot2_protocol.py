@@ -83,11 +83,10 @@ def test_reply_header_echoes_the_request_with_protocol_2_and_the_tree_id() -> No
     assert len(reply) == 22
 
 
-def test_tree_uuid_is_a_seeded_version_4_uuid() -> None:
-    first = tree_uuid(5)
-    assert first == tree_uuid(5) and first != tree_uuid(6)
-    assert first[6] >> 4 == 4 and first[8] >> 6 == 0b10
-    assert len(tree_uuid()) == 16
+def test_tree_uuid_is_a_version_4_uuid_that_changes_with_the_tree() -> None:
+    first = tree_uuid("<root/>")
+    assert first == tree_uuid("<root/>") and first != tree_uuid("<root BTCPP_format='4'/>")
+    assert first[6] >> 4 == 4 and first[8] >> 6 == 0b10 and len(first) == 16
 
 
 def test_status_codes_and_idle_after_a_status() -> None:

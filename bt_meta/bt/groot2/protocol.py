@@ -12,7 +12,7 @@ Offers:
 * :data:`PROTOCOL_ID`, :data:`DEFAULT_PORT`, :data:`REQUEST_HEADER_SIZE`, :data:`REPLY_HEADER_SIZE`
 * :class:`RequestHeader` -- :meth:`~RequestHeader.pack` / :meth:`~RequestHeader.unpack`
 * :func:`pack_reply_header` -- request header + tree id
-* :func:`tree_uuid` -- the 16 bytes identifying one published tree (seeded)
+* :func:`tree_uuid` -- the 16 bytes identifying one published tree (a UUID v4 derived from its XML)
 * :class:`NodeStatus` -- BehaviorTree.CPP's status numbers; :func:`status_code` maps py_trees statuses onto them
 * :func:`idle_code` -- the ``IDLE_FROM_*`` code of a transition to IDLE
 * :func:`pack_status_buffer` -- the STATUS reply body (``uint16`` uid + ``uint8`` status per node)
@@ -23,7 +23,7 @@ Offers:
 from __future__ import annotations
 
 import enum
-import random
+import hashlib
 import struct
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -88,10 +88,13 @@ def pack_reply_header(request: RequestHeader, tree_id: bytes) -> bytes:
     return RequestHeader(request.unique_id, request.type, PROTOCOL_ID).pack() + tree_id
 
 
-def tree_uuid(seed: int | None = None) -> bytes:
-    """A random UUID v4 as BehaviorTree.CPP makes one per publisher (``seed=None`` draws from the OS)."""
-    rng = random.Random(seed) if seed is not None else random.SystemRandom()
-    raw = bytearray(rng.getrandbits(8) for _ in range(16))
+def tree_uuid(tree_xml: str) -> bytes:
+    """The tree id of the reply headers, shaped as the random UUID v4 BehaviorTree.CPP draws per publisher.
+
+    Groot2 fetches the tree again when this id changes. Deriving it from the tree's XML (instead of drawing it)
+    gives a new id exactly when the tree differs -- also across runs -- and needs no random draw.
+    """
+    raw = bytearray(hashlib.sha256(tree_xml.encode("utf-8")).digest()[:16])
     raw[8] = (raw[8] & 0xBF) | 0x80  # variant 10xxxxxx
     raw[6] = (raw[6] & 0x4F) | 0x40  # version 0100xxxx
     return bytes(raw)

@@ -81,7 +81,7 @@ class Groot2Server:
         self.tree = tree
         self.port = check_port(port)
         self.tree_xml = full_tree_xml(tree)
-        self.tree_id = tree_uuid(seed)
+        self.tree_id = tree_uuid(self.tree_xml)
         order = [node.uid for node in tree.status_order()]
         # BehaviorTree.CPP's status buffer: uid + status per node; the status byte of each uid is updated in place.
         self._buffer = bytearray(pack_status_buffer((uid, int(NodeStatus.IDLE)) for uid in order))

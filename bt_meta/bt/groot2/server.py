@@ -1,9 +1,10 @@
 """A Groot2 monitoring server for a py_trees tree, answering as BehaviorTree.CPP's ``Groot2Publisher`` does.
 
-Two ZeroMQ sockets, as in BehaviorTree.CPP: a REP socket on ``tcp://*:PORT`` answers Groot2's requests and a PUB
-socket on ``PORT+1`` is bound for the notifications BehaviorTree.CPP sends there. Requests are served by a
+Two ZeroMQ sockets, as in BehaviorTree.CPP: a REP socket on ``tcp://HOST:PORT`` (``*`` by default) answers
+Groot2's requests and a PUB socket on ``PORT+1`` carries breakpoint notifications. Requests are served by a
 background thread (100 ms receive timeout, so closing is prompt); the tree ticks in the caller's thread and the
-server only reads what the :class:`~bt_meta.bt.groot2.observer.StatusObserver` reports, under a lock.
+server only reads what the :class:`~bt_meta.bt.groot2.observer.StatusObserver` reports (the status buffer is
+updated a byte at a time, the recording under a lock). ``seed`` seeds the ids of breakpoint notifications.
 
 Replies (first part: the request header echoed, protocol 2, the tree's 16-byte id):
 
@@ -20,7 +21,7 @@ Replies (first part: the request header echoed, protocol 2, the tree's 16-byte i
 
 Offers:
 
-* :class:`Groot2Server` -- ``Groot2Server(tree, observer, port)``; :meth:`~Groot2Server.close`
+* :class:`Groot2Server` -- ``Groot2Server(tree, observer, port, seed=..., host=...)``; :meth:`~Groot2Server.close`
 * :class:`Groot2PortError` -- a port that is invalid or in use (user input: the CLI exits 2)
 """
 

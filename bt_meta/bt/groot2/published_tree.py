@@ -191,8 +191,8 @@ class _Builder:
         self.nodes.append(published)
         subtree.nodes.append(published)
         self.note_model(instance, node_type)
-        for port, value in published.attributes.items():
-            key = blackboard_key(value)
+        for port, value in instance.ports.items():  # written ports create entries at load; defaults do not
+            key = blackboard_key(value) if _allowed_port_name(port) else None
             if key is not None:
                 holder, name = subtree.resolve(port if key == "=" else key)
                 spec = node_type.port(port) if node_type is not None else None

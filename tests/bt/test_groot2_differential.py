@@ -172,8 +172,8 @@ def assert_same_headers(btcpp: list[bytes], ours: list[bytes]) -> None:
     assert ours[0][6 + 6] >> 4 == 4  # tree ids are random UUIDs v4 on both sides
 
 
-def compare_server(seed: int, context: zmq.Context, ticks: int = 6) -> None:
-    pair = Pair(seed, context)
+def compare_server(seed: int, context: zmq.Context, ticks: int = 6, mode: str = "exactly_once") -> None:
+    pair = Pair(seed, context, mode)
     try:
         btcpp, ours = pair.both("T")
         assert_same_headers(btcpp, ours)
@@ -191,21 +191,23 @@ def compare_server(seed: int, context: zmq.Context, ticks: int = 6) -> None:
             for letter, extra in (("S", ()), ("B", (names,))):
                 btcpp, ours = pair.both(letter, *extra)
                 assert_same_headers(btcpp, ours)
-                assert ours[1:] == btcpp[1:], f"seed {seed} tick {tick} {letter}\n{pair.generated.xml}"
+                assert ours[1:] == btcpp[1:], f"seed {seed} {mode} tick {tick} {letter}\n{pair.generated.xml}"
             pair.tick()
     finally:
         pair.close()
 
 
-def test_status_full_tree_and_blackboard_replies_equal_btcpp(context: zmq.Context) -> None:
-    for seed in range(10):
-        compare_server(seed, context)
+@pytest.mark.parametrize("mode", ["exactly_once", "once"])
+def test_status_full_tree_and_blackboard_replies_equal_btcpp(mode: str, context: zmq.Context) -> None:
+    for seed in range(6):
+        compare_server(seed, context, mode=mode)
 
 
 @pytest.mark.slow
-def test_status_full_tree_and_blackboard_replies_equal_btcpp_sweep(context: zmq.Context) -> None:
-    for seed in range(10, 300):
-        compare_server(seed, context, ticks=10)
+@pytest.mark.parametrize("mode", ["exactly_once", "once"])
+def test_status_full_tree_and_blackboard_replies_equal_btcpp_sweep(mode: str, context: zmq.Context) -> None:
+    for seed in range(6, 150):
+        compare_server(seed, context, ticks=10, mode=mode)
 
 
 def test_error_replies_and_hook_requests_equal_btcpp(context: zmq.Context) -> None:

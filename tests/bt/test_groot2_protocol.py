@@ -185,3 +185,34 @@ def test_blackboard_entries_per_subtree_typed_like_btcpp() -> None:
     tick_exactly_once(root)
     # SetBlackboard wrote the text "3" into an entry an int port created: BT.CPP stores the number.
     assert tree.blackboard(main) == {"x": 3}
+
+
+def test_a_monitored_action_shows_what_its_monitor_decided(tmp_path) -> None:
+    """A compiled plan (a Monitor around every primitive): the failing primitive's uid carries the failure and the
+    monitors themselves are no nodes of the published tree."""
+    from pathlib import Path
+
+    from bt_meta.bt.groot2.btlog import read_btlog
+    from bt_meta.bt.groot2.session import Groot2Session
+    from bt_meta.testing import TreeHarness
+    from bt_meta.world.fake import Fault
+
+    tasks = Path(__file__).resolve().parents[2] / "trees" / "letters.yaml"
+    harness = TreeHarness.from_file(tasks, "A", world="fake", faults=[Fault.parse("place(b1, 0, 1)=fail")])
+    session = Groot2Session.start(harness.root, registry=harness.compiled.registry, btlog=tmp_path / "a.btlog")
+    try:
+        wrapped = [node for node in session.tree.nodes if node.behaviour is not node.node]
+        assert len(wrapped) == 6 and all(node.behaviour.is_monitor for node in wrapped)  # the six placements
+        assert not any(getattr(node.node, "is_monitor", False) for node in session.tree.nodes)
+        status = harness.tick()
+        session.after_tick(status)
+    finally:
+        session.close()
+        harness.close()
+    assert status == Status.FAILURE
+    log = read_btlog(tmp_path / "a.btlog")
+    uids = {e.get("name"): int(e.get("_uid")) for e in ET.fromstring(log.tree_xml).iter() if e.get("_uid")}
+    failing = uids["n3 place(b1, 0, 1)"]
+    assert (failing, NodeStatus.FAILURE) in [(t.uid, t.status) for t in log.transitions]
+    assert (uids["n5 place(b2, 3, 0)"], NodeStatus.RUNNING) not in [(t.uid, t.status) for t in log.transitions]
+    assert not [e for e in ET.fromstring(log.tree_xml).iter() if e.tag.startswith("Monitor")]

@@ -3,7 +3,8 @@
 Offers:
 
 * :func:`add_groot2_arguments` -- adds the options to a subcommand's parser
-* :func:`check_groot2_arguments` -- validates them before any work starts (bad port, unwritable log: exit 2)
+* :func:`check_groot2_arguments` -- validates them before any work starts (bad or busy port, unwritable log:
+  exit 2)
 * :func:`start_groot2` -- a :class:`Groot2Run` for a harness's tree; a no-op when no option was given
 
 A command calls ``groot2.after_tick(status)`` after each tick and ``groot2.finish()`` after the last one (which
@@ -34,7 +35,7 @@ def add_groot2_arguments(parser: argparse.ArgumentParser) -> None:
 def check_groot2_arguments(args: argparse.Namespace) -> None:
     from bt_meta.bt.groot2.session import check_options
 
-    check_options(args.groot2, args.btlog, args.hold)
+    check_options(args.groot2, args.btlog, args.hold, host=args.groot2_host)
 
 
 class Groot2Run:

@@ -163,17 +163,34 @@ def test_btlog_written_by_tick_without_a_server(tree_file: Path, tmp_path: Path,
     assert len(written.transitions) > 10
 
 
-def test_port_in_use_is_a_clear_error_naming_it(tree_file: Path, capsys) -> None:
+@pytest.mark.parametrize("busy_offset", [0, 1])
+def test_port_in_use_is_a_clear_error_naming_it_before_any_work(busy_offset: int, tree_file: Path, capsys) -> None:
     port = free_port()
     with socket.socket() as busy:
-        busy.bind(("127.0.0.1", port))
+        busy.bind(("127.0.0.1", port + busy_offset))
         busy.listen()
         code = main(["tick", str(tree_file), "--world", "fake", "--ticks", "1", "--groot2", str(port),
                      "--groot2-host", "127.0.0.1"])
-    err = capsys.readouterr().err
+    captured = capsys.readouterr()
     assert code == 2
-    assert f"Groot2 port {port} cannot be opened: already in use" in err
-    assert "Traceback" not in err
+    assert f"--groot2: Groot2 port {port + busy_offset} cannot be opened: already in use" in captured.err
+    assert "Traceback" not in captured.err and captured.out == ""  # nothing ticked
+
+
+def test_server_bind_failure_names_the_port(tree_file: Path) -> None:
+    """Taken between the early probe and the bind: the server itself reports it the same way."""
+    from bt_meta.bt.groot2.observer import StatusObserver
+    from bt_meta.bt.groot2.published_tree import PublishedTree
+    from bt_meta.bt.groot2.server import Groot2PortError, Groot2Server
+    from bt_meta.bt.xml.reader import load_tree_text
+
+    port = free_port()
+    tree = PublishedTree.build(load_tree_text(TREE))
+    with socket.socket() as busy, StatusObserver(tree) as observer:
+        busy.bind(("127.0.0.1", port))
+        busy.listen()
+        with pytest.raises(Groot2PortError, match=f"Groot2 port {port} cannot be opened: already in use"):
+            Groot2Server(tree, observer, port, host="127.0.0.1")
 
 
 @pytest.mark.parametrize("port", ["0", "65535", "70000", "-3"])

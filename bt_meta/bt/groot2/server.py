@@ -23,13 +23,16 @@ Offers:
 
 * :class:`Groot2Server` -- ``Groot2Server(tree, observer, port, seed=..., host=...)``; :meth:`~Groot2Server.close`
 * :class:`Groot2PortError` -- a port that is invalid or in use (user input: the CLI exits 2)
+* :func:`check_port`, :func:`probe_ports` -- the checks made before any work starts
 """
 
 from __future__ import annotations
 
 import collections
 import contextlib
+import errno
 import random
+import socket
 import threading
 import time
 from typing import Any
@@ -72,6 +75,20 @@ def check_port(port: int) -> int:
         raise Groot2PortError(f"Groot2 port {port!r} is invalid: expected 1..65534 (it uses PORT and PORT+1)",
                               "--groot2")
     return port
+
+
+def probe_ports(port: int, host: str = "*") -> None:
+    """Fail early, naming the port, when PORT or PORT+1 cannot be bound now (the server binds them later)."""
+    address = "0.0.0.0" if host == "*" else host
+    for candidate in (port, port + 1):
+        with socket.socket(socket.AF_INET6 if ":" in address else socket.AF_INET) as probe:
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as ZeroMQ binds its listeners
+            try:
+                probe.bind((address, candidate))
+            except OSError as error:
+                reason = "already in use" if error.errno == errno.EADDRINUSE else (error.strerror or str(error))
+                raise Groot2PortError(f"Groot2 port {candidate} cannot be opened: {reason} (Groot2 needs PORT and "
+                                      "PORT+1)", "--groot2") from None
 
 
 class Groot2Server:

@@ -23,16 +23,21 @@ import py_trees
 from bt_meta.bt.groot2.btlog import BtlogWriter, check_btlog_path
 from bt_meta.bt.groot2.observer import StatusObserver
 from bt_meta.bt.groot2.published_tree import PublishedTree
-from bt_meta.bt.groot2.server import Groot2Server, check_port
+from bt_meta.bt.groot2.server import Groot2Server, check_port, probe_ports
 from bt_meta.bt.groot2.tree_xml import full_tree_xml
 from bt_meta.bt.registry import NodeRegistry
 from bt_meta.errors import UserInputError
 
 
-def check_options(port: int | None, btlog: str | Path | None, hold: bool = False) -> None:
-    """Raise a :class:`UserInputError` for a bad port, an unwritable log path, or ``--hold`` without a server."""
+def check_options(port: int | None, btlog: str | Path | None, hold: bool = False, host: str | None = None) -> None:
+    """Raise a :class:`UserInputError` for a bad port, an unwritable log path, or ``--hold`` without a server.
+
+    With ``host``, the ports are also probed: one in use is reported before any work starts.
+    """
     if port is not None:
         check_port(port)
+        if host is not None:
+            probe_ports(port, host)
     if btlog is not None:
         check_btlog_path(btlog)
     if hold and port is None:
@@ -86,7 +91,9 @@ class Groot2Session:
         def on_signal(_signum: int, _frame: FrameType | None) -> None:
             stop.set()
 
-        previous = signal.signal(signal.SIGTERM, on_signal)
+        # Signal handlers can only be set from the main thread; elsewhere only Ctrl-C / close() end the hold.
+        main = threading.current_thread() is threading.main_thread()
+        previous = signal.signal(signal.SIGTERM, on_signal) if main else None
         print(f"groot2: serving the finished tree on port {self.server.port}; Ctrl-C or SIGTERM to stop",
               file=out, flush=True)
         try:
@@ -95,7 +102,8 @@ class Groot2Session:
         except KeyboardInterrupt:
             pass
         finally:
-            signal.signal(signal.SIGTERM, previous)
+            if main:
+                signal.signal(signal.SIGTERM, previous)
 
     def close(self) -> None:
         if self.server is not None:

@@ -6,6 +6,8 @@ Offers:
 * :func:`check_groot2_arguments` -- validates them before any work starts (bad or busy port, unwritable log:
   exit 2)
 * :func:`start_groot2` -- a :class:`Groot2Run` for a harness's tree; a no-op when no option was given
+* :func:`follow_groot2` -- a :class:`Groot2Follow` for a run that builds a new tree per segment (``run --repair``):
+  :meth:`~Groot2Follow.watch` a :class:`~bt_meta.bt.context.RunContext` and whatever root it ticks is published
 
 A command calls ``groot2.after_tick(status)`` after each tick and ``groot2.finish()`` after the last one (which
 holds the server up with ``--hold`` until SIGTERM or Ctrl-C, then releases the port and closes the log).
@@ -70,3 +72,39 @@ def start_groot2(args: argparse.Namespace, harness: Any) -> Groot2Run:
     session = Groot2Session.start(harness.root, registry=registry, port=args.groot2, btlog=args.btlog,
                                   host=args.groot2_host, seed=getattr(args, "seed", None))
     return Groot2Run(session, hold=args.hold)
+
+
+class Groot2Follow(Groot2Run):
+    """Publishes whatever tree a :class:`~bt_meta.bt.context.RunContext` ticks, switching when the tree changes."""
+
+    def __init__(self, args: argparse.Namespace) -> None:
+        super().__init__(None, hold=args.hold)
+        self.args = args
+
+    def watch(self, run: Any, registry: Any = None) -> None:
+        """Route ``run.tick`` through Groot2 (once per run; a no-op without ``--groot2``)."""
+        if self.args.groot2 is None or getattr(run, "_groot2_watched", False):
+            return
+        original = run.tick
+
+        def tick(root: Any, visit: Any = None) -> Any:
+            self._publish(root, registry)
+            status = original(root, visit)
+            self.after_tick(status)
+            return status
+
+        run.tick = tick
+        run._groot2_watched = True
+
+    def _publish(self, root: Any, registry: Any) -> None:
+        from bt_meta.bt.groot2.session import Groot2Session
+
+        if self.session is None:
+            self.session = Groot2Session.start(root, registry=registry, port=self.args.groot2,
+                                               host=self.args.groot2_host, seed=getattr(self.args, "seed", None))
+        else:
+            self.session.follow(root, registry)
+
+
+def follow_groot2(args: argparse.Namespace) -> Groot2Follow:
+    return Groot2Follow(args)

@@ -23,8 +23,9 @@ failures are diagnosed and repaired (at most ``--max-attempts``), a successful r
 prints the attempts and repairs (JSON gains ``attempts``, ``repairs``, ``refinement_saved``,
 ``refinements_used``, ``stop_reason``, ``reported``, ``initial_plan``).
 
-Groot2: ``--groot2 [PORT]`` serves the running tree to Groot2, ``--hold`` keeps serving after the last tick,
-``--btlog FILE`` logs it for replay (docs/groot2.md). Not with ``--repair``, whose trees change as it repairs.
+Groot2: ``--groot2 [PORT]`` serves the running tree to Groot2 (with ``--repair``: each segment's tree as it
+runs), ``--hold`` keeps serving after the last tick, ``--btlog FILE`` logs it for replay (docs/groot2.md; not with
+``--repair``: a log holds one tree).
 """
 
 from __future__ import annotations
@@ -40,7 +41,12 @@ from typing import Any
 from py_trees.common import Status
 
 from bt_meta.commands._common import print_json, shown_in_trace
-from bt_meta.commands._groot2_args import add_groot2_arguments, check_groot2_arguments, start_groot2
+from bt_meta.commands._groot2_args import (
+    add_groot2_arguments,
+    check_groot2_arguments,
+    follow_groot2,
+    start_groot2,
+)
 from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
 from bt_meta.errors import PlanningError, UserInputError
 from bt_meta.memory import ENV_VAR, add_memory_argument, resolve_memory_path
@@ -80,8 +86,8 @@ def run(args: argparse.Namespace) -> int:
     if args.max_attempts < 0:
         raise UserInputError("--max-attempts must be at least 0")
     check_groot2_arguments(args)
-    if args.repair and (args.groot2 is not None or args.btlog is not None):
-        raise UserInputError("--groot2 and --btlog publish one tree; --repair replaces it as it repairs", "--repair")
+    if args.repair and args.btlog is not None:
+        raise UserInputError("a .btlog file holds one tree; --repair replaces it as it repairs", "--repair")
     task_file = load_task_file(args.file)
     problem = task_file.problem(args.problem)  # unknown names list the known ones (exit 2)
     grounding = load_grounding(task_file.domain.name, args.file, args.grounding)
@@ -191,12 +197,16 @@ def _run_repaired(args: argparse.Namespace, task_file: Any, problem: Any, world:
     from bt_meta.meta.reasoner import Limits
     from bt_meta.meta.refinements import RefinementStore
 
+    groot2 = follow_groot2(args)
+
     class Executor(MetaExecutor):
-        """Hands the recorder every segment's decomposition tree (the parent tasks of repaired steps)."""
+        """Hands the recorder every segment's decomposition tree (the parent tasks of repaired steps), and Groot2
+        every segment's behaviour tree."""
 
         def _segment(self, run: Any, plan_state: Any, *rest: Any) -> Any:  # type: ignore[override]
             if recorder is not None:
                 recorder.tree = plan_state.tree
+            groot2.watch(run, rest[0] if rest else None)
             return super()._segment(run, plan_state, *rest)
 
     if not args.json:
@@ -235,7 +245,9 @@ def _run_repaired(args: argparse.Namespace, task_file: Any, problem: Any, world:
             saved = report.refinement_saved
             print(f"refinement saved: {saved.get('method') or saved.get('reason') or saved}")
     plan = [" ".join(step) for step in report.plan]
-    return _report(args, out, status, report.ticks, report.failures, world, plan, started, built, recorder)
+    code = _report(args, out, status, report.ticks, report.failures, world, plan, started, built, recorder)
+    groot2.finish()
+    return code
 
 
 class _Progress:

@@ -247,21 +247,64 @@ def test_hold_needs_a_server(tree_file: Path, capsys) -> None:
     assert "--hold: --hold keeps the Groot2 server up: it needs --groot2" in capsys.readouterr().err
 
 
-def test_run_refuses_groot2_with_repair(tmp_path: Path, capsys) -> None:
-    code = main(["run", str(tmp_path / "tasks.yaml"), "--repair", "--groot2", str(free_port())])
+def test_run_refuses_a_btlog_with_repair(tmp_path: Path, capsys) -> None:
+    code = main(["run", str(tmp_path / "tasks.yaml"), "--repair", "--btlog", str(tmp_path / "r.btlog")])
     assert code == 2
-    assert "--repair replaces it as it repairs" in capsys.readouterr().err
+    assert "--repair: a .btlog file holds one tree; --repair replaces it as it repairs" in capsys.readouterr().err
+
+
+def test_a_session_follows_a_run_that_replaces_its_tree(context: zmq.Context, tmp_path: Path) -> None:
+    from bt_meta.bt.groot2.session import Groot2Session
+    from bt_meta.bt.nodes.sequences import Sequence
+    from bt_meta.bt.nodes.ticking import tick_once
+    from bt_meta.bt.xml.reader import load_tree_text
+    from bt_meta.errors import UserInputError
+
+    first = load_tree_text(TREE)
+    second = load_tree_text(TREE.replace('<AlwaysSuccess name="done"/>', '<AlwaysFailure name="done"/>'))
+    port = free_port()
+    session = Groot2Session.start(first, port=port, host="127.0.0.1")
+    try:
+        session.after_tick(tick_once(first))
+        before = request(context, port, "T")
+        session.follow(first)  # the same tree: nothing changes
+        assert request(context, port, "T")[0] == before[0]
+        session.follow(second)
+        session.after_tick(tick_once(second))
+        after = request(context, port, "T")
+        assert after[0][:6] == before[0][:6] and after[0][6:] != before[0][6:]  # a new tree id: Groot2 refetches
+        assert b'AlwaysFailure name="done"' in after[1] and b'AlwaysFailure name="done"' not in before[1]
+        status = request(context, port, "S")[1]
+        assert status[:3] == bytes([1, 0, 13])  # the new root: failed, then reset
+        assert type(first) is Sequence and type(second) is not Sequence  # the first tree's classes are given back
+    finally:
+        session.close()
+    logged = Groot2Session.start(first, btlog=tmp_path / "one.btlog")
+    try:
+        with pytest.raises(UserInputError, match=r"a \.btlog file holds one tree"):
+            logged.follow(second)
+    finally:
+        logged.close()
 
 
 @pytest.mark.slow
-def test_run_in_the_simulator_writes_a_btlog(tmp_path: Path, capsys) -> None:
-    log = tmp_path / "A.btlog"
+def test_run_with_repair_serves_the_segment_being_run(context: zmq.Context, tmp_path: Path) -> None:
     tasks = Path(__file__).resolve().parents[2] / "trees" / "letters.yaml"
-    assert main(["run", str(tasks), "--problem", "A", "--btlog", str(log)]) == 0
-    written = read_btlog(log)
-    places = [e for e in ET.fromstring(written.tree_xml).iter() if e.tag == "place"]
-    assert len(places) == 6 and all(e.get("_uid") for e in places)  # blocks b0..b5
-    place_uids = {int(e.get("_uid")) for e in places}
-    succeeded = {t.uid for t in written.transitions if t.status == 2}
-    assert place_uids <= succeeded  # every placement ran to SUCCESS
-    assert (written.transitions[-1].uid, written.transitions[-1].status) == (1, 0)  # the root, reset after success
+    port = free_port()
+    command = [sys.executable, "-m", "bt_meta.cli", "run", str(tasks), "--problem", "A", "--repair",
+               "--memory", str(tmp_path / "m.sqlite"), "--groot2", str(port), "--groot2-host", "127.0.0.1", "--hold"]
+    errors = tmp_path / "stderr.txt"
+    with errors.open("w") as err_file:
+        process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=err_file, text=True)
+        try:
+            full = request(context, port, "T", attempts=240)  # served while it runs (the simulator loads first)
+            deadline = time.monotonic() + 120
+            while "serving the finished tree" not in errors.read_text() and time.monotonic() < deadline:
+                time.sleep(0.1)
+            final = request(context, port, "S")
+        finally:
+            code, _out, _err = stop(process, signal.SIGTERM)
+    assert code == 0, errors.read_text()
+    root = ET.fromstring(full[1]).find("BehaviorTree")[0]
+    assert root.get("name") == "plan A segment 1" and root.get("_uid") == "1"
+    assert final[1][:3] == bytes([1, 0, 12])  # the segment's root succeeded and was reset

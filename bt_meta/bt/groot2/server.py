@@ -92,18 +92,11 @@ def probe_ports(port: int, host: str = "*") -> None:
 
 
 class Groot2Server:
-    """Serves one published tree until :meth:`close`."""
+    """Serves a published tree until :meth:`close`; :meth:`publish` swaps in another (a repaired run's next one)."""
 
     def __init__(self, tree: PublishedTree, observer: StatusObserver, port: int = DEFAULT_PORT,
                  *, seed: int | None = None, host: str = "*") -> None:
-        self.tree = tree
         self.port = check_port(port)
-        self.tree_xml = full_tree_xml(tree)
-        self.tree_id = tree_uuid(self.tree_xml)
-        order = [node.uid for node in tree.status_order()]
-        # BehaviorTree.CPP's status buffer: uid + status per node; the status byte of each uid is updated in place.
-        self._buffer = bytearray(pack_status_buffer((uid, int(NodeStatus.IDLE)) for uid in order))
-        self._offset = {uid: 3 * index + 2 for index, uid in enumerate(order)}
         self._lock = threading.Lock()
         self._recording = False
         self._recording_start = 0
@@ -125,10 +118,8 @@ class Groot2Server:
         self._last_request = time.monotonic()
         self._heartbeat = True
         self._rng = random.Random(seed)
-        self.hooks = HookTable({node.uid for node in tree.nodes}, self._announce_breakpoint, observer.hook_node)
-        observer.hooks = self.hooks
-        self._observer = observer
-        observer.subscribe(self.record)
+        self.hooks: HookTable | None = None
+        self.publish(tree, observer)
         self._thread = threading.Thread(target=self._serve, name=f"groot2-server-{port}", daemon=True)
         self._thread.start()
 
@@ -139,6 +130,24 @@ class Groot2Server:
             reason = "already in use" if error.errno == zmq.EADDRINUSE else error.strerror
             raise Groot2PortError(f"Groot2 port {port} cannot be opened: {reason} (Groot2 needs PORT and PORT+1)",
                                   "--groot2") from None
+
+    def publish(self, tree: PublishedTree, observer: StatusObserver) -> None:
+        """Serve ``tree`` (reported by ``observer``) from now on; its new tree id tells Groot2 to fetch it again."""
+        if self.hooks is not None:
+            self.hooks.close()  # a breakpoint of the old tree must not hold the new one
+            if self._observer.hooks is self.hooks:
+                self._observer.hooks = None
+        order = [node.uid for node in tree.status_order()]
+        # BehaviorTree.CPP's status buffer: uid + status per node; the status byte of each uid is updated in place.
+        self._offset = {uid: 3 * index + 2 for index, uid in enumerate(order)}
+        self._buffer = bytearray(pack_status_buffer((uid, int(NodeStatus.IDLE)) for uid in order))
+        self.tree = tree
+        self.tree_xml = full_tree_xml(tree)
+        self.tree_id = tree_uuid(self.tree_xml)
+        self.hooks = HookTable({node.uid for node in tree.nodes}, self._announce_breakpoint, observer.hook_node)
+        observer.hooks = self.hooks
+        self._observer = observer
+        observer.subscribe(self.record)
 
     # -- what the tree reports ----------------------------------------------------------------------------------
 

@@ -5,7 +5,8 @@ What ``bt-meta tick/run --groot2 [PORT] [--hold] --btlog FILE`` use, so both com
 Offers:
 
 * :class:`Groot2Session` -- :meth:`~Groot2Session.start` (checks the port and log path before anything ticks),
-  :meth:`~Groot2Session.after_tick`, :meth:`~Groot2Session.hold`, :meth:`~Groot2Session.close`
+  :meth:`~Groot2Session.after_tick`, :meth:`~Groot2Session.follow` (publish the next tree of a run that replaces
+  its tree), :meth:`~Groot2Session.hold`, :meth:`~Groot2Session.close`
 * :func:`check_options` -- validate ``--groot2`` / ``--btlog`` values before any work starts
 """
 
@@ -48,11 +49,12 @@ class Groot2Session:
     """Publishes one tree while it ticks; close it (or use ``with``) to release the port and finish the log."""
 
     def __init__(self, tree: PublishedTree, observer: StatusObserver, server: Groot2Server | None,
-                 log: BtlogWriter | None) -> None:
+                 log: BtlogWriter | None, registry: NodeRegistry | None = None) -> None:
         self.tree = tree
         self.observer = observer
         self.server = server
         self.log = log
+        self.registry = registry
 
     @classmethod
     def start(cls, root: py_trees.behaviour.Behaviour, *, registry: NodeRegistry | None = None,
@@ -74,7 +76,23 @@ class Groot2Session:
                 server.close()
             observer.close()
             raise
-        return cls(tree, observer, server, log)
+        return cls(tree, observer, server, log, registry)
+
+    def follow(self, root: py_trees.behaviour.Behaviour, registry: NodeRegistry | None = None) -> None:
+        """Publish ``root`` instead if it is not the tree being published (a repaired run ticks a new tree per segment).
+
+        A ``.btlog`` file holds one tree, so a session with a log cannot follow.
+        """
+        if root is self.tree.root.behaviour:
+            return
+        if self.log is not None:
+            raise UserInputError("a .btlog file holds one tree; this run replaces its tree", "--btlog")
+        self.observer.close()
+        self.registry = registry if registry is not None else self.registry
+        self.tree = PublishedTree.build(root, registry=self.registry)
+        self.observer = StatusObserver(self.tree)
+        if self.server is not None:
+            self.server.publish(self.tree, self.observer)
 
     def after_tick(self, status: object) -> None:
         """Call after each root tick with the root's status (resets a finished root, flushes the log)."""

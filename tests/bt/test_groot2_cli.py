@@ -308,3 +308,17 @@ def test_run_with_repair_serves_the_segment_being_run(context: zmq.Context, tmp_
     root = ET.fromstring(full[1]).find("BehaviorTree")[0]
     assert root.get("name") == "plan A segment 1" and root.get("_uid") == "1"
     assert final[1][:3] == bytes([1, 0, 12])  # the segment's root succeeded and was reset
+
+
+@pytest.mark.slow
+def test_run_in_the_simulator_writes_a_btlog(tmp_path: Path, capsys) -> None:
+    log = tmp_path / "A.btlog"
+    tasks = Path(__file__).resolve().parents[2] / "trees" / "letters.yaml"
+    assert main(["run", str(tasks), "--problem", "A", "--btlog", str(log)]) == 0
+    written = read_btlog(log)
+    places = [e for e in ET.fromstring(written.tree_xml).iter() if e.tag == "place"]
+    assert len(places) == 6 and all(e.get("_uid") for e in places)  # blocks b0..b5
+    place_uids = {int(e.get("_uid")) for e in places}
+    succeeded = {t.uid for t in written.transitions if t.status == 2}
+    assert place_uids <= succeeded  # every placement ran to SUCCESS
+    assert (written.transitions[-1].uid, written.transitions[-1].status) == (1, 0)  # the root, reset after success

@@ -12,6 +12,7 @@ Subpackages and modules (import them explicitly; this package imports nothing he
 * :mod:`bt_meta.bt.context`, :mod:`bt_meta.bt.expectations`, :mod:`bt_meta.bt.failures` -- run context,
   expectation records, failure records
 * :mod:`bt_meta.bt.loading` -- a runnable tree from a task file or XML
+* :mod:`bt_meta.bt.groot2` -- Groot2 live monitoring (BehaviorTree.CPP's ZeroMQ protocol) and ``.btlog`` files
 """
 
 from __future__ import annotations

@@ -4,7 +4,8 @@ Offers:
 
 * :func:`register` -- adds ``run FILE [--problem P] [--variant V] [--seed S] [--json] [--plugins DIR]
   [--max-ticks N] [--gui] [--grounding FILE] [--robot R] [--scene FILE] [--record-rrd FILE.rrd] [--memory PATH]
-  [--record] [--record-failed] [--repair] [--max-attempts N]``
+  [--record] [--record-failed] [--repair] [--max-attempts N] [--groot2 [PORT]] [--groot2-host ADDRESS] [--hold]
+  [--btlog FILE]``
 * :func:`run` -- the handler
 
 The problem is planned and compiled with a Monitor around every primitive, then ticked on a
@@ -27,6 +28,10 @@ the :class:`~bt_meta.meta.executor.MetaExecutor` with the plugin host, the memor
 failures are diagnosed and repaired (at most ``--max-attempts``), a successful repair is saved as a refinement; it
 prints the attempts and repairs (JSON gains ``attempts``, ``repairs``, ``refinement_saved``,
 ``refinements_used``, ``stop_reason``, ``reported``, ``initial_plan``).
+
+Groot2: ``--groot2 [PORT]`` serves the running tree to Groot2 (with ``--repair``: each segment's tree as it
+runs), ``--hold`` keeps serving after the last tick, ``--btlog FILE`` logs it for replay (docs/groot2.md; not with
+``--repair``: a log holds one tree).
 """
 
 from __future__ import annotations
@@ -42,6 +47,12 @@ from typing import Any
 from py_trees.common import Status
 
 from bt_meta.commands._common import print_json, shown_in_trace
+from bt_meta.commands._groot2_args import (
+    add_groot2_arguments,
+    check_groot2_arguments,
+    follow_groot2,
+    start_groot2,
+)
 from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
 from bt_meta.commands._world_args import add_world_arguments, world_options
 from bt_meta.errors import PlanningError, UserInputError
@@ -72,6 +83,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_world_arguments(parser)
     add_memory_argument(parser)
     add_plugin_arguments(parser)
+    add_groot2_arguments(parser)
     parser.set_defaults(func=run)
 
 
@@ -83,6 +95,9 @@ def run(args: argparse.Namespace) -> int:
         raise UserInputError("--max-ticks must be at least 1")
     if args.max_attempts < 0:
         raise UserInputError("--max-attempts must be at least 0")
+    check_groot2_arguments(args)
+    if args.repair and args.btlog is not None:
+        raise UserInputError("a .btlog file holds one tree; --repair replaces it as it repairs", "--repair")
     task_file = load_task_file(args.file)
     problem = task_file.problem(args.problem)  # unknown names list the known ones (exit 2)
     grounding = load_grounding(task_file.domain.name, args.file, args.grounding)
@@ -175,11 +190,13 @@ def _run_plain(args: argparse.Namespace, problem: Any, world: Any, plugins: Any,
         print(f"{problem.name} in scene {world.scene.name} ({world.variant}), seed {args.seed}: "
               f"{len(plan)} primitives planned")
     shown = {b.name for b in harness.root.iterate() if shown_in_trace(b)}
+    groot2 = start_groot2(args, harness)
     last: dict[str, str] = {}
     status = Status.RUNNING
     reported = 0
     while harness.run.tick_count < args.max_ticks:
         status = harness.tick()
+        groot2.after_tick(status)
         seen = harness.statuses()
         nodes = {name: seen.get(f"Monitor<{name}>", value) for name, value in seen.items() if name in shown}
         changed = {name: value for name, value in nodes.items() if last.get(name) != value}
@@ -198,7 +215,9 @@ def _run_plain(args: argparse.Namespace, problem: Any, world: Any, plugins: Any,
     harness.run.finish(status)
     failures = [f.to_dict() for f in harness.failures]
     harness.close()
-    return _report(args, out, status.value, harness.run.tick_count, failures, world, plan, started, built, recorder)
+    code = _report(args, out, status.value, harness.run.tick_count, failures, world, plan, started, built, recorder)
+    groot2.finish()
+    return code
 
 
 def _run_repaired(args: argparse.Namespace, task_file: Any, problem: Any, world: Any, plugins: Any, memory: Any,
@@ -207,12 +226,16 @@ def _run_repaired(args: argparse.Namespace, task_file: Any, problem: Any, world:
     from bt_meta.meta.reasoner import Limits
     from bt_meta.meta.refinements import RefinementStore
 
+    groot2 = follow_groot2(args)
+
     class Executor(MetaExecutor):
-        """Hands the recorder every segment's decomposition tree (the parent tasks of repaired steps)."""
+        """Hands the recorder every segment's decomposition tree (the parent tasks of repaired steps), and Groot2
+        every segment's behaviour tree."""
 
         def _segment(self, run: Any, plan_state: Any, *rest: Any) -> Any:  # type: ignore[override]
             if recorder is not None:
                 recorder.tree = plan_state.tree
+            groot2.watch(run, rest[0] if rest else None)
             return super()._segment(run, plan_state, *rest)
 
     if not args.json:
@@ -251,7 +274,9 @@ def _run_repaired(args: argparse.Namespace, task_file: Any, problem: Any, world:
             saved = report.refinement_saved
             print(f"refinement saved: {saved.get('method') or saved.get('reason') or saved}")
     plan = [" ".join(step) for step in report.plan]
-    return _report(args, out, status, report.ticks, report.failures, world, plan, started, built, recorder)
+    code = _report(args, out, status, report.ticks, report.failures, world, plan, started, built, recorder)
+    groot2.finish()
+    return code
 
 
 class _Progress:

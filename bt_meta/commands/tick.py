@@ -4,7 +4,8 @@ Offers:
 
 * :func:`register` -- adds ``tick FILE [--problem P] [--task-file T] [--policy] [--world fake] [--ticks N]
   [--ticks-per-skill K] [--fault SPEC ...] [--seed N] [--world-option K=V ...] [--keep-ticking] [--plugins DIR]
-  [--repair [--max-attempts N] [--memory PATH]] [--json]``
+  [--repair [--max-attempts N] [--memory PATH]] [--json] [--groot2 [PORT]] [--groot2-host ADDRESS] [--hold]
+  [--btlog FILE]``
 
 FILE is a YAML task file (planned, then compiled) or a tree XML (its primitives come from ``--task-file``, by default
 the ``.yaml`` next to it). Ticking stops when the root finishes unless ``--keep-ticking``. Each tick prints the root
@@ -18,6 +19,8 @@ Exit status 0 when the root succeeded or is still running, 1 when it failed, 2 o
 (JSON: ``status``, ``attempts``, ``repairs``, ``stop_reason``, ``plan``, ``initial_plan``, ``failures``). A
 ``--memory`` file gives the repairs their episodic memory and keeps learned refinements; without it the run uses
 none and saves none.
+
+``--groot2``/``--btlog``: the run is visible live in Groot2 and/or logged for its replay (see docs/groot2.md).
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from typing import Any
 from py_trees.common import Status
 
 from bt_meta.commands._common import print_json, shown_in_trace
+from bt_meta.commands._groot2_args import add_groot2_arguments, check_groot2_arguments, start_groot2
 from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
 from bt_meta.errors import UserInputError
 
@@ -54,6 +58,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="with --repair: at most this many applied repairs (default 5)")
     parser.add_argument("--memory", help="with --repair: episodic memory file (SQLite) for the repairs")
     add_plugin_arguments(parser)
+    add_groot2_arguments(parser)
     parser.set_defaults(func=run)
 
 
@@ -65,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserInputError("--ticks must be at least 1")
     if args.ticks_per_skill < 1:
         raise UserInputError("--ticks-per-skill must be at least 1")
+    check_groot2_arguments(args)
     faults = [Fault.parse(spec) for spec in args.fault]
     world_options: dict[str, Any] = {"seed": args.seed}
     for item in args.world_option:
@@ -74,16 +80,21 @@ def run(args: argparse.Namespace) -> int:
         world_options[key.strip()] = value.strip()
     plugins = plugin_host_from_args(args, args.file)
     if args.repair:
+        if args.groot2 is not None or args.btlog is not None:
+            raise UserInputError("--groot2 and --btlog watch one tree; with --repair use "
+                                 "'bt-meta run --repair --groot2' (the simulator) instead")
         return _run_repaired(args, faults, world_options, plugins)
     harness = TreeHarness.from_file(args.file, args.problem, task_file=args.task_file, policy=args.policy,
                                     world=args.world, faults=faults, ticks_per_skill=args.ticks_per_skill,
                                     world_options=world_options, plugins=plugins)
     shown = {b.name for b in harness.root.iterate() if shown_in_trace(b)}
+    groot2 = start_groot2(args, harness)
     ticks: list[dict[str, Any]] = []
     status = Status.INVALID
     reported = 0
     for _ in range(args.ticks):
         status = harness.tick()
+        groot2.after_tick(status)
         # Show a monitored action with its monitor's verdict (what the tree saw).
         seen = harness.statuses()
         nodes = {name: seen.get(f"Monitor<{name}>", value) for name, value in seen.items() if name in shown}
@@ -114,6 +125,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(f"{status.value} after {harness.run.tick_count} ticks, {len(harness.failures)} failures; "
               f"belief state: {len(final_state)} atoms")
+    groot2.finish()
     harness.close()
     return 1 if status is Status.FAILURE else 0
 

@@ -20,10 +20,18 @@ class SubTree(DecoratorNode):
     """BT.CPP ``SubTree``; ``tree_id`` is the ``<BehaviorTree ID>`` it instantiates."""
 
     def __init__(
-        self, name: str, child: py_trees.behaviour.Behaviour, tree_id: str, init: dict[str, str] | None = None
+        self,
+        name: str,
+        child: py_trees.behaviour.Behaviour,
+        tree_id: str,
+        init: dict[str, str] | None = None,
+        scope: str = "",
     ) -> None:
         super().__init__(name, child)
         self.tree_id = tree_id
+        # The blackboard prefix of this instance's private entries (the reader's ``/_<TreeID>_<n>``); Groot2's
+        # blackboard view uses it to tell this subtree's entries from the others.
+        self.scope = scope
         # Literal remappings (``<SubTree ID="X" speed="3"/>``) written into the private scope once, before the first
         # tick (BT.CPP writes them when the tree is created; nothing else can write a private entry before that).
         self.init_values = dict(init or {})

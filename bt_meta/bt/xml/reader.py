@@ -87,6 +87,7 @@ class ResolvedNode:
     subtree_id: str | None = None
     subtree_init: dict[str, str] = field(default_factory=dict)
     from_model: bool = False
+    subtree_scope: str = ""
 
     @property
     def id(self) -> str:
@@ -334,6 +335,7 @@ class _Resolver:
             monitor is not False,
             subtree_id=tree_id,
             subtree_init=init,
+            subtree_scope=prefix,
         )
 
 
@@ -362,7 +364,7 @@ def _build(
     try:
         if node.subtree_id is not None:
             behaviour: py_trees.behaviour.Behaviour = SubTree(
-                node.name, children[0], node.subtree_id, node.subtree_init
+                node.name, children[0], node.subtree_id, node.subtree_init, node.subtree_scope
             )
             behaviour.bt_node = instance
         else:

@@ -219,8 +219,16 @@ class NodeRegistry:
 
     def __init__(self, types: list[NodeType] | None = None) -> None:
         self._types: dict[str, NodeType] = {}
+        # Script enums (BT.CPP's registerScriptingEnum): a name scripts read as a number.
+        self.enums: dict[str, int] = {}
         for node_type in types or []:
             self.register(node_type)
+
+    def register_enum(self, name: str, value: int) -> None:
+        """Let scripts use ``name`` for ``value`` (BT.CPP's ``registerScriptingEnum``)."""
+        if not re.match(r"^[A-Za-z_][A-Za-z0-9_]*$", name):
+            raise RegistryError(f"enum name {name!r} is not an identifier")
+        self.enums[name] = int(value)
 
     def register(self, node_type: NodeType, *, replace: bool = False) -> NodeType:
         if not replace and node_type.id in self._types:

@@ -352,12 +352,23 @@ def test_document_level_errors():
     assert error_of(empty).message == "<BehaviorTree ID='M'> must have exactly one child node, got 2"
 
 
-def test_unsupported_builtins_and_attributes_say_so():
-    assert error_of(xml('<Script code="x:=1"/>')).message == (
-        "BehaviorTree.CPP built-in 'Script' is not supported by bt-meta"
+def test_script_syntax_errors_are_located_at_load():
+    error = error_of(xml('<AlwaysSuccess _skipIf="x == "/>'))
+    assert error.message == "_skipIf: expected operand at the end of the script (at character 6 of 'x == ')"
+    assert (error.line, error.column) == (3, 1)
+    error = error_of(xml('<Script code="a := 1 + 2 &amp; 3"/>'))
+    assert error.message.startswith("Script code: operator cannot be mixed with previous operators")
+    assert error_of(xml('<ScriptCondition code="x := 1;"/>')).message.startswith(
+        "ScriptCondition code: unexpected trailing ';'"
     )
-    error = error_of(xml('<AlwaysSuccess _skipIf="x == 1"/>'))
-    assert error.message.startswith("attribute '_skipIf' is not supported")
+
+
+def test_editor_metadata_attributes_are_ignored_like_behaviortree_cpp():
+    root = load_tree_text(xml('<AlwaysSuccess _collapsed="true" _uid="7" _fullpath="x" _description="d"/>'))
+    assert root.bt_node.ports == {}
+
+
+def test_bad_attributes_say_so():
     assert error_of(xml('<AlwaysSuccess _monitor="maybe"/>')).message == '_monitor="maybe" must be "true" or "false"'
     assert error_of(xml('<AlwaysSuccess _autoremap="true"/>')).message == "_autoremap is only valid on <SubTree>"
     v3 = xml('<SubTree ID="S" __shared_blackboard="true"/>', '<BehaviorTree ID="S"><AlwaysSuccess/></BehaviorTree>')

@@ -10,6 +10,10 @@ Modules (one concept each):
 * :mod:`~bt_meta.bt.nodes.loops` -- Repeat, RetryUntilSuccessful
 * :mod:`~bt_meta.bt.nodes.timeout` -- Timeout (injectable clock)
 * :mod:`~bt_meta.bt.nodes.leaves` -- AlwaysSuccess, AlwaysFailure, SetBlackboard
+* :mod:`~bt_meta.bt.nodes.scripting` -- Script, ScriptCondition, Precondition (BT.CPP's script language)
+* :mod:`~bt_meta.bt.nodes.conditions` -- the ``_skipIf`` ... ``_post`` pre/post-condition attributes
+* :mod:`~bt_meta.bt.nodes.status` -- BT.CPP's SKIPPED status
+* :mod:`~bt_meta.bt.nodes.entries` -- blackboard writes with BT.CPP's update counts, the script environment
 * :mod:`~bt_meta.bt.nodes.subtree` -- SubTree
 * :mod:`~bt_meta.bt.nodes.ticking` -- tick_once / tick_exactly_once and the wake-up signal of a tree
 
@@ -29,10 +33,11 @@ from bt_meta.bt.nodes.leaves import AlwaysFailure, AlwaysSuccess, SetBlackboard
 from bt_meta.bt.nodes.loops import Repeat, RetryUntilSuccessful
 from bt_meta.bt.nodes.modifiers import ForceFailure, ForceSuccess, Inverter, KeepRunningUntilFailure
 from bt_meta.bt.nodes.parallel import FAILURE_COUNT, SUCCESS_COUNT, Parallel
+from bt_meta.bt.nodes.scripting import Precondition, Script, ScriptCondition, parse_status
 from bt_meta.bt.nodes.sequences import ReactiveSequence, Sequence, SequenceWithMemory
 from bt_meta.bt.nodes.subtree import SubTree
 from bt_meta.bt.nodes.timeout import Timeout
-from bt_meta.bt.registry import NodeType, PortSpec
+from bt_meta.bt.registry import NodeType, PortSpec, blackboard_key
 
 __all__ = [
     "UNSUPPORTED_BUILTINS",
@@ -44,10 +49,13 @@ __all__ = [
     "Inverter",
     "KeepRunningUntilFailure",
     "Parallel",
+    "Precondition",
     "ReactiveFallback",
     "ReactiveSequence",
     "Repeat",
     "RetryUntilSuccessful",
+    "Script",
+    "ScriptCondition",
     "Sequence",
     "SequenceWithMemory",
     "SetBlackboard",
@@ -72,10 +80,7 @@ UNSUPPORTED_BUILTINS: frozenset[str] = frozenset(
         "LoopInt",
         "LoopString",
         "ParallelAll",
-        "Precondition",
         "RunOnce",
-        "Script",
-        "ScriptCondition",
         "SkipUnlessUpdated",
         "Sleep",
         "Switch2",
@@ -95,6 +100,10 @@ NUM_ATTEMPTS = PortSpec("num_attempts", "input", "int", None, "retry a failing c
 MSEC = PortSpec("msec", "input", "unsigned int", None, "halt the child after this many milliseconds")
 SUBTREE_ID = PortSpec("ID", "input", "std::string", None, "the <BehaviorTree ID> this SubTree runs")
 VALUE = PortSpec("value", "input", "std::string", None, "value to write")
+CODE = PortSpec("code", "input", "std::string", None, "script to run")
+CONDITION_CODE = PortSpec("code", "input", "std::string", None, "script that gives true or false")
+IF = PortSpec("if", "input", "std::string", None, "script: tick the child when it gives true")
+ELSE = PortSpec("else", "input", "BT::NodeStatus", "FAILURE", "status returned when 'if' gives false")
 OUTPUT_KEY = PortSpec("output_key", "inout", "std::string", None, "blackboard entry to write")
 
 
@@ -146,6 +155,20 @@ def _set_blackboard(*, name: str, ports: dict[str, str], children: list[Behaviou
     return SetBlackboard(name=name, value=PortValue(VALUE, ports["value"]), output_key=ports["output_key"])
 
 
+def _script(*, name: str, ports: dict[str, str], children: list[Behaviour]) -> Behaviour:
+    return Script(name, PortValue(CODE, ports["code"]))
+
+
+def _script_condition(*, name: str, ports: dict[str, str], children: list[Behaviour]) -> Behaviour:
+    return ScriptCondition(name, PortValue(CONDITION_CODE, ports["code"]))
+
+
+def _precondition(*, name: str, ports: dict[str, str], children: list[Behaviour]) -> Behaviour:
+    otherwise = ports["else"]
+    value: Any = PortValue(ELSE, otherwise) if blackboard_key(otherwise) is not None else parse_status(otherwise)
+    return Precondition(name, children[0], PortValue(IF, ports["if"]), value)
+
+
 def _subtree(*, name: str, ports: dict[str, str], children: list[Behaviour]) -> Behaviour:
     return SubTree(name=name, child=children[0], tree_id=ports["ID"])
 
@@ -173,5 +196,8 @@ def builtin_node_types() -> list[NodeType]:
         node("AlwaysSuccess", "Action", _leaf(AlwaysSuccess)),
         node("AlwaysFailure", "Action", _leaf(AlwaysFailure)),
         node("SetBlackboard", "Action", _set_blackboard, [VALUE, OUTPUT_KEY]),
+        node("Script", "Action", _script, [CODE]),
+        node("ScriptCondition", "Condition", _script_condition, [CONDITION_CODE]),
+        node("Precondition", "Decorator", _precondition, [IF, ELSE]),
         node("SubTree", "SubTree", _subtree, [SUBTREE_ID], children=(1, 1)),
     ]

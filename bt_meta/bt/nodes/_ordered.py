@@ -18,7 +18,7 @@ from typing import ClassVar
 import py_trees
 from py_trees.common import Status
 
-from bt_meta.bt.nodes.base import ControlNode, TickGenerator
+from bt_meta.bt.nodes.base import SKIPPED, ControlNode, TickGenerator
 
 
 class ResumingControl(ControlNode):
@@ -30,8 +30,11 @@ class ResumingControl(ControlNode):
     def __init__(self, name: str, children: list[py_trees.behaviour.Behaviour] | None = None) -> None:
         super().__init__(name, children)
         self.current_child_idx = 0
+        self.skipped_count = 0
 
     def execute(self) -> TickGenerator:
+        if self.status != Status.RUNNING:
+            self.skipped_count = 0
         self.status = Status.RUNNING
         while self.current_child_idx < len(self.children):
             child_status = yield from self.tick_child(self.current_child_idx)
@@ -41,13 +44,18 @@ class ResumingControl(ControlNode):
                 self.reset_children()
                 self.current_child_idx = 0
                 return self.stop_on
+            if child_status is SKIPPED:
+                self.skipped_count += 1
             self.current_child_idx += 1
+        all_skipped = self.skipped_count == len(self.children)
         self.reset_children()
         self.current_child_idx = 0
-        return self.exhausted
+        self.skipped_count = 0
+        return SKIPPED if all_skipped else self.exhausted
 
     def halt(self) -> None:
         self.current_child_idx = 0
+        self.skipped_count = 0
         super().halt()
 
 
@@ -59,8 +67,13 @@ class ReactiveControl(ControlNode):
 
     def execute(self) -> TickGenerator:
         self.status = Status.RUNNING
+        all_skipped = True
         for index in range(len(self.children)):
             child_status = yield from self.tick_child(index)
+            all_skipped = all_skipped and child_status is SKIPPED
+            if child_status is SKIPPED:
+                self.reset_child(index)  # BT.CPP: so that it can be skipped again
+                continue
             if child_status == Status.RUNNING:
                 for other in range(len(self.children)):
                     if other != index:
@@ -70,4 +83,4 @@ class ReactiveControl(ControlNode):
                 self.reset_children()
                 return self.stop_on
         self.reset_children()
-        return self.exhausted
+        return SKIPPED if all_skipped else self.exhausted

@@ -11,6 +11,7 @@ from __future__ import annotations
 import py_trees
 from py_trees.common import Status
 
+from bt_meta.bt.nodes import entries
 from bt_meta.bt.nodes.base import PortValue, absolute_key
 from bt_meta.bt.registry import blackboard_key
 
@@ -45,5 +46,5 @@ class SetBlackboard(py_trees.behaviour.Behaviour):
 
     def update(self) -> Status:
         value = self.value.get() if self.value.key is not None else self.value.text
-        py_trees.blackboard.Blackboard.set(self.output_key, value)
+        entries.write(self.output_key, value)
         return Status.SUCCESS

@@ -19,7 +19,7 @@ from typing import ClassVar
 import py_trees
 from py_trees.common import Status
 
-from bt_meta.bt.nodes.base import DecoratorNode, PortValue, TickGenerator
+from bt_meta.bt.nodes.base import SKIPPED, DecoratorNode, PortValue, TickGenerator
 
 
 def _read(value: PortValue | int) -> int:
@@ -54,6 +54,9 @@ class _CountedLoop(DecoratorNode):
                 if self.requires_wake_up() and previous == Status.INVALID and do_loop:
                     self.emit_wake_up()
                     return Status.RUNNING
+            elif child_status is SKIPPED:
+                self.reset_child()  # BT.CPP: skipped again next time; the count is kept
+                return SKIPPED
             elif child_status == self.ends_on:
                 self.count = 0
                 self.reset_child()

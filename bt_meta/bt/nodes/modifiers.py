@@ -78,4 +78,5 @@ class KeepRunningUntilFailure(DecoratorNode):
         if child_status == Status.FAILURE:
             self.reset_child()
             return Status.FAILURE
-        return child_status
+        # BT.CPP returns its own status (RUNNING) when the child is skipped.
+        return Status.RUNNING

@@ -17,7 +17,7 @@ from __future__ import annotations
 import py_trees
 from py_trees.common import Status
 
-from bt_meta.bt.nodes.base import ControlNode, PortValue, TickGenerator
+from bt_meta.bt.nodes.base import SKIPPED, ControlNode, PortValue, TickGenerator
 from bt_meta.bt.registry import PortSpec
 from bt_meta.errors import BtMetaError
 
@@ -55,7 +55,8 @@ class Parallel(ControlNode):
 
     def thresholds(self) -> tuple[int, int]:
         count = len(self.children)
-        success = threshold(self._read(self.success_count), count)
+        self.raw_success = self._read(self.success_count)
+        success = threshold(self.raw_success, count)
         failure = threshold(self._read(self.failure_count), count)
         if count < success:
             raise ParallelThresholdError(f"{self.name}: success_count {success} > {count} children, can never succeed")
@@ -72,16 +73,21 @@ class Parallel(ControlNode):
         required_success, required_failure = self.thresholds()
         count = len(self.children)
         self.status = Status.RUNNING
+        skipped = 0
         for index in range(count):
             if index not in self.completed:
                 child_status = yield from self.tick_child(index)
-                if child_status == Status.SUCCESS:
+                if child_status is SKIPPED:
+                    skipped += 1
+                elif child_status == Status.SUCCESS:
                     self.completed.add(index)
                     self.success_total += 1
                 elif child_status == Status.FAILURE:
                     self.completed.add(index)
                     self.failure_total += 1
-            if self.success_total >= required_success:
+            if self.success_total >= required_success or (
+                self.raw_success < 0 and self.success_total + skipped >= required_success
+            ):
                 self.clear()
                 self.reset_children()
                 return Status.SUCCESS
@@ -89,7 +95,7 @@ class Parallel(ControlNode):
                 self.clear()
                 self.reset_children()
                 return Status.FAILURE
-        return Status.RUNNING
+        return SKIPPED if skipped == count else Status.RUNNING
 
     def halt(self) -> None:
         self.clear()

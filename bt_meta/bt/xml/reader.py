@@ -35,6 +35,8 @@ from pathlib import Path
 import py_trees
 
 from bt_meta.bt.nodes import UNSUPPORTED_BUILTINS
+from bt_meta.bt.nodes.conditions import POST_CONDITIONS, PRE_CONDITIONS, Conditions, attach_conditions
+from bt_meta.bt.nodes.entries import BlackboardEnvironment
 from bt_meta.bt.nodes.subtree import SubTree
 from bt_meta.bt.nodes.ticking import install_wake_up
 from bt_meta.bt.registry import (
@@ -48,12 +50,18 @@ from bt_meta.bt.registry import (
     blackboard_key,
     default_registry,
 )
+from bt_meta.bt.script import CompiledScript, ScriptSyntaxError, compile_script
+from bt_meta.bt.script.ast import Name
+from bt_meta.bt.script.parser import walk
 from bt_meta.bt.xml.document import ModelEntry, TreeDocument, XMLElement, parse_file, parse_text
 from bt_meta.errors import TreeXMLError
 
 WrapAction = Callable[[py_trees.behaviour.Behaviour, NodeInstance], py_trees.behaviour.Behaviour]
 
 _RESERVED = {"name", "ID"}
+_CONDITION_ATTRIBUTES = (*PRE_CONDITIONS, *POST_CONDITIONS)
+# Built-in ports whose literal value is a script, compiled at load so that a syntax error is located.
+_SCRIPT_PORTS = {("Script", "code"), ("ScriptCondition", "code"), ("Precondition", "if")}
 # Numbers SubTree instances across every load in this process: py_trees has one global blackboard, so two loaded
 # trees must not share a private scope.
 _INSTANCES = itertools.count(1)
@@ -87,6 +95,9 @@ class ResolvedNode:
     subtree_id: str | None = None
     subtree_init: dict[str, str] = field(default_factory=dict)
     from_model: bool = False
+    # Pre/post-condition scripts (``_skipIf`` ...) and the root key of every name the node's scripts use.
+    conditions: dict[str, CompiledScript] = field(default_factory=dict)
+    script_keys: dict[str, str] = field(default_factory=dict)
 
     @property
     def id(self) -> str:
@@ -201,23 +212,50 @@ class _Resolver:
         raise self.error(f'{name}="{value}" must be "true" or "false"', element)
 
     def split_attributes(self, element: XMLElement, explicit: bool) -> dict[str, str]:
+        """The ports an element writes. Attributes that do not start with a letter are not ports: BT.CPP reads
+        the pre/post conditions among them and ignores the rest (editor metadata such as ``_collapsed``)."""
         ports: dict[str, str] = {}
         for attr, value in element.attrib.items():
-            if attr in _RESERVED or attr in ("_monitor", "_autoremap", "_description"):
+            if attr in _RESERVED:
                 continue
             if attr == "__shared_blackboard":
                 raise self.error(
                     '__shared_blackboard is BehaviorTree.CPP v3 syntax; in v4 use _autoremap="true" or remap ports',
                     element,
                 )
-            if attr.startswith("_"):
-                raise self.error(
-                    f"attribute {attr!r} is not supported (BehaviorTree.CPP pre/post conditions need its "
-                    "scripting language)",
-                    element,
-                )
+            if not attr[:1].isalpha():
+                continue
             ports[attr] = value
         return ports
+
+    def compile(self, text: str, what: str, element: XMLElement) -> CompiledScript:
+        try:
+            return compile_script(text)
+        except ScriptSyntaxError as error:
+            where = f"at character {error.offset + 1} of {text!r}"
+            raise self.error(f"{what}: {error.message} ({where})", element) from None
+
+    def scripts(
+        self, element: XMLElement, node_type: NodeType, ports: dict[str, str], scope: _Scope
+    ) -> tuple[dict[str, CompiledScript], dict[str, str]]:
+        """Compile the element's condition attributes and script ports; map every name they use to a root key."""
+        conditions = {
+            attr: self.compile(element.attrib[attr], attr, element)
+            for attr in _CONDITION_ATTRIBUTES
+            if attr in element.attrib
+        }
+        compiled = list(conditions.values())
+        if node_type.builtin:
+            for port, text in ports.items():
+                if (node_type.id, port) in _SCRIPT_PORTS and blackboard_key(text) is None and text != "":
+                    compiled.append(self.compile(text, f"{node_type.id} {port}", element))
+        keys: dict[str, str] = {}
+        for script in compiled:
+            for expr in script.exprs:
+                for node in walk(expr):
+                    if isinstance(node, Name) and node.name not in keys:
+                        keys[node.name] = scope.resolve(node.name)
+        return conditions, keys
 
     def resolve_ports(self, node_type: NodeType, ports: dict[str, str], scope: _Scope) -> dict[str, str]:
         resolved = {}
@@ -262,6 +300,7 @@ class _Resolver:
                 element,
             )
         self.check_static(node_type, completed, count, element)
+        conditions, script_keys = self.scripts(element, node_type, completed, scope)
         children = [self.resolve(child, scope, stack) for child in element.children]
         return ResolvedNode(
             node_type,
@@ -273,6 +312,8 @@ class _Resolver:
             children,
             monitor is not False,
             from_model=from_model,
+            conditions=conditions,
+            script_keys=script_keys,
         )
 
     def check_static(self, node_type: NodeType, ports: dict[str, str], count: int, element: XMLElement) -> None:
@@ -319,6 +360,7 @@ class _Resolver:
             else:
                 remap[port] = key
         inner = _Scope(scope, remap, autoremap, prefix)
+        conditions, script_keys = self.scripts(element, node_type, {}, scope)
         child = self.resolve_tree(tree_id, inner, stack)
         written = dict(ports)
         if element.attrib.get("_autoremap") is not None:
@@ -334,6 +376,8 @@ class _Resolver:
             monitor is not False,
             subtree_id=tree_id,
             subtree_init=init,
+            conditions=conditions,
+            script_keys=script_keys,
         )
 
 
@@ -377,6 +421,12 @@ def _build(
         raise TreeXMLError(f"cannot build node {node.id!r}: {error}", path, node.line, node.column) from None
     if wrap_action is not None and node.category == "Action" and not node.node_type.builtin and node.monitor:
         behaviour = wrap_action(behaviour, instance)
+    env = BlackboardEnvironment(node.script_keys, registry.enums)
+    bind = getattr(behaviour, "bind_environment", None)
+    if bind is not None:
+        bind(env)
+    if node.conditions:
+        attach_conditions(behaviour, Conditions(dict(node.conditions), env))
     return behaviour
 
 
@@ -398,6 +448,7 @@ def load_document(
     root = _build(resolved, registry, wrap_action, document.path)
     if wake_up:
         install_wake_up(root)
+    root.bt_root = True
     root.bt_tree_id = select_tree(document, tree_id)
     root.bt_document = document
     return root

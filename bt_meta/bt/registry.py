@@ -118,6 +118,10 @@ class PortSpec:
                 return number
             if type_name in _FLOAT_TYPES:
                 return float(value)
+            if type_name in ("BT::NodeStatus", "NodeStatus"):
+                if value not in ("SUCCESS", "FAILURE", "RUNNING", "SKIPPED"):
+                    raise ValueError
+                return value
             if type_name == "bool":
                 lowered = value.lower()
                 if lowered in _TRUE:

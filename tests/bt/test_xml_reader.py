@@ -249,7 +249,7 @@ def test_unknown_node_lists_close_matches():
 
 def test_unknown_node_without_close_match_lists_known_ids():
     error = error_of(xml("<Zzz/>"))
-    assert error.message.startswith("unknown node ID 'Zzz'; known IDs: AlwaysFailure, AlwaysSuccess, Fallback")
+    assert error.message.startswith("unknown node ID 'Zzz'; known IDs: AlwaysFailure, AlwaysSuccess, AsyncFallback")
 
 
 def test_missing_required_port():
@@ -463,7 +463,8 @@ def test_show_bad_xml_exits_2_with_one_line(tmp_path):
     bad.write_text('<root BTCPP_format="4">\n<BehaviorTree ID="M">\n<Sequense/>\n</BehaviorTree></root>')
     result = run_cli("show", str(bad))
     assert result.returncode == 2
-    assert result.stderr == f"{bad}:3:1: unknown node ID 'Sequense'; did you mean Sequence?\n"
+    hint = "did you mean Sequence, AsyncSequence?"
+    assert result.stderr == f"{bad}:3:1: unknown node ID 'Sequense'; {hint}\n"
     assert result.stdout == ""
 
 

@@ -26,6 +26,8 @@ class ResumingControl(ControlNode):
 
     stop_on: ClassVar[Status]
     exhausted: ClassVar[Status]
+    # AsyncSequence / AsyncFallback: end the tick (RUNNING, wake-up raised) after a child that finished synchronously.
+    asynchronous: ClassVar[bool] = False
 
     def __init__(self, name: str, children: list[py_trees.behaviour.Behaviour] | None = None) -> None:
         super().__init__(name, children)
@@ -37,6 +39,7 @@ class ResumingControl(ControlNode):
             self.skipped_count = 0
         self.status = Status.RUNNING
         while self.current_child_idx < len(self.children):
+            previous = self.children[self.current_child_idx].status
             child_status = yield from self.tick_child(self.current_child_idx)
             if child_status == Status.RUNNING:
                 return Status.RUNNING
@@ -47,6 +50,15 @@ class ResumingControl(ControlNode):
             if child_status is SKIPPED:
                 self.skipped_count += 1
             self.current_child_idx += 1
+            if (
+                self.asynchronous
+                and child_status is not SKIPPED
+                and self.requires_wake_up()
+                and previous == Status.INVALID
+                and self.current_child_idx < len(self.children)
+            ):
+                self.emit_wake_up()
+                return Status.RUNNING
         all_skipped = self.skipped_count == len(self.children)
         self.reset_children()
         self.current_child_idx = 0

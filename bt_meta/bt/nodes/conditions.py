@@ -82,6 +82,7 @@ def attach_conditions(behaviour: py_trees.behaviour.Behaviour, conditions: Condi
     behaviour.bt_conditions = conditions
 
     def tick() -> Iterator[py_trees.behaviour.Behaviour]:
+        behaviour.bt_skipped = False  # what the last tick returned is not what this one returns
         imposed = conditions.pre(behaviour)
         if imposed is None:
             for node in inner_tick():

@@ -5,6 +5,7 @@ Offers:
 * :class:`Parallel` -- ticks every child that has not finished yet; SUCCESS once ``success_count`` children
   succeeded, FAILURE once ``failure_count`` failed or success became impossible; negative counts mean
   "number of children + 1 + count" (``-1`` = all)
+* :class:`ParallelAll` -- ticks every child to completion; FAILURE once ``max_failures`` failed
 * :func:`threshold` -- that arithmetic
 
 py_trees' ``Parallel`` only knows SuccessOnAll/SuccessOnOne/SuccessOnSelected and fails on the first failure, so it
@@ -99,4 +100,51 @@ class Parallel(ControlNode):
 
     def halt(self) -> None:
         self.clear()
+        super().halt()
+
+
+class ParallelAll(ControlNode):
+    """BT.CPP ``ParallelAll``: ticks every child until all finished; FAILURE when at least ``max_failures`` failed
+    (negative: number of children + 1 + value)."""
+
+    def __init__(
+        self, name: str, children: list[py_trees.behaviour.Behaviour], max_failures: PortValue | int = 1
+    ) -> None:
+        super().__init__(name, children)
+        self.max_failures = max_failures
+        self.completed: set[int] = set()
+        self.failure_total = 0
+
+    def execute(self) -> TickGenerator:
+        raw = self.max_failures.get() if isinstance(self.max_failures, PortValue) else self.max_failures
+        count = len(self.children)
+        failure_threshold = threshold(raw, count)
+        if count < failure_threshold:
+            raise ParallelThresholdError(f"{self.name}: max_failures {failure_threshold} > {count} children")
+        self.status = Status.RUNNING
+        skipped = 0
+        for index in range(count):
+            if index in self.completed:
+                continue
+            child_status = yield from self.tick_child(index)
+            if child_status is SKIPPED:
+                skipped += 1
+            elif child_status == Status.SUCCESS:
+                self.completed.add(index)
+            elif child_status == Status.FAILURE:
+                self.completed.add(index)
+                self.failure_total += 1
+        if skipped == count:
+            return SKIPPED
+        if skipped + len(self.completed) >= count:
+            self.reset_children()
+            self.completed.clear()
+            status = Status.FAILURE if self.failure_total >= failure_threshold else Status.SUCCESS
+            self.failure_total = 0
+            return status
+        return Status.RUNNING
+
+    def halt(self) -> None:
+        self.completed.clear()
+        self.failure_total = 0
         super().halt()

@@ -6,7 +6,6 @@ Offers:
 * :class:`ScriptCondition` -- SUCCESS when its ``code`` gives true, else FAILURE
 * :class:`Precondition` -- ticks its child when ``if`` gives true (and keeps ticking it while it is RUNNING),
   otherwise returns ``else`` (FAILURE by default; SUCCESS, RUNNING or SKIPPED allowed)
-* :func:`parse_status` -- "SUCCESS" / "FAILURE" / "RUNNING" / "SKIPPED" -> the status
 
 Every node gets its environment from the loader (``bind_environment``): script names mapped to root keys, enums.
 A ``code`` given as ``{key}`` is read from the blackboard at tick time and parsed when it changes.
@@ -21,22 +20,8 @@ from py_trees.common import Status
 
 from bt_meta.bt.nodes.base import DecoratorNode, PortValue, PortValueError, TickGenerator
 from bt_meta.bt.nodes.entries import BlackboardEnvironment
-from bt_meta.bt.nodes.status import SKIPPED, Returned, returned
+from bt_meta.bt.nodes.status import parse_status, returned
 from bt_meta.bt.script import CompiledScript, ScriptRuntimeError, ScriptSyntaxError, compile_script
-
-_STATUSES: dict[str, Returned] = {
-    "SUCCESS": Status.SUCCESS,
-    "FAILURE": Status.FAILURE,
-    "RUNNING": Status.RUNNING,
-    "SKIPPED": SKIPPED,
-}
-
-
-def parse_status(text: str) -> Returned:
-    try:
-        return _STATUSES[text.strip()]
-    except KeyError:
-        raise ValueError(f"expected one of {', '.join(_STATUSES)}, got {text!r}") from None
 
 
 class _ScriptSource:

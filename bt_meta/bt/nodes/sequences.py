@@ -7,6 +7,7 @@ Offers:
   (BT.CPP keeps the index even when halted); inside a tree with a wake-up signal it ends the tick with RUNNING
   after each child that finished synchronously (BT.CPP 4.8 does, see :mod:`bt_meta.bt.nodes.loops`)
 * :class:`ReactiveSequence` -- re-ticks every child from 0 on every tick; a RUNNING child halts all the others
+* :class:`AsyncSequence` -- a Sequence that yields (RUNNING, wake-up) after each child that finished synchronously
 
 py_trees' ``Sequence(memory=True)`` resumes at the RUNNING child but restarts at 0 after a failure, like BT.CPP's
 ``Sequence``; ``Sequence(memory=False)`` is close to ``ReactiveSequence`` but neither resets finished siblings nor
@@ -78,4 +79,13 @@ class ReactiveSequence(ReactiveControl):
     def __init__(
         self, name: str = "ReactiveSequence", children: list[py_trees.behaviour.Behaviour] | None = None
     ) -> None:
+        super().__init__(name, children)
+
+
+class AsyncSequence(Sequence):
+    """BT.CPP ``AsyncSequence``: a Sequence that ends the tick after each child that finished synchronously."""
+
+    asynchronous = True
+
+    def __init__(self, name: str = "AsyncSequence", children: list[py_trees.behaviour.Behaviour] | None = None) -> None:
         super().__init__(name, children)

@@ -11,6 +11,7 @@ Offers:
 * :data:`Returned` -- a py_trees Status or SKIPPED
 * :func:`returned` -- what a behaviour returned on its last tick
 * :func:`mark` -- record what a behaviour returned (sets or clears ``bt_skipped``)
+* :func:`parse_status` -- a status written in XML -> the status
 """
 
 from __future__ import annotations
@@ -41,3 +42,19 @@ def returned(behaviour: py_trees.behaviour.Behaviour) -> Returned:
 
 def mark(behaviour: py_trees.behaviour.Behaviour, result: Returned) -> None:
     behaviour.bt_skipped = result is SKIPPED
+
+
+_STATUSES: dict[str, Returned] = {
+    "SUCCESS": Status.SUCCESS,
+    "FAILURE": Status.FAILURE,
+    "RUNNING": Status.RUNNING,
+    "SKIPPED": SKIPPED,
+}
+
+
+def parse_status(text: str) -> Returned:
+    """"SUCCESS" / "FAILURE" / "RUNNING" / "SKIPPED" -> the status (``ValueError`` otherwise)."""
+    try:
+        return _STATUSES[text.strip()]
+    except KeyError:
+        raise ValueError(f"expected one of {', '.join(_STATUSES)}, got {text!r}") from None

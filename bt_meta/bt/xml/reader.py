@@ -61,6 +61,14 @@ WrapAction = Callable[[py_trees.behaviour.Behaviour, NodeInstance], py_trees.beh
 _RESERVED = {"name", "ID"}
 _CONDITION_ATTRIBUTES = (*PRE_CONDITIONS, *POST_CONDITIONS)
 # Built-in ports whose literal value is a script, compiled at load so that a syntax error is located.
+# Built-in ports that name a blackboard entry with a plain string (BT.CPP resolves it in the node's own scope).
+_ENTRY_NAME_PORTS = {
+    ("SetBlackboard", "output_key"),
+    ("UnsetBlackboard", "key"),
+    ("WasEntryUpdated", "entry"),
+    ("SkipUnlessUpdated", "entry"),
+    ("WaitValueUpdate", "entry"),
+}
 _SCRIPT_PORTS = {("Script", "code"), ("ScriptCondition", "code"), ("Precondition", "if")}
 # Numbers SubTree instances across every load in this process: py_trees has one global blackboard, so two loaded
 # trees must not share a private scope.
@@ -261,8 +269,8 @@ class _Resolver:
         resolved = {}
         for port, value in ports.items():
             key = blackboard_key(value)
-            if key is None and node_type.builtin and node_type.id == "SetBlackboard" and port == "output_key":
-                # BT.CPP's SetBlackboard names its entry with a plain string, in the current (subtree) scope.
+            if key is None and node_type.builtin and (node_type.id, port) in _ENTRY_NAME_PORTS:
+                # e.g. BT.CPP's SetBlackboard names its entry with a plain string, in the current (subtree) scope.
                 resolved[port] = "{" + scope.resolve(value.strip()) + "}"
             elif key is None:
                 resolved[port] = value

@@ -26,6 +26,11 @@ from bt_meta.bt.nodes import entries
 from bt_meta.bt.nodes.base import SKIPPED, DecoratorNode, PortValue, TickGenerator
 from bt_meta.bt.nodes.status import parse_status
 
+# A child that keeps completing while the loop runs (it was RUNNING, so BT.CPP does not yield) ends the tick after
+# this many cycles: RUNNING, with the wake-up signal raised, so ``--ticks`` bounds a ``-1`` or huge count. BT.CPP
+# would spin inside the tick; no finite run can observe the difference.
+MAX_CYCLES_PER_TICK = 1000
+
 
 def _read(value: PortValue | int) -> int:
     return value.get() if isinstance(value, PortValue) else value
@@ -49,7 +54,12 @@ class _CountedLoop(DecoratorNode):
         limit = self.limit()
         do_loop = self.count < limit or limit == -1
         self.status = Status.RUNNING
+        cycles = 0
         while do_loop:
+            cycles += 1
+            if cycles > MAX_CYCLES_PER_TICK:
+                self.emit_wake_up()
+                return Status.RUNNING
             previous = self.decorated.status
             child_status = yield from self.tick_child()
             if child_status == self.loops_on:

@@ -39,10 +39,17 @@ def tick_exactly_once(root: py_trees.behaviour.Behaviour) -> Returned:
     return _finish(root)
 
 
+# tick_once re-ticks a woken root at most this many times: a Repeat num_cycles="-1" over a child that completes at
+# once wakes it forever (BT.CPP spins there), and a caller's tick budget must still bound the run.
+MAX_WAKE_UPS = 10_000
+
+
 def tick_once(root: py_trees.behaviour.Behaviour) -> Returned:
     signal: WakeUpSignal | None = getattr(root, "bt_wake_up", None)
     # Like BT.CPP, a signal left pending by an earlier tick is not cleared first: it causes one re-tick.
     root.tick_once()
-    while returned(root) == Status.RUNNING and signal is not None and signal.consume():
+    wake_ups = 0
+    while returned(root) == Status.RUNNING and signal is not None and wake_ups < MAX_WAKE_UPS and signal.consume():
+        wake_ups += 1
         root.tick_once()
     return _finish(root)

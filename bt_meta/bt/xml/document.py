@@ -1,8 +1,11 @@
 """Safe parsing of BehaviorTree.CPP v4 XML into elements that remember their line and column.
 
 The parser is expat with every DTD feature refused: a DOCTYPE, an entity declaration or an external entity is an
-error, so entity-expansion bombs and external fetches cannot happen. No structure beyond XML well-formedness is
-checked here except the shape of ``<root>`` (see :mod:`bt_meta.bt.xml.reader` for the tree semantics).
+error, so entity-expansion bombs and external fetches cannot happen. What BehaviorTree.CPP's tinyxml2 accepts and a
+strict parser does not -- an unescaped ``&&`` or ``<`` inside an attribute value -- is accepted with a warning
+(``TreeDocument.warnings``, also logged on ``bt_meta.xml``). Elements nest at most :data:`MAX_NESTING` deep.
+No structure beyond XML well-formedness is checked here except the shape of ``<root>`` (see
+:mod:`bt_meta.bt.xml.reader` for the tree semantics).
 
 Offers:
 
@@ -10,16 +13,24 @@ Offers:
 * :class:`ModelEntry` -- one ``<TreeNodesModel>`` declaration (ID, category, ports)
 * :class:`TreeDocument` -- the ``<BehaviorTree>`` elements by ID, ``main_tree_to_execute``, the node models
 * :func:`parse_text`, :func:`parse_file` -- XML text or file -> :class:`TreeDocument` (raise ``TreeXMLError``)
+* :func:`escape_attribute_values` -- the repair behind that leniency
 """
 
 from __future__ import annotations
 
+import logging
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from xml.parsers import expat
 
 from bt_meta.bt.registry import CATEGORIES, DIRECTIONS, PortSpec
 from bt_meta.errors import TreeXMLError
+
+# Deeper element nesting is refused while parsing: every later stage (resolving, building, ticking) recurses over
+# the tree, and real trees are a few dozen levels deep.
+MAX_NESTING = 256
+_LOG = logging.getLogger("bt_meta.xml")
 
 
 @dataclass
@@ -47,6 +58,8 @@ class TreeDocument:
     trees: dict[str, XMLElement]
     main_tree: str | None
     models: dict[str, ModelEntry]
+    # "path:line:column: message" for XML that was accepted although it is not well formed
+    warnings: list[str] = field(default_factory=list)
 
     def error(self, message: str, element: XMLElement | None = None) -> TreeXMLError:
         if element is None:
@@ -73,6 +86,8 @@ def _parse_elements(text: str | bytes, path: str) -> XMLElement:
 
     def start(tag: str, attrib: dict[str, str]) -> None:
         line, column = where()
+        if len(stack) >= MAX_NESTING:
+            raise _Refused(f"elements nested deeper than {MAX_NESTING} levels", line, column)
         element = XMLElement(tag, dict(attrib), line, column)
         if stack:
             stack[-1].children.append(element)
@@ -105,7 +120,95 @@ def _parse_elements(text: str | bytes, path: str) -> XMLElement:
     except expat.ExpatError as error:
         message = expat.ErrorString(error.code) if error.code is not None else str(error)
         raise TreeXMLError(f"malformed XML: {message}", path, error.lineno, error.offset + 1) from None
+    except (LookupError, ValueError) as error:
+        # expat asks Python for an encoding it does not know itself; an unknown name ends up here.
+        raise TreeXMLError(f"malformed XML: unsupported encoding ({error})", path, 1, 1) from None
+    if not top:
+        raise TreeXMLError("malformed XML: no element found", path, 1, 1)
     return top[0]
+
+
+# Anything shaped like an entity reference is left to expat (an undefined one stays an error); only a bare '&', as
+# in "a && b", is escaped.
+_ENTITY = re.compile(r"&(?:[A-Za-z_:][\w.:-]*|#[0-9]+|#x[0-9a-fA-F]+);")
+
+
+def escape_attribute_values(text: str) -> tuple[str, list[tuple[int, int, str]]]:
+    """Escape what BT.CPP's tinyxml2 accepts unescaped inside attribute values (``&&``, ``<``): returns the fixed
+    text and, per fix, the 1-based line and column of the character and what it was."""
+    out: list[str] = []
+    fixes: list[tuple[int, int, str]] = []
+    index, size, line, line_start = 0, len(text), 1, 0
+    quote = ""
+    in_tag = False
+    while index < size:
+        char = text[index]
+        if char == "\n":
+            line, line_start = line + 1, index + 1
+        if not in_tag:
+            for opening, closing in (("<!--", "-->"), ("<![CDATA[", "]]>"), ("<?", "?>")):
+                if text.startswith(opening, index):
+                    end = text.find(closing, index)
+                    end = size if end < 0 else end + len(closing)
+                    chunk = text[index:end]
+                    line += chunk.count("\n")
+                    if "\n" in chunk:
+                        line_start = index + chunk.rindex("\n") + 1
+                    out.append(chunk)
+                    index = end
+                    break
+            else:
+                in_tag = char == "<"
+                out.append(char)
+                index += 1
+            continue
+        if quote:
+            if char == quote:
+                quote = ""
+            elif char == "<":
+                fixes.append((line, index - line_start + 1, "<"))
+                out.append("&lt;")
+                index += 1
+                continue
+            elif char == "&" and not _ENTITY.match(text, index):
+                fixes.append((line, index - line_start + 1, "&"))
+                out.append("&amp;")
+                index += 1
+                continue
+        elif char in "\"'":
+            quote = char
+        elif char == ">":
+            in_tag = False
+        out.append(char)
+        index += 1
+    return "".join(out), fixes
+
+
+def _parse_lenient(text: str | bytes, path: str) -> tuple[XMLElement, list[str]]:
+    """Parse strictly; if that fails, accept what tinyxml2 accepts (unescaped ``&`` / ``<`` in attribute
+    values) and say so in warnings. Anything else keeps the strict parser's error."""
+    try:
+        return _parse_elements(text, path), []
+    except TreeXMLError as strict:
+        try:
+            decoded = text.decode("utf-8") if isinstance(text, bytes) else text
+        except UnicodeDecodeError:
+            raise strict from None
+        fixed, fixes = escape_attribute_values(decoded)
+        if not fixes:
+            raise
+        try:
+            element = _parse_elements(fixed, path)
+        except TreeXMLError:
+            raise strict from None
+        warnings = [
+            f"{path}:{line}:{column}: warning: unescaped {char!r} in an attribute value (BehaviorTree.CPP accepts "
+            f"it; write {'&amp;' if char == '&' else '&lt;'} to make the XML well formed)"
+            for line, column, char in fixes
+        ]
+        for warning in warnings:
+            _LOG.warning(warning)
+        return element, warnings
 
 
 def _parse_model(element: XMLElement, doc_path: str) -> list[ModelEntry]:
@@ -123,6 +226,7 @@ def _parse_model(element: XMLElement, doc_path: str) -> list[ModelEntry]:
             raise TreeXMLError(f"<{child.tag}> in <TreeNodesModel> needs an ID", doc_path, child.line, child.column)
         ports: list[PortSpec] = []
         description = ""
+        declared: dict[str, int] = {}
         for port in child.children:
             if port.tag == "MetadataFields":
                 continue
@@ -137,6 +241,14 @@ def _parse_model(element: XMLElement, doc_path: str) -> list[ModelEntry]:
             name = port.attrib.get("name")
             if not name:
                 raise TreeXMLError(f"<{port.tag}> of {node_id!r} needs a name", doc_path, port.line, port.column)
+            if name in declared:
+                raise TreeXMLError(
+                    f"port {name!r} of {node_id!r} is declared twice (first on line {declared[name]})",
+                    doc_path,
+                    port.line,
+                    port.column,
+                )
+            declared[name] = port.line
             ports.append(
                 PortSpec(
                     name,
@@ -152,7 +264,7 @@ def _parse_model(element: XMLElement, doc_path: str) -> list[ModelEntry]:
 
 def parse_text(text: str | bytes, path: str = "<string>") -> TreeDocument:
     """Parse XML text; checks ``<root>``, ``BTCPP_format``, ``<BehaviorTree ID>`` and ``<TreeNodesModel>``."""
-    root = _parse_elements(text, path)
+    root, warnings = _parse_lenient(text, path)
     if root.tag != "root":
         raise TreeXMLError(f"the top element must be <root>, got <{root.tag}>", path, root.line, root.column)
     fmt = root.attrib.get("BTCPP_format")
@@ -205,7 +317,7 @@ def parse_text(text: str | bytes, path: str = "<string>") -> TreeDocument:
             root.line,
             root.column,
         )
-    return TreeDocument(path, root, trees, main_tree, models)
+    return TreeDocument(path, root, trees, main_tree, models, warnings)
 
 
 def parse_file(path: str | Path) -> TreeDocument:

@@ -151,6 +151,9 @@ class NodeType:
     builtin: bool = False
     # How many children the XML must give: (minimum, maximum or None for unbounded).
     children: tuple[int, int | None] | None = None
+    # Ports without a default may be left out (BT.CPP's rule for a <TreeNodesModel> declaration: a missing port is
+    # an error only when the node reads it).
+    ports_optional: bool = False
 
     def __post_init__(self) -> None:
         if self.category not in CATEGORIES:
@@ -196,7 +199,7 @@ class NodeType:
                 completed[spec.name] = given[spec.name]
             elif spec.default is not None:
                 completed[spec.name] = spec.default
-            elif spec.required:
+            elif spec.required and not self.ports_optional:
                 raise PortError(f"node {self.id!r} is missing required port {spec.name!r}", spec.name)
         return completed
 

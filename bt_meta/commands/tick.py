@@ -4,7 +4,7 @@ Offers:
 
 * :func:`register` -- adds ``tick FILE [--problem P] [--task-file T] [--policy] [--world fake] [--ticks N]
   [--ticks-per-skill K] [--fault SPEC ...] [--seed N] [--world-option K=V ...] [--keep-ticking] [--plugins DIR]
-  [--json]``
+  [--json]`` and, for tree XML, ``[--tree ID] [--include-path DIR] [--subtrees PATH] [--stub-unknown] [--stub ...]``
 
 FILE is a YAML task file (planned, then compiled) or a tree XML (its primitives come from ``--task-file``, by default
 the ``.yaml`` next to it). Ticking stops when the root finishes unless ``--keep-ticking``. Each tick prints the root
@@ -21,6 +21,7 @@ from py_trees.common import Status
 
 from bt_meta.commands._common import print_json, shown_in_trace
 from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
+from bt_meta.commands._tree_args import add_tree_arguments, stubs_from_args, tree_sources_from_args
 from bt_meta.errors import UserInputError
 
 
@@ -41,6 +42,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--keep-ticking", action="store_true", help="keep ticking after the root finished")
     parser.add_argument("--json", action="store_true", help="print one JSON object with every tick")
     add_plugin_arguments(parser)
+    add_tree_arguments(parser)
     parser.set_defaults(func=run)
 
 
@@ -62,7 +64,8 @@ def run(args: argparse.Namespace) -> int:
     plugins = plugin_host_from_args(args, args.file)
     harness = TreeHarness.from_file(args.file, args.problem, task_file=args.task_file, policy=args.policy,
                                     world=args.world, faults=faults, ticks_per_skill=args.ticks_per_skill,
-                                    world_options=world_options, plugins=plugins)
+                                    world_options=world_options, plugins=plugins, tree_id=args.tree,
+                                    xml_sources=tree_sources_from_args(args), stubs=stubs_from_args(args))
     shown = {b.name for b in harness.root.iterate() if shown_in_trace(b)}
     ticks: list[dict[str, Any]] = []
     status = Status.INVALID

@@ -37,6 +37,7 @@ import py_trees
 from bt_meta.bt.nodes import UNSUPPORTED_BUILTINS
 from bt_meta.bt.nodes.conditions import POST_CONDITIONS, PRE_CONDITIONS, Conditions, attach_conditions
 from bt_meta.bt.nodes.entries import BlackboardEnvironment
+from bt_meta.bt.nodes.stubs import Stub, StubPolicy
 from bt_meta.bt.nodes.subtree import SubTree
 from bt_meta.bt.nodes.ticking import install_wake_up
 from bt_meta.bt.registry import (
@@ -45,6 +46,7 @@ from bt_meta.bt.registry import (
     NodeRegistry,
     NodeType,
     PortError,
+    PortSpec,
     RegistryError,
     UnknownNodeError,
     blackboard_key,
@@ -53,7 +55,7 @@ from bt_meta.bt.registry import (
 from bt_meta.bt.script import CompiledScript, ScriptSyntaxError, compile_script
 from bt_meta.bt.script.ast import Name
 from bt_meta.bt.script.parser import walk
-from bt_meta.bt.xml.document import ModelEntry, TreeDocument, XMLElement, parse_file, parse_text
+from bt_meta.bt.xml.document import ModelEntry, TreeDocument, TreeSources, XMLElement, parse_file, parse_text
 from bt_meta.errors import BtMetaError, TreeXMLError
 
 WrapAction = Callable[[py_trees.behaviour.Behaviour, NodeInstance], py_trees.behaviour.Behaviour]
@@ -85,7 +87,9 @@ def _model_factory(node_id: str) -> Callable[..., py_trees.behaviour.Behaviour]:
 
 
 def _model_type(entry: ModelEntry) -> NodeType:
-    return NodeType(entry.id, entry.category, list(entry.ports), _model_factory(entry.id))  # type: ignore[arg-type]
+    return NodeType(
+        entry.id, entry.category, list(entry.ports), _model_factory(entry.id), ports_optional=True  # type: ignore[arg-type]
+    )
 
 
 @dataclass
@@ -106,6 +110,7 @@ class ResolvedNode:
     # Pre/post-condition scripts (``_skipIf`` ...) and the root key of every name the node's scripts use.
     conditions: dict[str, CompiledScript] = field(default_factory=dict)
     script_keys: dict[str, str] = field(default_factory=dict)
+    path: str | None = None  # the file the node was written in (trees can span several files)
 
     @property
     def id(self) -> str:
@@ -163,11 +168,25 @@ def select_tree(document: TreeDocument, tree_id: str | None = None) -> str:
     )
 
 
+def _stub_type(node_id: str, category: str, ports: list[PortSpec], stubs: StubPolicy) -> NodeType:
+    script = stubs.script(node_id)
+
+    def factory(*, name: str, ports: dict[str, str], children: list[py_trees.behaviour.Behaviour]) -> Stub:
+        return Stub(name, node_id, script)
+
+    return NodeType(
+        node_id, category, ports, factory, "stub (--stub-unknown)", children=(0, None), ports_optional=True  # type: ignore[arg-type]
+    )
+
+
 class _Resolver:
-    def __init__(self, document: TreeDocument, registry: NodeRegistry, allow_models: bool) -> None:
+    def __init__(
+        self, document: TreeDocument, registry: NodeRegistry, allow_models: bool, stubs: StubPolicy | None = None
+    ) -> None:
         self.document = document
         self.registry = registry
         self.allow_models = allow_models
+        self.stubs = stubs
 
     def error(self, message: str, element: XMLElement) -> TreeXMLError:
         return self.document.error(message, element)
@@ -186,6 +205,16 @@ class _Resolver:
         if node_id in self.registry:
             node_type = self.registry.get(node_id)
             from_model = False
+        elif self.stubs is not None and (node_id in self.document.models or node_id not in UNSUPPORTED_BUILTINS):
+            model = self.document.models.get(node_id)
+            if model is not None:
+                category, ports = model.category, list(model.ports)
+            else:
+                count = len(element.children)
+                category = explicit or ("Action" if count == 0 else "Decorator" if count == 1 else "Control")
+                ports = [PortSpec(attr) for attr in element.attrib if attr[:1].isalpha() and attr not in _RESERVED]
+            node_type = _stub_type(node_id, category, ports, self.stubs)
+            from_model = model is not None
         elif node_id in self.document.models:
             if not self.allow_models:
                 model = self.document.models[node_id]
@@ -322,6 +351,7 @@ class _Resolver:
             from_model=from_model,
             conditions=conditions,
             script_keys=script_keys,
+            path=element.path,
         )
 
     def check_static(self, node_type: NodeType, ports: dict[str, str], count: int, element: XMLElement) -> None:
@@ -350,7 +380,12 @@ class _Resolver:
             raise self.error("<SubTree> needs an ID attribute naming a <BehaviorTree>", element)
         if tree_id not in self.document.trees:
             known = ", ".join(self.document.trees)
-            raise self.error(f"SubTree {tree_id!r} does not exist; trees in this file: {known}", element)
+            where = "these files" if len(self.document.files) > 1 else "this file"
+            raise self.error(
+                f"SubTree {tree_id!r} does not exist; trees in {where}: {known} (a tree in another file needs "
+                '<include path="..."/> or the file on the command line)',
+                element,
+            )
         if tree_id in stack:
             cycle = " -> ".join((*stack[stack.index(tree_id) :], tree_id))
             raise self.error(f"recursive SubTree: {cycle}", element)
@@ -358,6 +393,12 @@ class _Resolver:
             raise self.error("<SubTree> takes no child elements; its body is the <BehaviorTree> it names", element)
         autoremap = bool(self.flags(element, "_autoremap"))
         ports = self.split_attributes(element, True)
+        model = self.document.models.get(tree_id)
+        if model is not None and model.category == "SubTree":
+            # BT.CPP 4: a SubTree's model gives defaults for the ports an instance leaves out.
+            for spec in model.ports:
+                if spec.name not in ports and spec.default is not None:
+                    ports[spec.name] = spec.default
         remap: dict[str, str] = {}
         init: dict[str, str] = {}
         prefix = f"/_{tree_id}_{next(_INSTANCES)}"
@@ -386,6 +427,7 @@ class _Resolver:
             subtree_init=init,
             conditions=conditions,
             script_keys=script_keys,
+            path=element.path,
         )
 
 
@@ -452,12 +494,15 @@ def resolve_document(
     *,
     tree_id: str | None = None,
     allow_models: bool = True,
+    stubs: StubPolicy | None = None,
 ) -> ResolvedNode:
-    """Validate the selected tree (and the subtrees it uses) and return it as :class:`ResolvedNode` objects."""
+    """Validate the selected tree (and the subtrees it uses) and return it as :class:`ResolvedNode` objects.
+
+    With ``stubs``, a node nobody registered (declared in the model or not) becomes a :class:`Stub`."""
     registry = registry if registry is not None else default_registry()
     chosen = select_tree(document, tree_id)
     check_expansion(document, chosen)
-    resolver = _Resolver(document, registry, allow_models)
+    resolver = _Resolver(document, registry, allow_models, stubs)
     return resolver.resolve_tree(chosen, _Scope(), ())
 
 
@@ -468,6 +513,7 @@ def _build(
     path: str,
 ) -> py_trees.behaviour.Behaviour:
     children = [_build(child, registry, wrap_action, path) for child in node.children]
+    path = node.path or path
     instance = node.instance(path)
     try:
         if node.subtree_id is not None:
@@ -476,7 +522,9 @@ def _build(
             )
             behaviour.bt_node = instance
         else:
-            behaviour = registry.create(
+            # A stub (--stub-unknown) is not in the registry: build it from its own node type.
+            maker = registry if node.node_type.id in registry else NodeRegistry([node.node_type])
+            behaviour = maker.create(
                 node.node_type.id,
                 name=node.name,
                 ports={k: v for k, v in node.resolved_ports.items() if k in node.ports},
@@ -488,7 +536,8 @@ def _build(
     except (BtMetaError, ValueError, TypeError) as error:
         # e.g. a CheckCondition whose condition does not parse: located here, at load, not at its first tick
         raise TreeXMLError(f"cannot build node {node.id!r}: {error}", path, node.line, node.column) from None
-    if wrap_action is not None and node.category == "Action" and not node.node_type.builtin and node.monitor:
+    monitored = node.category == "Action" and not node.node_type.builtin and node.monitor
+    if wrap_action is not None and monitored and not isinstance(behaviour, Stub):  # a stub has nothing to monitor
         behaviour = wrap_action(behaviour, instance)
     env = BlackboardEnvironment(node.script_keys, registry.enums)
     bind = getattr(behaviour, "bind_environment", None)
@@ -506,14 +555,15 @@ def load_document(
     tree_id: str | None = None,
     wrap_action: WrapAction | None = None,
     wake_up: bool = True,
+    stubs: StubPolicy | None = None,
 ) -> py_trees.behaviour.Behaviour:
     """Build the selected tree. ``wake_up`` installs BT.CPP's wake-up signal (see :mod:`bt_meta.bt.nodes.ticking`).
 
     ``wrap_action(behaviour, instance)`` is applied to every registered custom Action without
-    ``_monitor="false"``; built-ins and Conditions are never wrapped.
+    ``_monitor="false"``; built-ins and Conditions are never wrapped. ``stubs``: see :func:`resolve_document`.
     """
     registry = registry if registry is not None else default_registry()
-    resolved = resolve_document(document, registry, tree_id=tree_id, allow_models=False)
+    resolved = resolve_document(document, registry, tree_id=tree_id, allow_models=False, stubs=stubs)
     root = _build(resolved, registry, wrap_action, document.path)
     if wake_up:
         install_wake_up(root)
@@ -542,5 +592,9 @@ def load_tree_file(
     tree_id: str | None = None,
     wrap_action: WrapAction | None = None,
     wake_up: bool = True,
+    sources: TreeSources | None = None,
+    stubs: StubPolicy | None = None,
 ) -> py_trees.behaviour.Behaviour:
-    return load_document(parse_file(path), registry, tree_id=tree_id, wrap_action=wrap_action, wake_up=wake_up)
+    """Load a tree file; ``sources`` adds an include search path and files whose trees the tree may use."""
+    document = parse_file(path, sources)
+    return load_document(document, registry, tree_id=tree_id, wrap_action=wrap_action, wake_up=wake_up, stubs=stubs)

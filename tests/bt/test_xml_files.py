@@ -184,3 +184,21 @@ def test_show_loads_plugins_that_register_nodes(project: Path, capsys: pytest.Ca
     )
     assert main(["show", str(project / "main.xml"), "--plugins", str(plugins)]) == 0
     assert 'MoveBase "go"' in capsys.readouterr().out
+
+
+SUBTREE_MODEL = """<root BTCPP_format="4" main_tree_to_execute="M">
+<BehaviorTree ID="M"><Sequence><Script code="out := ''"/><SubTree ID="S"/><SubTree ID="S" n="3"/></Sequence>
+</BehaviorTree>
+<BehaviorTree ID="S"><Script code="@out := @out .. n"/></BehaviorTree>
+<TreeNodesModel><SubTree ID="S"><input_port name="n" default="7"/></SubTree></TreeNodesModel>
+</root>"""
+
+
+def test_subtree_model_defaults_fill_missing_ports_like_behaviortree_cpp() -> None:
+    from bt_meta.bt.nodes.ticking import tick_once
+    from bt_meta.bt.xml.reader import load_tree_text
+
+    theirs = btpy.BehaviorTreeFactory().create_tree_from_text(SUBTREE_MODEL)
+    assert theirs.tick_once().name == "SUCCESS"
+    assert tick_once(load_tree_text(SUBTREE_MODEL)) == Status.SUCCESS
+    assert py_trees.blackboard.Blackboard.storage["/out"] == theirs.root_blackboard().get_string("out") == "73"

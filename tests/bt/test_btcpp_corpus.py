@@ -71,7 +71,9 @@ def scripts_for(ids: list[str], seed: int) -> dict[str, list[str]]:
 class _Leaf(py_trees.behaviour.Behaviour):
     """behaviortreepy's stateful action: a finished leaf ticked again before a reset keeps its status."""
 
-    def __init__(self, name: str, node_id: str, script: list[str], calls: list[int], log: list[tuple[str, str]]) -> None:
+    def __init__(
+        self, name: str, node_id: str, script: list[str], calls: list[int], log: list[tuple[str, str]]
+    ) -> None:
         super().__init__(name)
         # ``calls`` is shared by every node of one ID, as the callbacks registered with behaviortreepy are.
         self.node_id, self.script, self.calls, self.log = node_id, script, calls, log

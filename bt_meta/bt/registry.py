@@ -219,6 +219,8 @@ class NodeInstance:
     monitor: bool = True
     line: int | None = None
     path: str | None = None
+    # Pre/post-condition attributes as written (``_skipIf`` ...): not ports, but written back with the node.
+    attributes: dict[str, str] = field(default_factory=dict)
 
 
 class NodeRegistry:

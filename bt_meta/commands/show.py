@@ -23,6 +23,7 @@ def _label(node: ResolvedNode) -> str:
     if node.name != node.id:
         parts.append(f'"{node.name}"')
     parts.extend(f'{port}="{value}"' for port, value in node.ports.items())
+    parts.extend(f'{name}="{script.source}"' for name, script in node.conditions.items())
     if node.category == "Action" and not node.node_type.builtin and not node.monitor:
         parts.append("[no monitor]")
     return " ".join(parts)

@@ -15,8 +15,8 @@ behaviour's name; ``_monitor="false"`` keeps the loader from wrapping that Actio
 
 Blackboard scoping: every SubTree instance gets a private scope, as in BT.CPP. The reader rewrites each ``{key}``
 inside a subtree to the key it denotes at the root: a remapped port ``p="{k}"`` maps ``{p}`` to the parent's ``k``
-(``{=}`` = same name), ``_autoremap="true"`` maps every other key to the same name in the parent, ``{@k}`` is
-always the root's ``k``, a literal remapping ``p="3"`` initialises the private entry, and anything else becomes a
+(``{=}`` = same name), ``_autoremap="true"`` maps every other key not starting with ``_`` to the same name in the
+parent, ``{@k}`` is always the root's ``k``, a literal remapping ``p="3"`` initialises the private entry, and anything else becomes a
 key private to that instance (``/_<TreeID>_<n>/key``, ``n`` unique in the process).
 
 TreeNodesModel: an ID declared in ``<TreeNodesModel>`` but not registered is an error for :func:`load_tree_*`
@@ -121,7 +121,10 @@ class ResolvedNode:
         return self.node_type.category
 
     def instance(self, path: str) -> NodeInstance:
-        return NodeInstance(self.id, self.category, dict(self.ports), self.monitor, self.line, path)  # type: ignore[arg-type]
+        attributes = {name: script.source for name, script in self.conditions.items()}
+        return NodeInstance(
+            self.id, self.category, dict(self.ports), self.monitor, self.line, path, attributes  # type: ignore[arg-type]
+        )
 
 
 class _Scope:
@@ -149,7 +152,8 @@ class _Scope:
             if target == "=":
                 target = key
             return self.parent.resolve(target)
-        if self.autoremap:
+        if self.autoremap and not key.startswith("_"):
+            # BT.CPP: _autoremap leaves keys that start with "_" private to the subtree
             return self.parent.resolve(key)
         return f"{self.prefix}/{key}"
 

@@ -153,7 +153,7 @@ def test_show_and_tick_take_tree_and_stub_options(project: Path, capsys: pytest.
     main_xml = str(project / "main.xml")
     assert main(["show", main_xml, "--tree", "Move", "--stub-unknown"]) == 0
     out = capsys.readouterr().out
-    assert out.splitlines() == [f"Move ({main_xml})", 'MoveBase "go"']
+    assert out.splitlines() == [f"Move ({main_xml})", 'MoveBase "go" _onFailure="failed := true"']
     assert main(["show", main_xml]) == 2
     assert "unknown node ID 'MoveBase'" in capsys.readouterr().err
     code = main(["tick", main_xml, "--stub-unknown", "--stub", "MoveBase=FAILURE,RUNNING,SUCCESS", "--ticks", "5"])

@@ -16,8 +16,8 @@ behaviour's name; ``_monitor="false"`` keeps the loader from wrapping that Actio
 Blackboard scoping: every SubTree instance gets a private scope, as in BT.CPP. The reader rewrites each ``{key}``
 inside a subtree to the key it denotes at the root: a remapped port ``p="{k}"`` maps ``{p}`` to the parent's ``k``
 (``{=}`` = same name), ``_autoremap="true"`` maps every other key not starting with ``_`` to the same name in the
-parent, ``{@k}`` is always the root's ``k``, a literal remapping ``p="3"`` initialises the private entry, and anything else becomes a
-key private to that instance (``/_<TreeID>_<n>/key``, ``n`` unique in the process).
+parent, ``{@k}`` is always the root's ``k``, a literal remapping ``p="3"`` initialises the private entry, and
+anything else becomes a key private to that instance (``/_<TreeID>_<n>/key``, ``n`` unique in the process).
 
 TreeNodesModel: an ID declared in ``<TreeNodesModel>`` but not registered is an error for :func:`load_tree_*`
 (there is no implementation to instantiate) and names the model; :func:`resolve_document` accepts it and checks

@@ -41,7 +41,7 @@ def tick_exactly_once(root: py_trees.behaviour.Behaviour) -> Returned:
 
 # tick_once re-ticks a woken root at most this many times: a Repeat num_cycles="-1" over a child that completes at
 # once wakes it forever (BT.CPP spins there), and a caller's tick budget must still bound the run.
-MAX_WAKE_UPS = 10_000
+MAX_WAKE_UPS = 1_000
 
 
 def tick_once(root: py_trees.behaviour.Behaviour) -> Returned:

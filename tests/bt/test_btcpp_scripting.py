@@ -149,6 +149,9 @@ def test_random_scripts_evaluate_like_behaviortree_cpp() -> None:
         "x := 1;", "x := 1 + 2 & 3", "x := y := 1", "truex := 1", "x := ~-1", "x := -!1", "x := 1..2", "x := 5 % 2",
         "x := 9223372036854775808", "x = 3", "x := '3' + 1", "x := 1 || 2", "x := 1 .. 2", "x := 'a' < 3",
         "x := 1.5 & 1", "x := 3; x = 2.5", "x := 'a'; x = 1", "x := -'a'", "x := 'a' ? 1 : 2", "   ",
+        # one operator group per expression, across comparisons and && / ||
+        "x := 1 & 2 <= 3 - 1", "x := 1 + 2 == 3 .. 'a'", "x := 1 & 2 == 3 & 1", "x := !1 == 1 + 0",
+        "x := 1 + 1 == 2 && 1 & 1", "x := 1 < 2 == !0", "x := 1 ? 1 + 1 : 2 & 2", "x := (1 + 1) == (2 & 2)",
     ],
 )  # fmt: skip
 def test_script_corner_cases_match_behaviortree_cpp(code: str) -> None:
@@ -476,3 +479,25 @@ def test_written_xml_keeps_scripts_conditions_and_new_builtins() -> None:
         original = _btcpp_steps(xml, leaves, "exactly_once")
         rewritten = _btcpp_steps(written, leaves, "exactly_once")
         assert [rewritten() for _ in range(10)] == [original() for _ in range(10)], f"seed {seed}\n{written}"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mode", ["exactly_once", "once"])
+def test_larger_sweep_of_trees_with_conditions(mode: str) -> None:
+    for seed in range(1000, 2500):
+        xml, leaves, _ = generate_tree(seed)
+        theirs = _btcpp_steps(xml, leaves, mode)
+        ours = _our_steps(xml, leaves, mode)
+        for tick in range(20):
+            want, got = theirs(), ours()
+            assert got == want, f"seed {seed} mode {mode} tick {tick}\nXML: {xml}\nBT.CPP: {want}\nours: {got}"
+            if want[0] == "error":
+                break
+
+
+@pytest.mark.slow
+def test_larger_sweep_of_random_scripts() -> None:
+    for seed in range(10_000, 16_000):
+        code = _ScriptGenerator(random.Random(seed)).statement()
+        xml = _script_xml(code)
+        assert _our_outcome(xml) == _btcpp_outcome(xml), f"seed {seed}: {code!r}"

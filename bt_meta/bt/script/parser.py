@@ -9,7 +9,8 @@ Precedence, lowest first (as BT.CPP's grammar): assignment (``:= = += -= *= /=``
 ``c ? a : b`` (not chainable), ``&& ||`` (one level, left to right), comparisons (a chain ``a < b == c``), then one
 of three operator groups that cannot be mixed without parentheses: arithmetic (``+ -`` then ``* /`` then prefix
 ``-``; BT.CPP 4.8 groups these to the right), bitwise/logical (``| ^`` then ``&`` then prefix ``~ !``) and string
-concatenation (``..``).
+concatenation (``..``). One expression commits to one group, across its comparisons and ``&&``/``||`` too
+(``1 + 1 == 2 && 1 & 1`` is refused, as in BT.CPP); parentheses and the ternary's middle part start afresh.
 """
 
 from __future__ import annotations
@@ -34,6 +35,9 @@ class _Parser:
         self.tokens = tokenize(text)
         self.index = 0
         self.depth = 0
+        # The operator group ("math", "bit" or "concat") the current expression committed to: BT.CPP refuses a
+        # second group anywhere in the same expression (across comparisons and &&/||), until parentheses.
+        self.group_kind: str | None = None
 
     def peek(self) -> Token:
         return self.tokens[self.index]
@@ -67,6 +71,7 @@ class _Parser:
         self.depth += 1
         if self.depth > MAX_DEPTH:
             raise self.fail(f"expression nested deeper than {MAX_DEPTH} levels")
+        outer_group, self.group_kind = self.group_kind, None
         try:
             left = self.conditional()
             if self.at(*ASSIGNMENTS):
@@ -78,6 +83,7 @@ class _Parser:
             return left
         finally:
             self.depth -= 1
+            self.group_kind = outer_group
 
     def conditional(self) -> Expr:
         condition = self.logical()
@@ -110,18 +116,28 @@ class _Parser:
             return operands[0]
         return Comparison(tuple(ops), tuple(operands))
 
+    def commit(self, kind: str) -> None:
+        if self.group_kind is not None and self.group_kind != kind:
+            raise self.fail("operator cannot be mixed with previous operators (add parentheses)")
+        self.group_kind = kind
+
     def group(self) -> Expr:
         if self.at("-"):
+            self.commit("math")
             result = self.sum()
         elif self.at("~", "!"):
+            self.commit("bit")
             result = self.bit_or()
         else:
             first = self.atom()
             if self.at(*MATH):
+                self.commit("math")
                 result = self.sum(first)
             elif self.at(".."):
+                self.commit("concat")
                 result = self.concat(first)
             elif self.at(*BITS):
+                self.commit("bit")
                 result = self.bit_or(first)
             else:
                 return first

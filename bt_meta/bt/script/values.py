@@ -130,8 +130,10 @@ def convert_into(value: Any, current: Any) -> Any:
 def divide(left: float, right: float) -> float:
     """IEEE division (C++ semantics): dividing by zero gives an infinity or NaN, not an exception."""
     if right == 0.0:
-        if left == 0.0 or math.isnan(left):
-            return math.nan
+        if math.isnan(left):
+            return left
+        if left == 0.0:
+            return math.copysign(math.nan, -1.0)  # x86's default NaN has the sign bit set: BT.CPP prints "-nan"
         return math.copysign(math.inf, left) * math.copysign(1.0, right)
     return left / right
 

@@ -61,6 +61,10 @@ def run(args: argparse.Namespace) -> int:
         if not sep or not key.strip():
             raise UserInputError(f"bad --world-option {item!r}: expected KEY=VALUE")
         world_options[key.strip()] = value.strip()
+    from bt_meta.bt.loading import is_xml
+
+    if not is_xml(args.file) and (args.tree or args.include_path or args.subtrees or args.stub_unknown):
+        raise UserInputError("--tree, --include-path, --subtrees and --stub-unknown apply to tree XML", args.file)
     plugins = plugin_host_from_args(args, args.file)
     harness = TreeHarness.from_file(args.file, args.problem, task_file=args.task_file, policy=args.policy,
                                     world=args.world, faults=faults, ticks_per_skill=args.ticks_per_skill,

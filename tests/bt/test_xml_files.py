@@ -202,3 +202,26 @@ def test_subtree_model_defaults_fill_missing_ports_like_behaviortree_cpp() -> No
     assert theirs.tick_once().name == "SUCCESS"
     assert tick_once(load_tree_text(SUBTREE_MODEL)) == Status.SUCCESS
     assert py_trees.blackboard.Blackboard.storage["/out"] == theirs.root_blackboard().get_string("out") == "73"
+
+
+def test_tree_options_refuse_a_task_file(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["tick", "trees/letters.yaml", "--problem", "A", "--tree", "X"]) == 2
+    assert "--tree, --include-path, --subtrees and --stub-unknown apply to tree XML" in capsys.readouterr().err
+
+
+def test_show_warns_about_xml_that_only_behaviortree_cpp_accepts(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    tree = tmp_path / "lenient.xml"
+    body = '<ScriptCondition code="1 && 1"/>'
+    tree.write_text(f'<root BTCPP_format="4"><BehaviorTree ID="M">{body}</BehaviorTree></root>')
+    result = subprocess.run([sys.executable, "-m", "bt_meta.cli", "show", str(tree)], capture_output=True, text=True)
+    assert result.returncode == 0
+    assert result.stdout.splitlines() == [f"M ({tree})", 'ScriptCondition code="1 && 1"']
+    assert result.stderr.splitlines() == [
+        f"{tree}:1:70: warning: unescaped '&' in an attribute value (BehaviorTree.CPP accepts it; write &amp; to make "
+        "the XML well formed)",
+        f"{tree}:1:71: warning: unescaped '&' in an attribute value (BehaviorTree.CPP accepts it; write &amp; to make "
+        "the XML well formed)",
+    ]

@@ -274,3 +274,21 @@ def test_fuzz_campaign_ten_thousand_trees(capsys: pytest.CaptureFixture[str]) ->
     with capsys.disabled():
         print(f"\nXML fuzz campaign: {dict(counts)}, slowest input {worst * 1000:.0f} ms")
     assert sum(counts.values()) == 10_000 and counts["loaded and ticked"] > 1000
+
+
+@pytest.mark.parametrize(
+    "loop",
+    [
+        '<Repeat num_cycles="-1"><AlwaysSuccess/></Repeat>',
+        '<RetryUntilSuccessful num_attempts="-1"><AlwaysFailure/></RetryUntilSuccessful>',
+    ],
+)
+def test_the_tick_command_bounds_an_endless_loop_by_ticks(loop: str, tmp_path, capsys) -> None:
+    from bt_meta.cli import main
+
+    path = tmp_path / "loop.xml"
+    path.write_text(tree(loop))
+    started = time.perf_counter()
+    assert main(["tick", str(path), "--ticks", "3"]) == 0
+    assert time.perf_counter() - started < 20.0
+    assert capsys.readouterr().out.splitlines()[-1].startswith("RUNNING after 3 ticks")

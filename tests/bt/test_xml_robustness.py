@@ -292,3 +292,25 @@ def test_the_tick_command_bounds_an_endless_loop_by_ticks(loop: str, tmp_path, c
     assert main(["tick", str(path), "--ticks", "3"]) == 0
     assert time.perf_counter() - started < 20.0
     assert capsys.readouterr().out.splitlines()[-1].startswith("RUNNING after 3 ticks")
+
+
+@pytest.mark.parametrize("name", ["/dev/zero", "/etc", "missing.xml"])
+def test_only_regular_files_are_read(name: str) -> None:
+    from bt_meta.bt.xml.document import parse_file
+
+    with pytest.raises(TreeXMLError) as info:
+        parse_file(name)
+    assert info.value.message in (
+        "cannot read tree XML: not a regular file",
+        "cannot read tree XML: No such file or directory",
+    )
+
+
+def test_an_include_of_a_device_is_refused(tmp_path) -> None:
+    from bt_meta.bt.xml.document import parse_file
+
+    path = tmp_path / "main.xml"
+    path.write_text(tree("<AlwaysSuccess/>").replace("<BehaviorTree", '<include path="/dev/zero"/><BehaviorTree', 1))
+    with pytest.raises(TreeXMLError) as info:
+        parse_file(path)
+    assert info.value.message.startswith("<include path='/dev/zero'>: no such file")

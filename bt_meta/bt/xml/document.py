@@ -363,11 +363,23 @@ def _merge(into: TreeDocument, other: TreeDocument) -> None:
     into.files.extend(f for f in other.files if f not in into.files)
 
 
+# Tree XML files larger than this are refused before reading (real trees are a few hundred KB at most).
+MAX_FILE_BYTES = 16 * 1024 * 1024
+
+
 def _read(path: Path) -> bytes:
+    """The one place tree XML files are read (the main file, includes, extra files): regular files only, bounded."""
     try:
+        if not path.is_file():
+            what = "No such file or directory" if not path.exists() else "not a regular file"
+            raise TreeXMLError(f"cannot read tree XML: {what}", str(path))
+        size = path.stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise TreeXMLError(f"tree XML is {size:,} bytes; at most {MAX_FILE_BYTES:,} are read", str(path))
         return path.read_bytes()
-    except OSError as error:
-        raise TreeXMLError(f"cannot read tree XML: {error.strerror or error}", str(path)) from None
+    except (OSError, ValueError) as error:
+        message = getattr(error, "strerror", None) or str(error)
+        raise TreeXMLError(f"cannot read tree XML: {message}", str(path)) from None
 
 
 def _resolve_includes(

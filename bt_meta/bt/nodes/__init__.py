@@ -3,13 +3,17 @@
 Modules (one concept each):
 
 * :mod:`~bt_meta.bt.nodes.base` -- BT.CPP tick/halt/reset discipline for py_trees composites and decorators
-* :mod:`~bt_meta.bt.nodes.sequences` -- Sequence, SequenceWithMemory, ReactiveSequence
-* :mod:`~bt_meta.bt.nodes.fallbacks` -- Fallback, ReactiveFallback
-* :mod:`~bt_meta.bt.nodes.parallel` -- Parallel with success/failure counts
-* :mod:`~bt_meta.bt.nodes.modifiers` -- Inverter, ForceSuccess, ForceFailure, KeepRunningUntilFailure
-* :mod:`~bt_meta.bt.nodes.loops` -- Repeat, RetryUntilSuccessful
+* :mod:`~bt_meta.bt.nodes.sequences` -- Sequence, SequenceWithMemory, ReactiveSequence, AsyncSequence
+* :mod:`~bt_meta.bt.nodes.fallbacks` -- Fallback, ReactiveFallback, AsyncFallback
+* :mod:`~bt_meta.bt.nodes.parallel` -- Parallel with success/failure counts, ParallelAll
+* :mod:`~bt_meta.bt.nodes.branches` -- IfThenElse, WhileDoElse, Switch2 ... Switch6
+* :mod:`~bt_meta.bt.nodes.modifiers` -- Inverter, ForceSuccess, ForceFailure, KeepRunningUntilFailure, RunOnce
+* :mod:`~bt_meta.bt.nodes.loops` -- Repeat, RetryUntilSuccessful, LoopInt/LoopDouble/LoopBool/LoopString
 * :mod:`~bt_meta.bt.nodes.timeout` -- Timeout (injectable clock)
-* :mod:`~bt_meta.bt.nodes.leaves` -- AlwaysSuccess, AlwaysFailure, SetBlackboard
+* :mod:`~bt_meta.bt.nodes.timers` -- Delay, Sleep (injectable clock)
+* :mod:`~bt_meta.bt.nodes.leaves` -- AlwaysSuccess, AlwaysFailure, SetBlackboard, UnsetBlackboard
+* :mod:`~bt_meta.bt.nodes.updates` -- WasEntryUpdated, SkipUnlessUpdated, WaitValueUpdate
+* :mod:`~bt_meta.bt.nodes.stubs` -- stand-ins for nodes nobody implements (``--stub-unknown``)
 * :mod:`~bt_meta.bt.nodes.scripting` -- Script, ScriptCondition, Precondition (BT.CPP's script language)
 * :mod:`~bt_meta.bt.nodes.conditions` -- the ``_skipIf`` ... ``_post`` pre/post-condition attributes
 * :mod:`~bt_meta.bt.nodes.status` -- BT.CPP's SKIPPED status

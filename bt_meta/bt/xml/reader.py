@@ -8,10 +8,15 @@ Offers:
 * :class:`ResolvedNode` -- one validated node: type, name, ports as written and as resolved, children, position
 * :func:`select_tree` -- which ``<BehaviorTree>`` to run: explicit ID, else ``main_tree_to_execute``, else the
   only one
+* :func:`check_expansion` -- refuse SubTrees that expand beyond a size or depth bound, without expanding them
 
 Syntax: compact (``<MoveTo goal="{g}"/>``) and explicit (``<Action ID="MoveTo" goal="{g}"/>``, ``<Condition ID>``,
 ``<Control ID>``, ``<Decorator ID>``); ``<SubTree ID="X" port="{key}" _autoremap="true"/>``; ``name`` sets the
-behaviour's name; ``_monitor="false"`` keeps the loader from wrapping that Action in a monitor.
+behaviour's name; ``_monitor="false"`` keeps the loader from wrapping that Action in a monitor. The pre/post
+conditions ``_skipIf`` ... ``_post`` are compiled here (syntax errors located) and attached to the behaviour (see
+:mod:`bt_meta.bt.nodes.conditions`); every other attribute that does not start with a letter (Groot2's
+``_collapsed``, ``_uid``) is ignored, as BT.CPP ignores it. Before resolving, SubTree expansion is bounded
+(:func:`check_expansion`).
 
 Blackboard scoping: every SubTree instance gets a private scope, as in BT.CPP. The reader rewrites each ``{key}``
 inside a subtree to the key it denotes at the root: a remapped port ``p="{k}"`` maps ``{p}`` to the parent's ``k``
@@ -20,9 +25,11 @@ parent, ``{@k}`` is always the root's ``k``, a literal remapping ``p="3"`` initi
 anything else becomes a key private to that instance (``/_<TreeID>_<n>/key``, ``n`` unique in the process).
 
 TreeNodesModel: an ID declared in ``<TreeNodesModel>`` but not registered is an error for :func:`load_tree_*`
-(there is no implementation to instantiate) and names the model; :func:`resolve_document` accepts it and checks
-the XML's ports against the declared ports, so a file can be inspected without the plugins that implement it.
-For registered IDs the registry's ports are authoritative and the model is ignored.
+(there is no implementation to instantiate) and names the model, unless ``stubs`` is given (``--stub-unknown``);
+:func:`resolve_document` accepts it and checks the XML's ports against the declared ports (a port without a
+default may be left out, as in BT.CPP), so a file can be inspected without the plugins that implement it. For
+registered IDs the registry's ports are authoritative and the model is ignored. A ``<SubTree>`` model's port
+defaults fill the ports a SubTree instance leaves out.
 """
 
 from __future__ import annotations

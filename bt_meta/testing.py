@@ -95,11 +95,15 @@ class TreeHarness:
         plugin_dirs: Iterable[str | Path] = (),
         entry_points: bool = True,
         extra_plugins: Iterable[tuple[str, Any]] = (),
+        tree_id: str | None = None,
+        xml_sources: Any = None,
+        stubs: Any = None,
     ) -> TreeHarness:
         """Load a task file or tree XML, build the world (``"fake"``, another name a plugin provides, a World
         object, or ``None``) and a plugin host (given, or built-ins + entry points + folders + ``extra_plugins``).
 
         A named world gets ``options`` with ``faults``, ``ticks_per_skill``, ``task_file`` and ``world_options``.
+        ``tree_id``, ``xml_sources`` and ``stubs`` are passed to :func:`~bt_meta.bt.loading.load_runnable`.
         """
         from bt_meta.bt.loading import load_runnable
         from bt_meta.plugins import create_plugin_host
@@ -107,7 +111,8 @@ class TreeHarness:
         if plugins is None:
             plugins = create_plugin_host(plugin_dirs, project_file=path, entry_points=entry_points,
                                          plugins=extra_plugins)
-        compiled = load_runnable(path, problem=problem, task_file=task_file, policy=policy, plugins=plugins)
+        compiled = load_runnable(path, problem=problem, task_file=task_file, policy=policy, plugins=plugins,
+                                 tree_id=tree_id, xml_sources=xml_sources, stubs=stubs)
         if isinstance(world, str):
             options = {"faults": list(faults), "ticks_per_skill": ticks_per_skill,
                        "task_file": getattr(compiled.task_file, "path", None), **(world_options or {})}

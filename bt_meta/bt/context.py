@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 import py_trees
 
 from bt_meta.bt.failures import Failure, FailureKind
+from bt_meta.bt.nodes.ticking import MAX_WAKE_UPS
 from bt_meta.htn.state import State
 
 if TYPE_CHECKING:
@@ -162,12 +163,14 @@ class RunContext:
         """Tick ``root`` once inside this run (installing it first) and return the root's status.
 
         Like BehaviorTree.CPP's ``tickOnce``, the root is ticked again while it is RUNNING and a node raised the
-        tree's wake-up signal. ``visit(behaviour)`` sees every behaviour as it finishes its part of the tick.
+        tree's wake-up signal (at most :data:`~bt_meta.bt.nodes.ticking.MAX_WAKE_UPS` times, where BT.CPP would
+        spin forever). ``visit(behaviour)`` sees every behaviour as it finishes its part of the tick.
         """
         if _STORAGE.get(RUN_KEY) is not self:
             self.install()
         self.tick_count += 1
         signal = getattr(root, "bt_wake_up", None)
+        wake_ups = 0
         while True:
             if visit is None:
                 root.tick_once()
@@ -175,6 +178,9 @@ class RunContext:
                 for behaviour in root.tick():
                     visit(behaviour)
             if root.status is not py_trees.common.Status.RUNNING or signal is None or not signal.consume():
+                break
+            wake_ups += 1
+            if wake_ups >= MAX_WAKE_UPS:  # a Repeat num_cycles="-1" over an instant child: --ticks must bound it
                 break
         if self._trace:
             self.emit("tick", status=root.status.value)

@@ -5,7 +5,8 @@ ticking its XML give the same behaviours.
 
 Offers:
 
-* :func:`domain_registry` -- BehaviorTree.CPP built-ins + ``CheckCondition`` + the domain's primitives + whatever
+* :func:`domain_registry` -- BehaviorTree.CPP built-ins + ``CheckCondition`` + the domain's primitives + the
+  ``@action``/``@condition`` nodes of :mod:`bt_meta.bt.python_nodes` + whatever
   plugins register through ``bt_meta_register_nodes``
 * :func:`primitive_node_type` -- the Action node type of one primitive (ID = its name, one port per parameter)
 * :func:`check_condition_node_type` -- the ``CheckCondition`` guard (ports ``condition``, ``bindings``, ``method``,
@@ -94,4 +95,9 @@ def domain_registry(domain: Any = None, plugins: Any = None, base: NodeRegistry 
         result = plugins.call("bt_meta_register_nodes", registry=registry, domain=domain)
         if result.errors:
             raise PluginError(result.errors[0].message)
+    from bt_meta.bt.python_nodes import registered_node_types
+
+    for node_type in registered_node_types():  # @action / @condition in any loaded module
+        if node_type.id not in registry:
+            registry.register(node_type)
     return registry

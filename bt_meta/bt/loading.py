@@ -52,8 +52,13 @@ def load_runnable(
     plugins: Any = None,
     tree_id: str | None = None,
     max_depth: int = DEFAULT_POLICY_DEPTH,
+    xml_sources: Any = None,
+    stubs: Any = None,
 ) -> CompiledTree:
-    """A runnable tree from ``file`` (task file or tree XML), its domain and problem when known."""
+    """A runnable tree from ``file`` (task file or tree XML), its domain and problem when known.
+
+    For tree XML: ``tree_id`` picks the tree, ``xml_sources`` (a :class:`~bt_meta.bt.xml.document.TreeSources`)
+    adds other files' trees, ``stubs`` (a :class:`~bt_meta.bt.nodes.stubs.StubPolicy`) stubs unimplemented nodes."""
     from bt_meta.htn import load_task_file
 
     path = Path(file)
@@ -68,6 +73,7 @@ def load_runnable(
     domain = loaded.domain if loaded is not None else None
     chosen = loaded.problem(problem) if loaded is not None and loaded.problems else None
     registry = domain_registry(domain, plugins)
-    root = load_tree_file(path, registry, tree_id=tree_id, wrap_action=monitor_action)
+    root = load_tree_file(path, registry, tree_id=tree_id, wrap_action=monitor_action, sources=xml_sources,
+                          stubs=stubs)
     steps = assign_steps(root)
     return CompiledTree(root, domain, chosen, loaded, None, registry, "xml", {"primitives": steps})

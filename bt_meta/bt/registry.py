@@ -118,6 +118,10 @@ class PortSpec:
                 return number
             if type_name in _FLOAT_TYPES:
                 return float(value)
+            if type_name in ("BT::NodeStatus", "NodeStatus"):
+                if value not in ("SUCCESS", "FAILURE", "RUNNING", "SKIPPED"):
+                    raise ValueError
+                return value
             if type_name == "bool":
                 lowered = value.lower()
                 if lowered in _TRUE:
@@ -147,6 +151,9 @@ class NodeType:
     builtin: bool = False
     # How many children the XML must give: (minimum, maximum or None for unbounded).
     children: tuple[int, int | None] | None = None
+    # Ports without a default may be left out (BT.CPP's rule for a <TreeNodesModel> declaration: a missing port is
+    # an error only when the node reads it).
+    ports_optional: bool = False
 
     def __post_init__(self) -> None:
         if self.category not in CATEGORIES:
@@ -192,7 +199,7 @@ class NodeType:
                 completed[spec.name] = given[spec.name]
             elif spec.default is not None:
                 completed[spec.name] = spec.default
-            elif spec.required:
+            elif spec.required and not self.ports_optional:
                 raise PortError(f"node {self.id!r} is missing required port {spec.name!r}", spec.name)
         return completed
 
@@ -212,6 +219,8 @@ class NodeInstance:
     monitor: bool = True
     line: int | None = None
     path: str | None = None
+    # Pre/post-condition attributes as written (``_skipIf`` ...): not ports, but written back with the node.
+    attributes: dict[str, str] = field(default_factory=dict)
 
 
 class NodeRegistry:
@@ -219,8 +228,16 @@ class NodeRegistry:
 
     def __init__(self, types: list[NodeType] | None = None) -> None:
         self._types: dict[str, NodeType] = {}
+        # Script enums (BT.CPP's registerScriptingEnum): a name scripts read as a number.
+        self.enums: dict[str, int] = {}
         for node_type in types or []:
             self.register(node_type)
+
+    def register_enum(self, name: str, value: int) -> None:
+        """Let scripts use ``name`` for ``value`` (BT.CPP's ``registerScriptingEnum``)."""
+        if not re.match(r"^[A-Za-z_][A-Za-z0-9_]*$", name):
+            raise RegistryError(f"enum name {name!r} is not an identifier")
+        self.enums[name] = int(value)
 
     def register(self, node_type: NodeType, *, replace: bool = False) -> NodeType:
         if not replace and node_type.id in self._types:

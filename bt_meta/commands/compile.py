@@ -2,7 +2,8 @@
 
 Offers:
 
-* :func:`register` -- adds ``compile FILE [--problem P] [--policy] [--depth N] [-o tree.xml] [--plugins DIR]``
+* :func:`register` -- adds ``compile FILE [--problem P] [--policy] [--depth N] [-o tree.xml] [--tree ID]
+  [--plugins DIR]``
 
 Monitors are implicit in the XML (the loader adds them back around every primitive). Exit status 0 when written,
 1 when the planner finds no plan, 2 on bad input.
@@ -27,6 +28,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="compile the whole method library as a reactive policy tree instead of one plan")
     parser.add_argument("--depth", type=int, default=None, help="with --policy: how deep recursive tasks expand")
     parser.add_argument("-o", "--output", help="write the XML here (default: stdout)")
+    parser.add_argument("--tree", metavar="ID", help="the <BehaviorTree ID> of the written tree (default: "
+                        "Plan_<problem> or Policy_<problem>)")
     add_plugin_arguments(parser)
     parser.set_defaults(func=run)
 
@@ -43,7 +46,10 @@ def run(args: argparse.Namespace) -> int:
     plugins = plugin_host_from_args(args, args.file)
     compiled = compile_task_file(args.file, args.problem, policy=args.policy, plugins=plugins,
                                  max_depth=args.depth or DEFAULT_POLICY_DEPTH)
-    tree_id = re.sub(r"[^A-Za-z0-9_]", "_", f"{'Policy' if args.policy else 'Plan'}_{compiled.problem.name}")
+    if args.tree is not None and not re.match(r"^[A-Za-z_][A-Za-z0-9_.\-]*$", args.tree):
+        raise UserInputError(f"--tree {args.tree!r} is not a valid tree ID")
+    default_id = f"{'Policy' if args.policy else 'Plan'}_{compiled.problem.name}"
+    tree_id = args.tree or re.sub(r"[^A-Za-z0-9_]", "_", default_id)
     text = tree_to_xml(compiled.root, tree_id=tree_id, registry=compiled.registry)
     if args.output:
         Path(args.output).write_text(text, encoding="utf-8")

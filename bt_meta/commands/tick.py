@@ -5,7 +5,8 @@ Offers:
 * :func:`register` -- adds ``tick FILE [--problem P] [--task-file T] [--policy] [--world fake] [--ticks N]
   [--ticks-per-skill K] [--fault SPEC ...] [--seed N] [--world-option K=V ...] [--keep-ticking] [--plugins DIR]
   [--repair [--max-attempts N] [--memory PATH]] [--json] [--groot2 [PORT]] [--groot2-host ADDRESS] [--hold]
-  [--btlog FILE]``
+  [--btlog FILE]`` and, for tree XML, ``[--tree ID] [--include-path DIR] [--subtrees PATH] [--stub-unknown]
+  [--stub ...]``
 
 FILE is a YAML task file (planned, then compiled) or a tree XML (its primitives come from ``--task-file``, by default
 the ``.yaml`` next to it). Ticking stops when the root finishes unless ``--keep-ticking``. Each tick prints the root
@@ -33,6 +34,7 @@ from py_trees.common import Status
 from bt_meta.commands._common import print_json, shown_in_trace
 from bt_meta.commands._groot2_args import add_groot2_arguments, check_groot2_arguments, start_groot2
 from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
+from bt_meta.commands._tree_args import add_tree_arguments, stubs_from_args, tree_sources_from_args
 from bt_meta.errors import UserInputError
 
 
@@ -59,6 +61,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--memory", help="with --repair: episodic memory file (SQLite) for the repairs")
     add_plugin_arguments(parser)
     add_groot2_arguments(parser)
+    add_tree_arguments(parser)
     parser.set_defaults(func=run)
 
 
@@ -78,6 +81,10 @@ def run(args: argparse.Namespace) -> int:
         if not sep or not key.strip():
             raise UserInputError(f"bad --world-option {item!r}: expected KEY=VALUE")
         world_options[key.strip()] = value.strip()
+    from bt_meta.bt.loading import is_xml
+
+    if not is_xml(args.file) and (args.tree or args.include_path or args.subtrees or args.stub_unknown):
+        raise UserInputError("--tree, --include-path, --subtrees and --stub-unknown apply to tree XML", args.file)
     plugins = plugin_host_from_args(args, args.file)
     if args.repair:
         if args.groot2 is not None or args.btlog is not None:
@@ -86,7 +93,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_repaired(args, faults, world_options, plugins)
     harness = TreeHarness.from_file(args.file, args.problem, task_file=args.task_file, policy=args.policy,
                                     world=args.world, faults=faults, ticks_per_skill=args.ticks_per_skill,
-                                    world_options=world_options, plugins=plugins)
+                                    world_options=world_options, plugins=plugins, tree_id=args.tree,
+                                    xml_sources=tree_sources_from_args(args), stubs=stubs_from_args(args))
     shown = {b.name for b in harness.root.iterate() if shown_in_trace(b)}
     groot2 = start_groot2(args, harness)
     ticks: list[dict[str, Any]] = []

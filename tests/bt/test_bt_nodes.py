@@ -63,7 +63,7 @@ def test_registry_lookup_errors_and_custom_types():
     assert "Sequence" in registry and "MoveTo" not in registry
     with pytest.raises(UnknownNodeError) as info:
         registry.get("Fallbak")
-    assert str(info.value) == "unknown node ID 'Fallbak'; did you mean Fallback, ReactiveFallback?"
+    assert str(info.value) == "unknown node ID 'Fallbak'; did you mean Fallback, AsyncFallback, ReactiveFallback?"
     assert isinstance(info.value, KeyError)
     assert registry.custom_types() == []
     move = NodeType("MoveTo", "Action", [PortSpec("goal")], lambda **k: Scripted(k["name"], S))

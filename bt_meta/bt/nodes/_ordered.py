@@ -18,7 +18,7 @@ from typing import ClassVar
 import py_trees
 from py_trees.common import Status
 
-from bt_meta.bt.nodes.base import ControlNode, TickGenerator
+from bt_meta.bt.nodes.base import SKIPPED, ControlNode, TickGenerator
 
 
 class ResumingControl(ControlNode):
@@ -26,14 +26,20 @@ class ResumingControl(ControlNode):
 
     stop_on: ClassVar[Status]
     exhausted: ClassVar[Status]
+    # AsyncSequence / AsyncFallback: end the tick (RUNNING, wake-up raised) after a child that finished synchronously.
+    asynchronous: ClassVar[bool] = False
 
     def __init__(self, name: str, children: list[py_trees.behaviour.Behaviour] | None = None) -> None:
         super().__init__(name, children)
         self.current_child_idx = 0
+        self.skipped_count = 0
 
     def execute(self) -> TickGenerator:
+        if self.status != Status.RUNNING:
+            self.skipped_count = 0
         self.status = Status.RUNNING
         while self.current_child_idx < len(self.children):
+            previous = self.children[self.current_child_idx].status
             child_status = yield from self.tick_child(self.current_child_idx)
             if child_status == Status.RUNNING:
                 return Status.RUNNING
@@ -41,13 +47,27 @@ class ResumingControl(ControlNode):
                 self.reset_children()
                 self.current_child_idx = 0
                 return self.stop_on
+            if child_status is SKIPPED:
+                self.skipped_count += 1
             self.current_child_idx += 1
+            if (
+                self.asynchronous
+                and child_status is not SKIPPED
+                and self.requires_wake_up()
+                and previous == Status.INVALID
+                and self.current_child_idx < len(self.children)
+            ):
+                self.emit_wake_up()
+                return Status.RUNNING
+        all_skipped = self.skipped_count == len(self.children)
         self.reset_children()
         self.current_child_idx = 0
-        return self.exhausted
+        self.skipped_count = 0
+        return SKIPPED if all_skipped else self.exhausted
 
     def halt(self) -> None:
         self.current_child_idx = 0
+        self.skipped_count = 0
         super().halt()
 
 
@@ -59,8 +79,13 @@ class ReactiveControl(ControlNode):
 
     def execute(self) -> TickGenerator:
         self.status = Status.RUNNING
+        all_skipped = True
         for index in range(len(self.children)):
             child_status = yield from self.tick_child(index)
+            all_skipped = all_skipped and child_status is SKIPPED
+            if child_status is SKIPPED:
+                self.reset_child(index)  # BT.CPP: so that it can be skipped again
+                continue
             if child_status == Status.RUNNING:
                 for other in range(len(self.children)):
                     if other != index:
@@ -70,4 +95,4 @@ class ReactiveControl(ControlNode):
                 self.reset_children()
                 return self.stop_on
         self.reset_children()
-        return self.exhausted
+        return SKIPPED if all_skipped else self.exhausted

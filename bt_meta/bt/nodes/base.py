@@ -22,10 +22,15 @@ from typing import Any
 import py_trees
 from py_trees.common import Status
 
+from bt_meta.bt.nodes import entries
+from bt_meta.bt.nodes.entries import absolute_key
+from bt_meta.bt.nodes.status import SKIPPED, Returned, mark, returned
 from bt_meta.bt.registry import PortSpec, blackboard_key
 from bt_meta.errors import BtMetaError
 
-TickGenerator = Generator[py_trees.behaviour.Behaviour, None, Status]
+TickGenerator = Generator[py_trees.behaviour.Behaviour, None, Returned]
+
+__all__ = ["SKIPPED", "absolute_key"]
 
 
 class PortValueError(BtMetaError):
@@ -58,12 +63,6 @@ def reset_child(child: py_trees.behaviour.Behaviour) -> None:
         child.status = Status.INVALID
 
 
-def absolute_key(key: str) -> str:
-    """A blackboard key as py_trees stores it: ``g`` -> ``/g``; BehaviorTree.CPP's root key ``@g`` -> ``/g``."""
-    key = key.lstrip("@")
-    return key if key.startswith("/") else "/" + key
-
-
 class PortValue:
     """A port as given to a factory: a literal converted once, or a ``{key}`` read from the blackboard per tick."""
 
@@ -93,7 +92,7 @@ class PortValue:
     def set(self, value: Any) -> None:
         if self.key is None:
             raise PortValueError(f"output port {self.spec.name!r} must be a {{key}}, got {self.text!r}")
-        py_trees.blackboard.Blackboard.set(absolute_key(self.key), value)
+        entries.write(self.key, value)
 
 
 class _BTNodeMixin:
@@ -122,9 +121,12 @@ class _BTNodeMixin:
         if self.status != Status.RUNNING:
             behaviour.initialise()
         status = yield from self.execute()
-        if status != Status.RUNNING:
-            behaviour.terminate(status)
-        self.status = status
+        mark(behaviour, status)
+        if status is not SKIPPED:
+            # BT.CPP keeps the node's own status when it returns SKIPPED (RUNNING if it had set itself RUNNING).
+            if status != Status.RUNNING:
+                behaviour.terminate(status)
+            self.status = status  # type: ignore[assignment]
         yield behaviour
 
     def stop(self, new_status: Status = Status.INVALID) -> None:
@@ -147,7 +149,7 @@ class ControlNode(_BTNodeMixin, py_trees.composites.Composite):
         child = self.children[index]
         self.current_child = child
         yield from child.tick()
-        return child.status
+        return returned(child)
 
     def reset_child(self, index: int) -> None:
         reset_child(self.children[index])
@@ -169,7 +171,7 @@ class DecoratorNode(_BTNodeMixin, py_trees.decorators.Decorator):
 
     def tick_child(self) -> TickGenerator:
         yield from self.decorated.tick()
-        return self.decorated.status
+        return returned(self.decorated)
 
     def reset_child(self) -> None:
         reset_child(self.decorated)

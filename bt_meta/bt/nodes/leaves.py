@@ -4,6 +4,7 @@ Offers:
 
 * :class:`AlwaysSuccess`, :class:`AlwaysFailure` -- constant actions
 * :class:`SetBlackboard` -- copies ``value`` (a literal or another ``{key}``) to ``output_key``; SUCCESS
+* :class:`UnsetBlackboard` -- removes an entry; SUCCESS
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from __future__ import annotations
 import py_trees
 from py_trees.common import Status
 
+from bt_meta.bt.nodes import entries
 from bt_meta.bt.nodes.base import PortValue, absolute_key
 from bt_meta.bt.registry import blackboard_key
 
@@ -45,5 +47,17 @@ class SetBlackboard(py_trees.behaviour.Behaviour):
 
     def update(self) -> Status:
         value = self.value.get() if self.value.key is not None else self.value.text
-        py_trees.blackboard.Blackboard.set(self.output_key, value)
+        entries.write(self.output_key, value)
+        return Status.SUCCESS
+
+
+class UnsetBlackboard(py_trees.behaviour.Behaviour):
+    """BT.CPP ``UnsetBlackboard``: removes the entry ``key`` (a root key, already mapped by the loader); SUCCESS."""
+
+    def __init__(self, name: str, key: str) -> None:
+        super().__init__(name)
+        self.key = absolute_key(blackboard_key(key) or key)
+
+    def update(self) -> Status:
+        entries.unset(self.key)
         return Status.SUCCESS

@@ -5,6 +5,7 @@ Offers:
 * :class:`Parallel` -- ticks every child that has not finished yet; SUCCESS once ``success_count`` children
   succeeded, FAILURE once ``failure_count`` failed or success became impossible; negative counts mean
   "number of children + 1 + count" (``-1`` = all)
+* :class:`ParallelAll` -- ticks every child to completion; FAILURE once ``max_failures`` failed
 * :func:`threshold` -- that arithmetic
 
 py_trees' ``Parallel`` only knows SuccessOnAll/SuccessOnOne/SuccessOnSelected and fails on the first failure, so it
@@ -17,7 +18,7 @@ from __future__ import annotations
 import py_trees
 from py_trees.common import Status
 
-from bt_meta.bt.nodes.base import ControlNode, PortValue, TickGenerator
+from bt_meta.bt.nodes.base import SKIPPED, ControlNode, PortValue, TickGenerator
 from bt_meta.bt.registry import PortSpec
 from bt_meta.errors import BtMetaError
 
@@ -55,7 +56,8 @@ class Parallel(ControlNode):
 
     def thresholds(self) -> tuple[int, int]:
         count = len(self.children)
-        success = threshold(self._read(self.success_count), count)
+        self.raw_success = self._read(self.success_count)
+        success = threshold(self.raw_success, count)
         failure = threshold(self._read(self.failure_count), count)
         if count < success:
             raise ParallelThresholdError(f"{self.name}: success_count {success} > {count} children, can never succeed")
@@ -72,16 +74,21 @@ class Parallel(ControlNode):
         required_success, required_failure = self.thresholds()
         count = len(self.children)
         self.status = Status.RUNNING
+        skipped = 0
         for index in range(count):
             if index not in self.completed:
                 child_status = yield from self.tick_child(index)
-                if child_status == Status.SUCCESS:
+                if child_status is SKIPPED:
+                    skipped += 1
+                elif child_status == Status.SUCCESS:
                     self.completed.add(index)
                     self.success_total += 1
                 elif child_status == Status.FAILURE:
                     self.completed.add(index)
                     self.failure_total += 1
-            if self.success_total >= required_success:
+            if self.success_total >= required_success or (
+                self.raw_success < 0 and self.success_total + skipped >= required_success
+            ):
                 self.clear()
                 self.reset_children()
                 return Status.SUCCESS
@@ -89,8 +96,55 @@ class Parallel(ControlNode):
                 self.clear()
                 self.reset_children()
                 return Status.FAILURE
-        return Status.RUNNING
+        return SKIPPED if skipped == count else Status.RUNNING
 
     def halt(self) -> None:
         self.clear()
+        super().halt()
+
+
+class ParallelAll(ControlNode):
+    """BT.CPP ``ParallelAll``: ticks every child until all finished; FAILURE when at least ``max_failures`` failed
+    (negative: number of children + 1 + value)."""
+
+    def __init__(
+        self, name: str, children: list[py_trees.behaviour.Behaviour], max_failures: PortValue | int = 1
+    ) -> None:
+        super().__init__(name, children)
+        self.max_failures = max_failures
+        self.completed: set[int] = set()
+        self.failure_total = 0
+
+    def execute(self) -> TickGenerator:
+        raw = self.max_failures.get() if isinstance(self.max_failures, PortValue) else self.max_failures
+        count = len(self.children)
+        failure_threshold = threshold(raw, count)
+        if count < failure_threshold:
+            raise ParallelThresholdError(f"{self.name}: max_failures {failure_threshold} > {count} children")
+        self.status = Status.RUNNING
+        skipped = 0
+        for index in range(count):
+            if index in self.completed:
+                continue
+            child_status = yield from self.tick_child(index)
+            if child_status is SKIPPED:
+                skipped += 1
+            elif child_status == Status.SUCCESS:
+                self.completed.add(index)
+            elif child_status == Status.FAILURE:
+                self.completed.add(index)
+                self.failure_total += 1
+        if skipped == count:
+            return SKIPPED
+        if skipped + len(self.completed) >= count:
+            self.reset_children()
+            self.completed.clear()
+            status = Status.FAILURE if self.failure_total >= failure_threshold else Status.SUCCESS
+            self.failure_total = 0
+            return status
+        return Status.RUNNING
+
+    def halt(self) -> None:
+        self.completed.clear()
+        self.failure_total = 0
         super().halt()

@@ -7,6 +7,7 @@ Offers:
   (BT.CPP keeps the index even when halted); inside a tree with a wake-up signal it ends the tick with RUNNING
   after each child that finished synchronously (BT.CPP 4.8 does, see :mod:`bt_meta.bt.nodes.loops`)
 * :class:`ReactiveSequence` -- re-ticks every child from 0 on every tick; a RUNNING child halts all the others
+* :class:`AsyncSequence` -- a Sequence that yields (RUNNING, wake-up) after each child that finished synchronously
 
 py_trees' ``Sequence(memory=True)`` resumes at the RUNNING child but restarts at 0 after a failure, like BT.CPP's
 ``Sequence``; ``Sequence(memory=False)`` is close to ``ReactiveSequence`` but neither resets finished siblings nor
@@ -19,7 +20,7 @@ import py_trees
 from py_trees.common import Status
 
 from bt_meta.bt.nodes._ordered import ReactiveControl, ResumingControl
-from bt_meta.bt.nodes.base import ControlNode, TickGenerator
+from bt_meta.bt.nodes.base import SKIPPED, ControlNode, TickGenerator
 
 
 class Sequence(ResumingControl):
@@ -40,8 +41,11 @@ class SequenceWithMemory(ControlNode):
     ) -> None:
         super().__init__(name, children)
         self.current_child_idx = 0
+        self.skipped_count = 0
 
     def execute(self) -> TickGenerator:
+        if self.status != Status.RUNNING:
+            self.skipped_count = 0
         self.status = Status.RUNNING
         while self.current_child_idx < len(self.children):
             previous = self.children[self.current_child_idx].status
@@ -52,13 +56,18 @@ class SequenceWithMemory(ControlNode):
                 self.reset_children(self.current_child_idx)
                 return Status.FAILURE
             self.current_child_idx += 1
+            if child_status is SKIPPED:
+                self.skipped_count += 1
+                continue
             # BT.CPP 4.8 yields after a child that finished synchronously, whether or not it is async.
             if self.requires_wake_up() and previous == Status.INVALID and self.current_child_idx < len(self.children):
                 self.emit_wake_up()
                 return Status.RUNNING
+        all_skipped = self.skipped_count == len(self.children)
         self.reset_children()
         self.current_child_idx = 0
-        return Status.SUCCESS
+        self.skipped_count = 0
+        return SKIPPED if all_skipped else Status.SUCCESS
 
 
 class ReactiveSequence(ReactiveControl):
@@ -70,4 +79,13 @@ class ReactiveSequence(ReactiveControl):
     def __init__(
         self, name: str = "ReactiveSequence", children: list[py_trees.behaviour.Behaviour] | None = None
     ) -> None:
+        super().__init__(name, children)
+
+
+class AsyncSequence(Sequence):
+    """BT.CPP ``AsyncSequence``: a Sequence that ends the tick after each child that finished synchronously."""
+
+    asynchronous = True
+
+    def __init__(self, name: str = "AsyncSequence", children: list[py_trees.behaviour.Behaviour] | None = None) -> None:
         super().__init__(name, children)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import py_trees
 from py_trees.common import Status
 
+from bt_meta.bt.nodes import entries
 from bt_meta.bt.nodes.base import DecoratorNode, TickGenerator
 
 
@@ -41,7 +42,7 @@ class SubTree(DecoratorNode):
         if not self._initialised:
             self._initialised = True
             for key, value in self.init_values.items():
-                py_trees.blackboard.Blackboard.set(key, value)
+                entries.write(key, value)
 
     def execute(self) -> TickGenerator:
         self.status = Status.RUNNING

@@ -15,6 +15,7 @@ import py_trees
 from py_trees.common import Status
 
 from bt_meta.bt.nodes.base import WakeUpSignal
+from bt_meta.bt.nodes.status import Returned, returned
 
 
 def install_wake_up(root: py_trees.behaviour.Behaviour, signal: WakeUpSignal | None = None) -> WakeUpSignal:
@@ -26,15 +27,29 @@ def install_wake_up(root: py_trees.behaviour.Behaviour, signal: WakeUpSignal | N
     return signal
 
 
-def tick_exactly_once(root: py_trees.behaviour.Behaviour) -> Status:
+def _finish(root: py_trees.behaviour.Behaviour) -> Returned:
+    # BT.CPP's tickRoot resets a root that finished to IDLE; we keep its status readable and mark it as the root
+    # instead, so that its pre-conditions treat a finished status as idle (see conditions.py).
+    root.bt_root = True
+    return returned(root)
+
+
+def tick_exactly_once(root: py_trees.behaviour.Behaviour) -> Returned:
     root.tick_once()
-    return root.status
+    return _finish(root)
 
 
-def tick_once(root: py_trees.behaviour.Behaviour) -> Status:
+# tick_once re-ticks a woken root at most this many times: a Repeat num_cycles="-1" over a child that completes at
+# once wakes it forever (BT.CPP spins there), and a caller's tick budget must still bound the run.
+MAX_WAKE_UPS = 1_000
+
+
+def tick_once(root: py_trees.behaviour.Behaviour) -> Returned:
     signal: WakeUpSignal | None = getattr(root, "bt_wake_up", None)
     # Like BT.CPP, a signal left pending by an earlier tick is not cleared first: it causes one re-tick.
     root.tick_once()
-    while root.status == Status.RUNNING and signal is not None and signal.consume():
+    wake_ups = 0
+    while returned(root) == Status.RUNNING and signal is not None and wake_ups < MAX_WAKE_UPS and signal.consume():
+        wake_ups += 1
         root.tick_once()
-    return root.status
+    return _finish(root)

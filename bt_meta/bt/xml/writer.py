@@ -166,6 +166,7 @@ class _Writer:
         if behaviour.name != instance.id:
             attrib["name"] = behaviour.name
         attrib.update(instance.ports)
+        attrib.update(instance.attributes)
         if not instance.monitor:
             attrib["_monitor"] = "false"
         element = ET.Element(instance.id, attrib)
@@ -182,6 +183,7 @@ class _Writer:
         if behaviour.name != instance.id:
             attrib["name"] = behaviour.name
         attrib.update(instance.ports)
+        attrib.update(instance.attributes)
         if not instance.monitor:
             attrib["_monitor"] = "false"
         if len(behaviour.children) != 1:

@@ -100,6 +100,35 @@ def _unify_head(method: Method, task: tuple[str, ...]) -> dict[str, str] | None:
     return env
 
 
+def _cell_hash(item: tuple, rest: tuple | None) -> int:
+    """The hash of an agenda cell: its item's tasks (not tree positions) and the hash of the cells after it."""
+    kind = item[0]
+    # TASK: the task (and a replan exclusion); CLOSE: (task, state hash); UNORDERED: the subtasks
+    own = hash((kind, item[1])) if kind != TASK else hash(item[1]) if item[3] is None else hash((item[1], item[3]))
+    return hash((own, rest[2] if rest is not None else 0))
+
+
+def _same_agenda(first: tuple | None, second: tuple | None) -> bool:
+    """Whether two agendas hold the same work: equal tasks in order, equal loop-check entries (CLOSE items).
+
+    The subtree below a search node depends only on its state and this (tree positions aside): alternatives
+    come from a task and the state, the loop check from the CLOSE items still on the agenda, the goal from the
+    final state. So a node equal to one whose subtree was exhausted without a plan fails too, and is skipped.
+    """
+    while first is not None and second is not None:
+        if first is second:
+            return True
+        a, b = first[0], second[0]
+        if a[0] != b[0] or a[1] != b[1] or first[2] != second[2]:
+            return False
+        if a[0] == TASK and a[3] != b[3]:
+            return False
+        if a[0] == CLOSE and a[2] != b[2]:
+            return False
+        first, second = first[1], second[1]
+    return first is second
+
+
 class Search:
     """One search over an agenda. Parent keys of new nodes are trail indices (int) or existing node ids (str)."""
 
@@ -116,6 +145,7 @@ class Search:
         self.expansions = 0
         self.backtracks = 0
         self.loops = 0
+        self.memo_pruned = 0
         self.deepest: tuple[int, str] | None = None  # (plan length, description) of the deepest dead end
         self.started = time.perf_counter()
 
@@ -191,7 +221,10 @@ class Search:
         for_size = compiled.for_size
         agenda: tuple | None = None
         for item in reversed(items):
-            agenda = (item, agenda)
+            agenda = (item, agenda, _cell_hash(item, agenda))
+        # search nodes (state + agenda) whose whole subtree failed, by (state hash, agenda hash); see _same_agenda
+        failed: dict[tuple[int, int], list[tuple[State, tuple]]] = {}
+        reached: list[tuple[State, tuple, int]] = []  # compound expansions since, with the stack height then
         trail: list[tuple] = []  # (task, kind, method, bindings, parent_key, state_before, step)
         plan: list[int] = []
         active: dict[tuple, list[State]] = {}
@@ -222,6 +255,12 @@ class Search:
                             active.setdefault(entry[1], []).append(entry[2])
                     alternative = next(cp[0], None)
                     if alternative is not None:
+                        # every search node reached after this choice point was made has failed as a whole
+                        height = len(stack) - 1
+                        while reached and reached[-1][2] > height:
+                            done_state, done_agenda, _ = reached.pop()
+                            failed.setdefault((done_state._hash, done_agenda[2]), []).append(
+                                (done_state, done_agenda))
                         self.backtracks += 1
                         item = cp[1]
                         rest = cp[2]
@@ -239,7 +278,7 @@ class Search:
                         continue
                     self.expansions = expansions
                     return self._success(trail, plan, state)
-                item, rest = agenda
+                item, rest, _ = agenda
                 kind = item[0]
                 if kind == CLOSE:
                     states = active[item[1]]
@@ -280,6 +319,14 @@ class Search:
                         # at most one way to apply it: no choice point (a dead end resumes the previous one)
                         alternatives = iter(found) if found.__class__ is not tuple or len(found) > 1 else None
                     else:
+                        bucket = failed.get((state._hash, agenda[2]))
+                        if bucket is not None and any(s == state and _same_agenda(a, agenda) for s, a in bucket):
+                            self.memo_pruned += 1
+                            self._dead_end(len(plan), f"{atom_text(task)}: failed before in the same state with "
+                                                      "the same tasks after it")
+                            advance = True
+                            continue
+                        reached.append((state, agenda, len(stack)))
                         if name in recursive:
                             key = (task, state._hash)
                             seen = active.get(key)
@@ -324,21 +371,26 @@ class Search:
                         key = (task, state._hash)
                         active.setdefault(key, []).append(state)
                         undo.append((True, key))
-                        agenda = ((CLOSE, key, state), rest)
+                        close = (CLOSE, key, state)
+                        agenda = (close, rest, _cell_hash(close, rest))
                     else:
                         agenda = rest
                     if method.ordered:
                         for sub in reversed(subtasks):
-                            agenda = ((TASK, sub, index, None), agenda)
+                            pushed = (TASK, sub, index, None)
+                            agenda = (pushed, agenda, _cell_hash(pushed, agenda))
                     elif subtasks:
-                        agenda = ((UNORDERED, subtasks, index), agenda)
+                        pushed = (UNORDERED, subtasks, index)
+                        agenda = (pushed, agenda, _cell_hash(pushed, agenda))
             else:  # UNORDERED: the alternative is the index of the subtask to do first
                 subs = item[1]
                 remaining = subs[:alternative] + subs[alternative + 1:]
                 agenda = rest
                 if remaining:
-                    agenda = ((UNORDERED, remaining, item[2]), agenda)
-                agenda = ((TASK, subs[alternative], item[2], None), agenda)
+                    pushed = (UNORDERED, remaining, item[2])
+                    agenda = (pushed, agenda, _cell_hash(pushed, agenda))
+                pushed = (TASK, subs[alternative], item[2], None)
+                agenda = (pushed, agenda, _cell_hash(pushed, agenda))
 
     def _holds(self, atom: Atom, state: State) -> bool:
         if atom[0] in self.domain.context.derived:
@@ -353,6 +405,7 @@ class Search:
             "expansions": self.expansions,
             "backtracks": self.backtracks,
             "loops_pruned": self.loops,
+            "memo_pruned": self.memo_pruned,
             "seconds": round(time.perf_counter() - self.started, 6),
         }
         data.update(more)

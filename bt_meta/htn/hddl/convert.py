@@ -203,6 +203,14 @@ class _Converter:
             self.tasks[spelled] = [f"?{self._var_name(p.name)}" for p in task.params]
         self.task_arity = {self.names.name("call", t.name): len(t.params) for t in d.tasks}
         self.actions_by_key = {a.name.key: a for a in d.actions}
+        changed: set[str] = set()
+        pending = [e for a in d.actions for e in a.effects]
+        while pending:
+            effect = pending.pop()
+            if effect.pred is not None:
+                changed.add(effect.pred.key)
+            pending.extend(effect.effects)
+        self.static_keys = {pred.key for pred, _ in d.predicates} - changed
         self.action_arity = {self.names.name("call", a.name): len(a.params) for a in d.actions}
 
     def _type_name(self, sym: Sym) -> str:
@@ -553,6 +561,8 @@ class _Converter:
             lifted = self.first_action_precondition(ordered_subs[0])
             if lifted is not None:
                 conjuncts.append(lifted)
+        for sub in ordered_subs[1:] if ordered else ordered_subs:
+            conjuncts.extend(self.static_precondition(sub))
         combined = Formula("and", where, conjuncts) if conjuncts else None
         precondition = self.precondition(combined, scope, bound, needed, f"the precondition of {what}", params,
                                          tested)
@@ -573,6 +583,25 @@ class _Converter:
             return None
         mapping = {p.name.key: arg for p, arg in zip(action.params, sub.args, strict=True)}
         return _substitute(action.precondition, mapping)
+
+    def static_precondition(self, sub: Subtask) -> list[Formula]:
+        """The conjuncts of a subtask action's precondition on static predicates, in the method's terms.
+
+        A predicate no action changes holds in every state exactly as in the initial one, so such a conjunct
+        is true when the action runs iff it is true when the method is applied: testing it with the method's
+        precondition only removes bindings that would fail later (``road(?l2, ?l3)`` binds a route's next
+        location instead of every location being tried, with everything between done first).
+        """
+        action = self.actions_by_key.get(sub.name.key)
+        if action is None or action.precondition is None or len(action.params) != len(sub.args):
+            return []
+        mapping = {p.name.key: arg for p, arg in zip(action.params, sub.args, strict=True)}
+        found = []
+        for conj in self.conjuncts(action.precondition):
+            atom = conj.children[0] if conj.op == "not" and conj.children[0].op == "atom" else conj
+            if atom.op == "atom" and atom.pred is not None and atom.pred.key in self.static_keys:
+                found.append(_substitute(conj, mapping))
+        return found
 
     def _types_of(self, var: str, params: Sequence[Typed]) -> tuple[Sym, ...]:
         for p in params:

@@ -316,7 +316,7 @@ class _Converter:
                 known = ", ".join(sorted(self.predicates)) or "none"
                 raise self.error(f"unknown predicate {f.pred.text!r} in {where} (known: {known})", f.pred)
             if len(f.terms) != len(self.predicates[pred]):
-                raise self.error(f"predicate {f.pred.text} takes {len(self.predicates[pred])} arguments, got "
+                raise self.error(f"predicate {f.pred.text} takes {len(self.predicates[pred])} argument(s), got "
                                  f"{len(f.terms)}", f.pred)
             text = f"{pred}({', '.join(self.term(t, scope, where) for t in f.terms)})"
             return f"not {text}" if negate else text
@@ -495,7 +495,7 @@ class _Converter:
         if pred is None or pred not in self.predicates:
             raise self.error(f"unknown predicate {effect.pred.text!r} in the effect of {what}", effect.pred)
         if len(effect.terms) != len(self.predicates[pred]):
-            raise self.error(f"predicate {effect.pred.text} takes {len(self.predicates[pred])} arguments, got "
+            raise self.error(f"predicate {effect.pred.text} takes {len(self.predicates[pred])} argument(s), got "
                              f"{len(effect.terms)}", effect.pred)
         return f"{pred}({', '.join(self.term(t, scope, f'the effect of {what}') for t in effect.terms)})"
 
@@ -505,7 +505,7 @@ class _Converter:
             raise self.error(f"unknown task or action {sub.name.text!r} in {what}", sub.name)
         arity = self.task_arity.get(spelled, self.action_arity.get(spelled))
         if arity != len(sub.args):
-            raise self.error(f"{sub.name.text} takes {arity} arguments, got {len(sub.args)}", sub.name)
+            raise self.error(f"{sub.name.text} takes {arity} argument(s), got {len(sub.args)}", sub.name)
         return f"{spelled}({', '.join(self.term(t, scope, what) for t in sub.args)})"
 
     def order(self, net: TaskNetwork, what: str, where: Sym | SList) -> tuple[list[Subtask], bool]:
@@ -629,7 +629,7 @@ class _Converter:
             kind = "an action" if task in self.primitives else "not a declared task"
             raise self.error(f"{what} decomposes {method.task.text}, which is {kind}", method.task)
         if len(method.task_args) != self.task_arity[task]:
-            raise self.error(f"{method.task.text} takes {self.task_arity[task]} arguments, got "
+            raise self.error(f"{method.task.text} takes {self.task_arity[task]} argument(s), got "
                              f"{len(method.task_args)}", method.task)
         head_vars: set[str] = set()
         head_types: dict[str, tuple[Sym, ...]] = {}
@@ -674,7 +674,7 @@ class _Converter:
                 else:
                     raise self.error(f"unknown predicate {pred_sym.text!r} in the initial state", pred_sym)
             elif len(terms) != len(self.predicates[pred]):
-                raise self.error(f"predicate {pred_sym.text} takes {len(self.predicates[pred])} arguments, got "
+                raise self.error(f"predicate {pred_sym.text} takes {len(self.predicates[pred])} argument(s), got "
                                  f"{len(terms)}", pred_sym)
             init.append(f"{pred}({', '.join(self.term(t, scope, 'the initial state') for t in terms)})")
         tasks: list[str] = []

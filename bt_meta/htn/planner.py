@@ -100,35 +100,6 @@ def _unify_head(method: Method, task: tuple[str, ...]) -> dict[str, str] | None:
     return env
 
 
-def _cell_hash(item: tuple, rest: tuple | None) -> int:
-    """The hash of an agenda cell: its item's tasks (not tree positions) and the hash of the cells after it."""
-    kind = item[0]
-    # TASK: the task (and a replan exclusion); CLOSE: (task, state hash); UNORDERED: the subtasks
-    own = hash((kind, item[1])) if kind != TASK else hash(item[1]) if item[3] is None else hash((item[1], item[3]))
-    return hash((own, rest[2] if rest is not None else 0))
-
-
-def _same_agenda(first: tuple | None, second: tuple | None) -> bool:
-    """Whether two agendas hold the same work: equal tasks in order, equal loop-check entries (CLOSE items).
-
-    The subtree below a search node depends only on its state and this (tree positions aside): alternatives
-    come from a task and the state, the loop check from the CLOSE items still on the agenda, the goal from the
-    final state. So a node equal to one whose subtree was exhausted without a plan fails too, and is skipped.
-    """
-    while first is not None and second is not None:
-        if first is second:
-            return True
-        a, b = first[0], second[0]
-        if a[0] != b[0] or a[1] != b[1] or first[2] != second[2]:
-            return False
-        if a[0] == TASK and a[3] != b[3]:
-            return False
-        if a[0] == CLOSE and a[2] != b[2]:
-            return False
-        first, second = first[1], second[1]
-    return first is second
-
-
 class Search:
     """One search over an agenda. Parent keys of new nodes are trail indices (int) or existing node ids (str)."""
 
@@ -221,10 +192,12 @@ class Search:
         for_size = compiled.for_size
         agenda: tuple | None = None
         for item in reversed(items):
-            agenda = (item, agenda, _cell_hash(item, agenda))
-        # search nodes (state + agenda) whose whole subtree failed, by (state hash, agenda hash); see _same_agenda
+            agenda = (item, agenda)
+        # search nodes whose whole subtree failed: (state hash, id of the agenda) -> [(state, agenda)]. The agenda
+        # is compared by identity: the same agenda object holds the same tasks and loop-check entries (CLOSE
+        # items) whatever path led to it, and the subtree below a node depends only on its state and agenda
         failed: dict[tuple[int, int], list[tuple[State, tuple]]] = {}
-        reached: list[tuple[State, tuple, int]] = []  # compound expansions since, with the stack height then
+        reached: list[tuple[State, tuple, int]] = []  # compound expansions, with the stack height then
         trail: list[tuple] = []  # (task, kind, method, bindings, parent_key, state_before, step)
         plan: list[int] = []
         active: dict[tuple, list[State]] = {}
@@ -259,7 +232,7 @@ class Search:
                         height = len(stack) - 1
                         while reached and reached[-1][2] > height:
                             done_state, done_agenda, _ = reached.pop()
-                            failed.setdefault((done_state._hash, done_agenda[2]), []).append(
+                            failed.setdefault((done_state._hash, id(done_agenda)), []).append(
                                 (done_state, done_agenda))
                         self.backtracks += 1
                         item = cp[1]
@@ -278,7 +251,7 @@ class Search:
                         continue
                     self.expansions = expansions
                     return self._success(trail, plan, state)
-                item, rest, _ = agenda
+                item, rest = agenda
                 kind = item[0]
                 if kind == CLOSE:
                     states = active[item[1]]
@@ -319,14 +292,16 @@ class Search:
                         # at most one way to apply it: no choice point (a dead end resumes the previous one)
                         alternatives = iter(found) if found.__class__ is not tuple or len(found) > 1 else None
                     else:
-                        bucket = failed.get((state._hash, agenda[2]))
-                        if bucket is not None and any(s == state and _same_agenda(a, agenda) for s, a in bucket):
-                            self.memo_pruned += 1
-                            self._dead_end(len(plan), f"{atom_text(task)}: failed before in the same state with "
-                                                      "the same tasks after it")
-                            advance = True
-                            continue
-                        reached.append((state, agenda, len(stack)))
+                        if failed:
+                            bucket = failed.get((state._hash, id(agenda)))
+                            if bucket is not None and any(a is agenda and s == state for s, a in bucket):
+                                self.memo_pruned += 1
+                                self._dead_end(len(plan), f"{atom_text(task)}: failed before in the same state with "
+                                                          "the same tasks after it")
+                                advance = True
+                                continue
+                        if stack:  # with no choice point left a failure ends the search: nothing to remember
+                            reached.append((state, agenda, len(stack)))
                         if name in recursive:
                             key = (task, state._hash)
                             seen = active.get(key)
@@ -371,26 +346,21 @@ class Search:
                         key = (task, state._hash)
                         active.setdefault(key, []).append(state)
                         undo.append((True, key))
-                        close = (CLOSE, key, state)
-                        agenda = (close, rest, _cell_hash(close, rest))
+                        agenda = ((CLOSE, key, state), rest)
                     else:
                         agenda = rest
                     if method.ordered:
                         for sub in reversed(subtasks):
-                            pushed = (TASK, sub, index, None)
-                            agenda = (pushed, agenda, _cell_hash(pushed, agenda))
+                            agenda = ((TASK, sub, index, None), agenda)
                     elif subtasks:
-                        pushed = (UNORDERED, subtasks, index)
-                        agenda = (pushed, agenda, _cell_hash(pushed, agenda))
+                        agenda = ((UNORDERED, subtasks, index), agenda)
             else:  # UNORDERED: the alternative is the index of the subtask to do first
                 subs = item[1]
                 remaining = subs[:alternative] + subs[alternative + 1:]
                 agenda = rest
                 if remaining:
-                    pushed = (UNORDERED, remaining, item[2])
-                    agenda = (pushed, agenda, _cell_hash(pushed, agenda))
-                pushed = (TASK, subs[alternative], item[2], None)
-                agenda = (pushed, agenda, _cell_hash(pushed, agenda))
+                    agenda = ((UNORDERED, remaining, item[2]), agenda)
+                agenda = ((TASK, subs[alternative], item[2], None), agenda)
 
     def _holds(self, atom: Atom, state: State) -> bool:
         if atom[0] in self.domain.context.derived:

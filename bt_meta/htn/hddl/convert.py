@@ -441,7 +441,11 @@ class _Converter:
             if atom:
                 out.append(atom)
             tested.add(spelled)
-        return [o for o in out if o and o != "true"]
+        kept: list[str] = []
+        for conjunct in out:  # a lifted action precondition often repeats the method's own conjuncts
+            if conjunct and conjunct != "true" and conjunct not in kept:
+                kept.append(conjunct)
+        return kept
 
     def subtype(self, declared: str, wanted: tuple[Sym, ...]) -> bool:
         """Whether every object of type ``declared`` has one of the ``wanted`` types."""

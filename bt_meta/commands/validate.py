@@ -2,8 +2,8 @@
 
 Offers:
 
-* :func:`register` -- adds ``validate FILE [--problem P.hddl]`` (YAML, or HDDL imported on the fly); prints ``FILE: ok (N primitives, M methods, K problems)`` or the
-  error as ``path:line:column: message`` (exit 2)
+* :func:`register` -- adds ``validate FILE [--problem P.hddl]`` (YAML, or HDDL imported on the fly); prints
+  ``FILE: ok (N primitives, M methods, K problems)`` or the error as ``path:line:column: message`` (exit 2)
 """
 
 from __future__ import annotations
@@ -14,7 +14,8 @@ from bt_meta.htn.hddl.files import load_task_input
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser("validate", help="check a YAML task file or HDDL files (syntax, names, arities, variables)")
+    parser = subparsers.add_parser("validate",
+                                   help="check a YAML task file or HDDL files (syntax, names, arities, variables)")
     parser.add_argument("file", help="YAML task file, or an HDDL domain or problem file (.hddl)")
     parser.add_argument("--problem", help="with an HDDL domain: an HDDL problem file to check with it")
     parser.set_defaults(func=run)

@@ -66,8 +66,9 @@ def _domain_root(path: Path) -> Path:
 
 def problem_files(domain_dir: Path) -> list[Path]:
     """The problem files of one IPC domain folder, in name order (domain files and subfolders left out)."""
-    return sorted(p for p in domain_dir.glob("*.hddl")
-                  if p.name != "domain.hddl" and not p.name.endswith("-domain.hddl") and p.is_file())
+    found = [*domain_dir.glob("*.hddl"), *domain_dir.glob("*.pddl")]  # IPC 2023 names some problems .pddl
+    return sorted(p for p in found if p.name not in ("domain.hddl", "domain.pddl")
+                  and not p.name.endswith(("-domain.hddl", "-domain.pddl")) and p.is_file())
 
 
 def _run_problem(problem_path: Path, timeout: float) -> dict[str, Any]:

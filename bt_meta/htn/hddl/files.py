@@ -58,7 +58,7 @@ def find_domain_file(problem_path: str | Path) -> Path:
 
 
 def is_hddl(path: str | Path) -> bool:
-    return str(path).lower().endswith(".hddl")
+    return str(path).lower().endswith((".hddl", ".pddl"))  # IPC 2023 names some HDDL problems .pddl
 
 
 def load_task_input(file: str | Path, problem: str | None) -> tuple[TaskFile, str | None]:

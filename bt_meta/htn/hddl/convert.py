@@ -403,34 +403,51 @@ class _Converter:
             bound.add(var_text)
             tested.add(var_text)
 
-        for conj in self.conjuncts(pre):
-            if conj.op == "atom":
-                text = self.condition(conj, scope, False, where)
-                out.append(text)
-                pred_types = self.predicates.get(self.names.spelled.get(("pred", conj.pred.key), ""), [])
-                for position, term in enumerate(conj.terms):
-                    if not term.is_var:
-                        continue
-                    found = scope.lookup(term)
-                    if found is None:
-                        continue
-                    spelled = found[0]
-                    declared = pred_types[position] if position < len(pred_types) else OBJECT
-                    covered = self.subtype(declared, found[1])  # the fact's declared type implies the var's
-                    if spelled not in bound:
-                        bound.add(spelled)
-                        if not covered:
-                            atom = self.type_atom(found[1], f"?{spelled}", needed=False)
-                            if atom:
-                                out.append(atom)
-                        tested.add(spelled)
-                    elif covered:
-                        tested.add(spelled)
-                continue
+        def unbound(conj: Formula) -> list[str]:
+            names = []
             for sym in self.free_vars(conj, scope):
                 found = scope.lookup(sym)
-                if found is not None:
-                    bind(found[0])
+                if found is not None and found[0] not in bound:
+                    names.append(found[0])
+            return names
+
+        # positive atoms in order, each test (not, =, quantifiers, or) as soon as atoms before it bound its
+        # variables; tests still unbound at the end get type atoms that bind them (HDDL's conjunction has no order)
+        waiting: list[Formula] = []
+        for conj in self.conjuncts(pre):
+            if conj.op != "atom":
+                if unbound(conj):
+                    waiting.append(conj)
+                else:
+                    out.append(self.condition(conj, scope, False, where))
+                continue
+            out.append(self.condition(conj, scope, False, where))
+            pred_types = self.predicates.get(self.names.spelled.get(("pred", conj.pred.key), ""), [])
+            for position, term in enumerate(conj.terms):
+                if not term.is_var:
+                    continue
+                found = scope.lookup(term)
+                if found is None:
+                    continue
+                spelled = found[0]
+                declared = pred_types[position] if position < len(pred_types) else OBJECT
+                covered = self.subtype(declared, found[1])  # the fact's declared type implies the var's
+                if spelled not in bound:
+                    bound.add(spelled)
+                    if not covered:
+                        atom = self.type_atom(found[1], f"?{spelled}", needed=False)
+                        if atom:
+                            out.append(atom)
+                    tested.add(spelled)
+                elif covered:
+                    tested.add(spelled)
+            ready = [w for w in waiting if not unbound(w)]
+            for conj_ready in ready:
+                waiting.remove(conj_ready)
+                out.append(self.condition(conj_ready, scope, False, where))
+        for conj in waiting:
+            for spelled in unbound(conj):
+                bind(spelled)
             out.append(self.condition(conj, scope, False, where))
         for sym in needed:
             found = scope.lookup(sym)

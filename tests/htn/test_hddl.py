@@ -284,3 +284,27 @@ def test_bench_ipc_on_a_folder_of_domains(tmp_path, cli):
     assert row["runs"][0]["verified"] is True and row["hypertension_ipc2020"] is None
     missing = cli("bench", "ipc", "--path", str(tmp_path), "--domains", "Towers")
     assert missing.returncode == 2 and "--domains: no domain 'Towers'" in missing.stderr
+
+
+def test_conditions_later_subtasks_need_are_tested_with_the_method_when_nothing_before_can_change_them():
+    text = DELIVERY_DOMAIN.read_text().replace("    :precondition (at ?p ?from)\n", "")
+    converted = import_hddl_text(text)
+    method = converted.split("- name: m-deliver", 1)[1].split("- name:", 1)[0]
+    # pick's (at ?p ?from): goto before it moves trucks only, so the package's place binds ?from ...
+    assert "- at(?p, ?from)" in method
+    # ... while pick's (at ?t ?from) is left to pick itself: goto changes where the truck is
+    assert "at(?t, ?from)" not in method
+    # and the via method tests road(?mid, ?to) (static) before driving anywhere
+    via = converted.split("- name: m-via", 1)[1]
+    assert via.split("subtasks:")[0].strip().endswith("- road(?mid, ?to)")
+
+
+def import_hddl_text(domain_text: str) -> str:
+    from bt_meta.htn.hddl.convert import convert
+
+    converted = convert(parse_domain(domain_text, "d.hddl"), [parse_problem(DELIVERY.read_text(), "p.hddl")])
+    taskfile = load_task_text(converted.text)
+    result = plan(taskfile.domain, taskfile.problems["two-parcels"])
+    assert result.ok and verify_plan(taskfile.domain, taskfile.problems["two-parcels"],
+                                     [a.as_list() for a in result.plan], result.tree.to_dict()).ok
+    return converted.text

@@ -203,6 +203,11 @@ class _Converter:
             self.tasks[spelled] = [f"?{self._var_name(p.name)}" for p in task.params]
         self.task_arity = {self.names.name("call", t.name): len(t.params) for t in d.tasks}
         self.actions_by_key = {a.name.key: a for a in d.actions}
+        self.methods_by_task_key: dict[str, list] = {}
+        for method in d.methods:
+            self.methods_by_task_key.setdefault(method.task.key, []).append(method)
+        self.constant_types = {c.name.key: c.types for c in d.constants}
+        self._changes: dict[str, set[tuple[str, tuple[str | None, ...]]]] | None = None
         changed: set[str] = set()
         pending = [e for a in d.actions for e in a.effects]
         while pending:
@@ -582,8 +587,12 @@ class _Converter:
             lifted = self.first_action_precondition(ordered_subs[0])
             if lifted is not None:
                 conjuncts.append(lifted)
-        for sub in ordered_subs[1:] if ordered else ordered_subs:
-            conjuncts.extend(self.static_precondition(sub))
+        if ordered:
+            for position, sub in enumerate(ordered_subs):
+                conjuncts.extend(self.lifted_precondition(sub, ordered_subs[:position], scope))
+        else:
+            for sub in ordered_subs:
+                conjuncts.extend(self.static_precondition(sub))
         combined = Formula("and", where, conjuncts) if conjuncts else None
         precondition = self.precondition(combined, scope, bound, needed, f"the precondition of {what}", params,
                                          tested)
@@ -604,6 +613,113 @@ class _Converter:
             return None
         mapping = {p.name.key: arg for p, arg in zip(action.params, sub.args, strict=True)}
         return _substitute(action.precondition, mapping)
+
+    def lifted_precondition(self, sub: Subtask, before: Sequence[Subtask], scope: _Scope) -> list[Formula]:
+        """Conjuncts that must hold when ``sub`` starts and that the subtasks ``before`` it cannot change.
+
+        ``sub``'s conditions: an action's precondition, or the precondition of a task's only method (the
+        conjuncts over its head's variables). A conjunct whose atom no action reachable from ``before`` can add
+        or delete -- no effect on its predicate with compatible argument types -- is true when ``sub`` starts
+        iff it is true when the method is applied, so it is tested there too: only bindings that would fail
+        later go (Transport's (at ?p ?l1) of load, past get_to that moves vehicles only, binds the pick-up
+        place instead of every place being tried with a whole route driven to each).
+        """
+        if not before and sub.name.key in self.actions_by_key:
+            return []  # the first action's whole precondition is lifted by first_action_precondition
+        conditions: list[Formula] = []
+        action = self.actions_by_key.get(sub.name.key)
+        if action is not None:
+            if action.precondition is None or len(action.params) != len(sub.args):
+                return []
+            mapping = {p.name.key: arg for p, arg in zip(action.params, sub.args, strict=True)}
+            conditions = [_substitute(c, mapping) for c in self.conjuncts(action.precondition)]
+        else:
+            methods = self.methods_by_task_key.get(sub.name.key, [])
+            if len(methods) != 1:
+                return []
+            method = methods[0]
+            head = method.task_args
+            if len(head) != len(sub.args) or not all(t.is_var for t in head) or len({t.key for t in head}) != len(head):
+                return []
+            mapping = {t.key: arg for t, arg in zip(head, sub.args, strict=True)}
+            own = self.conjuncts(method.precondition)
+            sub_order, sub_ordered = self.order(method.network, f"method {method.name.text}", method.where)
+            first = sub_order[:1] if sub_ordered else []
+            if first:  # the method's first action must apply where the method does, so its precondition counts
+                first_pre = self.first_action_precondition(first[0])
+                own = [*own, *self.conjuncts(first_pre)]
+            for conj in own:
+                atom = conj.children[0] if conj.op == "not" and conj.children else conj
+                if atom.op == "atom" and all(not t.is_var or t.key in mapping for t in atom.terms):
+                    conditions.append(_substitute(conj, mapping))
+        changes = set()
+        for earlier in before:
+            changes |= self.changes_of(earlier.name.key)
+        lifted = []
+        for conj in conditions:
+            atom = conj.children[0] if conj.op == "not" and conj.children else conj
+            if atom.op != "atom" or atom.pred is None:
+                continue
+            wanted = tuple(self._term_type(t, scope) for t in atom.terms)
+            if not any(pred == atom.pred.key and len(types) == len(wanted)
+                       and all(self._compatible(a, b) for a, b in zip(types, wanted, strict=True))
+                       for pred, types in changes):
+                lifted.append(conj)
+        return lifted
+
+    def _term_type(self, term: Sym, scope: _Scope) -> str | None:
+        if term.is_var:
+            found = scope.lookup(term)
+            types = found[1] if found is not None else ()
+        else:
+            types = self.constant_types.get(term.key, ())
+        if len(types) != 1 or types[0].key == OBJECT:
+            return None
+        return self._type_name(types[0])
+
+    def _compatible(self, first: str | None, second: str | None) -> bool:
+        """Whether an object can have both types (one is the other or an ancestor of it); None: any type."""
+        if first is None or second is None or first == second:
+            return True
+        return self.subtype(first, (Sym(second, 0, 0),)) or self.subtype(second, (Sym(first, 0, 0),))
+
+    def changes_of(self, key: str) -> set[tuple[str, tuple[str | None, ...]]]:
+        """(predicate, argument types) of every atom the action, or any decomposition of the task, can change."""
+        if self._changes is None:
+            changes: dict[str, set[tuple[str, tuple[str | None, ...]]]] = {}
+            for action in self.domain.actions:
+                scope = _Scope()
+                for p in action.params:
+                    scope.declare(p, self._var_name(p.name))
+                found: set[tuple[str, tuple[str | None, ...]]] = set()
+                pending = list(action.effects)
+                while pending:
+                    effect = pending.pop()
+                    pending.extend(effect.effects)
+                    if effect.pred is not None:
+                        inner = scope
+                        if effect.kind == "forall" or effect.params:
+                            inner = _Scope(scope)
+                        found.add((effect.pred.key, tuple(
+                            self._term_type(t, inner) if inner.lookup(t) or not t.is_var else None
+                            for t in effect.terms)))
+                    for nested in effect.effects:  # forall / when bodies may use their own variables
+                        if nested.pred is not None:
+                            found.add((nested.pred.key, tuple(None for _ in nested.terms)))
+                changes[action.name.key] = found
+            for task in self.domain.tasks:
+                changes.setdefault(task.name.key, set())
+            grew = True
+            while grew:
+                grew = False
+                for method in self.domain.methods:
+                    target = changes.setdefault(method.task.key, set())
+                    size = len(target)
+                    for sub in method.network.subtasks:
+                        target |= changes.get(sub.name.key, set())
+                    grew = grew or len(target) != size
+            self._changes = changes
+        return self._changes.get(key, set())
 
     def static_precondition(self, sub: Subtask) -> list[Formula]:
         """The conjuncts of a subtask action's precondition on static predicates, in the method's terms.

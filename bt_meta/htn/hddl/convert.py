@@ -32,7 +32,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 from bt_meta.htn.hddl.sexpr import HddlError, SList, Sym
-from bt_meta.htn.hddl.syntax import Effect, Formula, HDomain, HProblem, Subtask, TaskNetwork, Typed
+from bt_meta.htn.hddl.syntax import Effect, Formula, HDomain, HMethod, HProblem, Subtask, TaskNetwork, Typed
 
 _KEYWORDS = {"and", "or", "not", "true", "false"}
 _NAME_OK = re.compile(r"[A-Za-z0-9_.+\-][A-Za-z0-9_.+\-/:]*\Z")
@@ -203,7 +203,7 @@ class _Converter:
             self.tasks[spelled] = [f"?{self._var_name(p.name)}" for p in task.params]
         self.task_arity = {self.names.name("call", t.name): len(t.params) for t in d.tasks}
         self.actions_by_key = {a.name.key: a for a in d.actions}
-        self.methods_by_task_key: dict[str, list] = {}
+        self.methods_by_task_key: dict[str, list[HMethod]] = {}
         for method in d.methods:
             self.methods_by_task_key.setdefault(method.task.key, []).append(method)
         self.constant_types = {c.name.key: c.types for c in d.constants}
@@ -753,7 +753,7 @@ class _Converter:
             return False
         return self.subtype(self._type_name(have[0]) if have[0].key != OBJECT else OBJECT, wanted)
 
-    def convert_method(self, method) -> dict:  # type: ignore[no-untyped-def]
+    def convert_method(self, method: HMethod) -> dict:
         what = f"method {method.name.text}"
         name = self.names.name("method", method.name)
         scope = _Scope()
@@ -796,7 +796,7 @@ class _Converter:
         name = problem.name.text
         objects: dict[str, list[str]] = {}
         untyped: list[str] = []
-        seen: set[str] = set()
+        seen: set[tuple[str, str]] = set()
         for obj_name, obj_types in self.constants:
             self._add_object(objects, untyped, seen, obj_name, obj_types)
         for entry in problem.objects:
@@ -849,12 +849,12 @@ class _Converter:
             objects.setdefault(OBJECT, []).extend(untyped)
         return name, {"objects": objects, "init": init, "tasks": tasks, "goal": goal}
 
-    def _add_object(self, objects: dict[str, list[str]], untyped: list[str], seen: set[str], name: str,
+    def _add_object(self, objects: dict[str, list[str]], untyped: list[str], seen: set[tuple[str, str]], name: str,
                     types: list[str]) -> None:
         for type_name in types or [OBJECT]:
             if (name, type_name) in seen:
                 continue
-            seen.add((name, type_name))  # type: ignore[arg-type]
+            seen.add((name, type_name))
             if type_name == OBJECT:
                 untyped.append(name)
             else:

@@ -308,3 +308,23 @@ def import_hddl_text(domain_text: str) -> str:
     assert result.ok and verify_plan(taskfile.domain, taskfile.problems["two-parcels"],
                                      [a.as_list() for a in result.plan], result.tree.to_dict()).ok
     return converted.text
+
+
+def test_a_type_named_like_a_predicate_is_renamed_and_mapped():
+    from bt_meta.htn.hddl.convert import convert
+
+    domain = parse_domain("""(define (domain clash) (:types block - thing thing)
+      (:predicates (block ?a - thing ?b - thing) (free ?x - block))
+      (:task free-one :parameters (?x - block))
+      (:method m :parameters (?x - block ?y - thing) :task (free-one ?x) :precondition (block ?y ?x)
+        :ordered-subtasks (unblock ?y ?x))
+      (:action unblock :parameters (?y - thing ?x - block) :precondition (block ?y ?x)
+        :effect (and (not (block ?y ?x)) (free ?x))))""")
+    problem = parse_problem("(define (problem p) (:domain clash) (:objects b1 - block t - thing) "
+                            "(:htn :ordered-subtasks (free-one b1)) (:init (block t b1)))")
+    converted = convert(domain, [problem])
+    assert converted.names == {"block_type": "block"}
+    taskfile = load_task_text(converted.text)
+    result = plan(taskfile.domain, taskfile.problems["p"])
+    assert [str(a) for a in result.plan] == ["unblock(t, b1)"]
+    assert ("block_type", "b1") in taskfile.problems["p"].state and ("block", "t", "b1") in result.tree.nodes["n0"].state_before

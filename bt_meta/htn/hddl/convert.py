@@ -681,7 +681,18 @@ class _Converter:
         """Whether an object can have both types (one is the other or an ancestor of it); None: any type."""
         if first is None or second is None or first == second:
             return True
-        return self.subtype(first, (Sym(second, 0, 0),)) or self.subtype(second, (Sym(first, 0, 0),))
+        return self._below(first, second) or self._below(second, first)
+
+    def _below(self, lower: str, upper: str) -> bool:
+        """Whether task-file type ``lower`` is ``upper`` or one of its descendants."""
+        cursor: str | None = lower
+        seen: set[str] = set()
+        while cursor is not None and cursor not in seen:
+            if cursor == upper:
+                return True
+            seen.add(cursor)
+            cursor = self.types.get(cursor)
+        return False
 
     def changes_of(self, key: str) -> set[tuple[str, tuple[str | None, ...]]]:
         """(predicate, argument types) of every atom the action, or any decomposition of the task, can change."""

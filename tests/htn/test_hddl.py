@@ -327,4 +327,5 @@ def test_a_type_named_like_a_predicate_is_renamed_and_mapped():
     taskfile = load_task_text(converted.text)
     result = plan(taskfile.domain, taskfile.problems["p"])
     assert [str(a) for a in result.plan] == ["unblock(t, b1)"]
-    assert ("block_type", "b1") in taskfile.problems["p"].state and ("block", "t", "b1") in result.tree.nodes["n0"].state_before
+    assert ("block_type", "b1") in taskfile.problems["p"].state
+    assert ("block", "t", "b1") in result.tree.nodes["n0"].state_before

@@ -15,7 +15,8 @@ state order). Every task expansion with an alternative left pushes a choice poin
 remaining alternatives) on an explicit stack; a dead end resumes the most recent choice point, undoing the
 agenda, state, tree and plan to what they were there. No Python recursion is involved, so plans of any length
 fit. A compound task that reappears below itself in the same state (same ground task, equal state) is a loop
-and that branch fails. Goal facts, when the problem has some, must hold at the end, else the search backtracks.
+and that branch fails. A search node (state and agenda) met again after its whole subtree failed fails at once.
+Goal facts, when the problem has some, must hold at the end, else the search backtracks.
 
 The alternatives of a task come from the domain's generated code (:mod:`bt_meta.htn.compiled`) where there is
 some, else from the reference path here (:meth:`Search._method_alternatives`, primitives' satisfiers); both give

@@ -39,6 +39,9 @@ from bt_meta.htn.tree import DecompositionNode, DecompositionTree
 
 # agenda item kinds
 TASK, CLOSE, UNORDERED = 0, 1, 2
+# failed search nodes remembered per search at most (each keeps its state and agenda alive); past it the search
+# goes on without remembering more, which only costs the skips it would have made
+MEMO_LIMIT = 200_000
 
 
 @dataclass
@@ -199,6 +202,7 @@ class Search:
         # items) whatever path led to it, and the subtree below a node depends only on its state and agenda
         failed: dict[tuple[int, int], list[tuple[State, tuple]]] = {}
         reached: list[tuple[State, tuple, int]] = []  # compound expansions, with the stack height then
+        remembered = 0
         trail: list[tuple] = []  # (task, kind, method, bindings, parent_key, state_before, step)
         plan: list[int] = []
         active: dict[tuple, list[State]] = {}
@@ -233,8 +237,10 @@ class Search:
                         height = len(stack) - 1
                         while reached and reached[-1][2] > height:
                             done_state, done_agenda, _ = reached.pop()
-                            failed.setdefault((done_state._hash, id(done_agenda)), []).append(
-                                (done_state, done_agenda))
+                            if remembered < MEMO_LIMIT:
+                                remembered += 1
+                                failed.setdefault((done_state._hash, id(done_agenda)), []).append(
+                                    (done_state, done_agenda))
                         self.backtracks += 1
                         item = cp[1]
                         rest = cp[2]

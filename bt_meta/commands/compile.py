@@ -22,8 +22,9 @@ from bt_meta.errors import UserInputError
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("compile", help="compile a task file's plan (or policy) to BT.CPP v4 XML")
-    parser.add_argument("file", help="YAML task file")
-    parser.add_argument("--problem", help="problem name (required when the file has several)")
+    parser.add_argument("file", help="YAML task file, or an HDDL domain or problem file (.hddl)")
+    parser.add_argument("--problem", help="problem name (required when the file has several); with an HDDL "
+                                          "domain, the HDDL problem file")
     parser.add_argument("--policy", action="store_true",
                         help="compile the whole method library as a reactive policy tree instead of one plan")
     parser.add_argument("--depth", type=int, default=None, help="with --policy: how deep recursive tasks expand")
@@ -43,8 +44,11 @@ def run(args: argparse.Namespace) -> int:
         raise UserInputError("compile takes a YAML task file; a tree XML is already compiled", args.file)
     if args.depth is not None and args.depth < 1:
         raise UserInputError("--depth must be at least 1")
+    from bt_meta.htn.hddl.files import load_task_input
+
     plugins = plugin_host_from_args(args, args.file)
-    compiled = compile_task_file(args.file, args.problem, policy=args.policy, plugins=plugins,
+    task_file, problem_name = load_task_input(args.file, args.problem)
+    compiled = compile_task_file(task_file, problem_name, policy=args.policy, plugins=plugins,
                                  max_depth=args.depth or DEFAULT_POLICY_DEPTH)
     if args.tree is not None and not re.match(r"^[A-Za-z_][A-Za-z0-9_.\-]*$", args.tree):
         raise UserInputError(f"--tree {args.tree!r} is not a valid tree ID")

@@ -2,6 +2,9 @@
 
 Offers:
 
+``FILE`` may be HDDL: ``plan domain.hddl --problem p01.hddl`` or ``plan p01.hddl`` (its domain file found beside
+it, see :func:`bt_meta.htn.hddl.find_domain_file`).
+
 * :func:`register` -- adds ``plan FILE [--problem NAME] [--json] [--states] [--max-nodes N] [--max-seconds S]
   [--plugins DIR] [--no-entry-points]``
 
@@ -20,13 +23,15 @@ from typing import Any
 from bt_meta.commands._common import print_json
 from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
 from bt_meta.errors import UserInputError
-from bt_meta.htn import load_task_file, plan
+from bt_meta.htn import plan
+from bt_meta.htn.hddl.files import load_task_input
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("plan", help="plan a problem of a YAML task file (plan + decomposition tree)")
-    parser.add_argument("file", help="YAML task file")
-    parser.add_argument("--problem", help="problem name (required when the file has several)")
+    parser.add_argument("file", help="YAML task file, or an HDDL domain or problem file (.hddl)")
+    parser.add_argument("--problem", help="problem name (required when the file has several); with an HDDL "
+                                          "domain, the HDDL problem file")
     parser.add_argument("--json", action="store_true", help="print one JSON object: plan, tree, stats")
     parser.add_argument("--states", action="store_true", help="with --json: include each node's state_before")
     parser.add_argument("--max-nodes", type=int, default=None, help="node budget (task expansions)")
@@ -40,8 +45,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserInputError("--max-nodes must be at least 1")
     if args.max_seconds is not None and args.max_seconds <= 0:
         raise UserInputError("--max-seconds must be positive")
-    taskfile = load_task_file(args.file)
-    problem = taskfile.problem(args.problem)
+    taskfile, problem_name = load_task_input(args.file, args.problem)
+    problem = taskfile.problem(problem_name)
     external = None
     if taskfile.domain.external:  # only then are plugins needed: loading them costs more than most plans
         external = plugin_host_from_args(args, args.file).external_predicate

@@ -11,6 +11,9 @@ Offers (re-exported here; each lives in its own module):
 * :func:`plan`, :class:`PlanResult`, :class:`GroundAction` -- the planner (``planner``)
 * :class:`DecompositionTree`, :class:`DecompositionNode` -- its output (``tree``)
 * :func:`replan` -- re-decompose from a failed node keeping the executed prefix (``replan``)
+* :func:`verify_plan`, :class:`Verdict` -- an independent check of a plan and its tree (``verify``)
+
+HDDL import lives in :mod:`bt_meta.htn.hddl` (``load_hddl``, ``import_hddl``).
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from bt_meta.htn.planner import GroundAction, PlanResult, plan
 from bt_meta.htn.replan import replan
 from bt_meta.htn.state import State, atom_text
 from bt_meta.htn.tree import DecompositionNode, DecompositionTree
+from bt_meta.htn.verify import Verdict, verify_plan
 
 __all__ = [
     "Axiom",
@@ -42,6 +46,7 @@ __all__ = [
     "TaskDecl",
     "TaskFile",
     "Var",
+    "Verdict",
     "atom_text",
     "load_task_file",
     "load_task_text",
@@ -49,4 +54,5 @@ __all__ = [
     "plan",
     "problem_from_atoms",
     "replan",
+    "verify_plan",
 ]

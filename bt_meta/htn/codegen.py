@@ -44,7 +44,7 @@ from typing import Any
 
 from bt_meta.htn.axioms import _IN_PROGRESS as _REFERENCE_IN_PROGRESS
 from bt_meta.htn.conditions import DNEG, DPOS, EQ, EXT, NEG, NEQ, NEXT, POS, Term, Var
-from bt_meta.htn.state import Atom
+from bt_meta.htn.state import Atom, atom_hash
 
 INLINE_CLAUSES = 3  # a non-recursive derived predicate with more rule clauses than this is called, not inlined
 INLINE_LEVELS = 3  # how deep inlined predicates may nest
@@ -176,7 +176,7 @@ class Generated:
         self.reference_proofs = reference_proofs
         self.memo_key = (axioms._key, "generated", reference_proofs)
         self.ns: dict[str, Any] = {
-            "__builtins__": {"len": len, "set": set, "tuple": tuple, "dict": dict, "hash": hash},
+            "__builtins__": {"len": len, "set": set, "tuple": tuple, "dict": dict, "hash": atom_hash},
             "EMPTY": {}, "INP": _IN_PROGRESS, "Fallback": _Fallback, "MAXD": max_depth,
             "fb": self._fallback, "holds": axioms.holds,
             "OMK": axioms._memo_key, "OINP": _REFERENCE_IN_PROGRESS,

@@ -15,7 +15,8 @@ state order). Every task expansion with an alternative left pushes a choice poin
 remaining alternatives) on an explicit stack; a dead end resumes the most recent choice point, undoing the
 agenda, state, tree and plan to what they were there. No Python recursion is involved, so plans of any length
 fit. A compound task that reappears below itself in the same state (same ground task, equal state) is a loop
-and that branch fails. Goal facts, when the problem has some, must hold at the end, else the search backtracks.
+and that branch fails. A search node (state and agenda) met again after its whole subtree failed fails at once.
+Goal facts, when the problem has some, must hold at the end, else the search backtracks.
 
 The alternatives of a task come from the domain's generated code (:mod:`bt_meta.htn.compiled`) where there is
 some, else from the reference path here (:meth:`Search._method_alternatives`, primitives' satisfiers); both give
@@ -38,6 +39,9 @@ from bt_meta.htn.tree import DecompositionNode, DecompositionTree
 
 # agenda item kinds
 TASK, CLOSE, UNORDERED = 0, 1, 2
+# failed search nodes remembered per search at most (each keeps its state and agenda alive); past it the search
+# goes on without remembering more, which only costs the skips it would have made
+MEMO_LIMIT = 200_000
 
 
 @dataclass
@@ -116,6 +120,7 @@ class Search:
         self.expansions = 0
         self.backtracks = 0
         self.loops = 0
+        self.memo_pruned = 0
         self.deepest: tuple[int, str] | None = None  # (plan length, description) of the deepest dead end
         self.started = time.perf_counter()
 
@@ -192,6 +197,12 @@ class Search:
         agenda: tuple | None = None
         for item in reversed(items):
             agenda = (item, agenda)
+        # search nodes whose whole subtree failed: (state hash, id of the agenda) -> [(state, agenda)]. The agenda
+        # is compared by identity: the same agenda object holds the same tasks and loop-check entries (CLOSE
+        # items) whatever path led to it, and the subtree below a node depends only on its state and agenda
+        failed: dict[tuple[int, int], list[tuple[State, tuple]]] = {}
+        reached: list[tuple[State, tuple, int]] = []  # compound expansions, with the stack height then
+        remembered = 0
         trail: list[tuple] = []  # (task, kind, method, bindings, parent_key, state_before, step)
         plan: list[int] = []
         active: dict[tuple, list[State]] = {}
@@ -222,6 +233,14 @@ class Search:
                             active.setdefault(entry[1], []).append(entry[2])
                     alternative = next(cp[0], None)
                     if alternative is not None:
+                        # every search node reached after this choice point was made has failed as a whole
+                        height = len(stack) - 1
+                        while reached and reached[-1][2] > height:
+                            done_state, done_agenda, _ = reached.pop()
+                            if remembered < MEMO_LIMIT:
+                                remembered += 1
+                                failed.setdefault((done_state._hash, id(done_agenda)), []).append(
+                                    (done_state, done_agenda))
                         self.backtracks += 1
                         item = cp[1]
                         rest = cp[2]
@@ -280,6 +299,16 @@ class Search:
                         # at most one way to apply it: no choice point (a dead end resumes the previous one)
                         alternatives = iter(found) if found.__class__ is not tuple or len(found) > 1 else None
                     else:
+                        if failed:
+                            bucket = failed.get((state._hash, id(agenda)))
+                            if bucket is not None and any(a is agenda and s == state for s, a in bucket):
+                                self.memo_pruned += 1
+                                self._dead_end(len(plan), f"{atom_text(task)}: failed before in the same state with "
+                                                          "the same tasks after it")
+                                advance = True
+                                continue
+                        if stack:  # with no choice point left a failure ends the search: nothing to remember
+                            reached.append((state, agenda, len(stack)))
                         if name in recursive:
                             key = (task, state._hash)
                             seen = active.get(key)
@@ -353,6 +382,7 @@ class Search:
             "expansions": self.expansions,
             "backtracks": self.backtracks,
             "loops_pruned": self.loops,
+            "memo_pruned": self.memo_pruned,
             "seconds": round(time.perf_counter() - self.started, 6),
         }
         data.update(more)

@@ -21,6 +21,21 @@ from typing import Any
 Atom = tuple[str, ...]
 
 _MASK = (1 << 64) - 1
+
+
+def atom_hash(atom: Atom) -> int:
+    """The atom's share of a state's hash: Python's tuple hash, mixed (MurmurHash3's 64-bit finaliser).
+
+    A state's hash is the sum of its atoms' shares, kept up to date by adding and subtracting the changed ones.
+    Plain tuple hashes do not survive that sum: atoms that swap arguments between them (``on(r1, t3)``,
+    ``on(r3, r4)`` against ``on(r1, r4)``, ``on(r3, t3)``) cancel out, and the 1,024 states of a 10-ring Towers
+    of Hanoi plan had 266 distinct sums, so every loop check compared whole states. Mixed, they have 1,024.
+    """
+    h = hash(atom) & _MASK
+    h ^= h >> 33
+    h = (h * 0xFF51AFD7ED558CCD) & _MASK
+    h ^= h >> 33
+    return h
 _new_state = object.__new__
 _PREDICATE = itemgetter(0)
 _EMPTY: dict[Atom, None] = {}
@@ -56,7 +71,7 @@ class State:
         total = 0
         for atoms_of in self._preds.values():
             for atom in atoms_of:
-                total += hash(atom)
+                total += atom_hash(atom)
         self._hash = total & _MASK
         self._by_arg: dict[tuple[str, int], dict[str, tuple[Atom, ...]]] = {}
         self._derived: dict[Any, Any] = {}
@@ -215,7 +230,7 @@ class State:
             elif atom not in atoms_of or atom in add:
                 continue
             del atoms_of[atom]
-            hash_ -= hash(atom)
+            hash_ -= atom_hash(atom)
             length -= 1
             delta.append(atom)
         fresh: list[Atom] = []
@@ -238,7 +253,7 @@ class State:
                 found = preds.get(pred)
                 atoms_of = changed[pred] = found.copy() if found is not None else {}
             atoms_of[atom] = None
-            hash_ += hash(atom)
+            hash_ += atom_hash(atom)
         if not fresh and not delta:
             return self
         delta.extend(fresh)

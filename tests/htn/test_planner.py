@@ -18,8 +18,16 @@ def load(text: str):
 
 
 def plan_of(text: str, problem: str = "p", **kwargs):
+    """Plan, and check every plan found with the independent verifier (bt_meta.htn.verify)."""
+    from bt_meta.htn.verify import verify_plan
+
     taskfile = load(text)
-    return plan(taskfile.domain, taskfile.problems[problem], **kwargs)
+    result = plan(taskfile.domain, taskfile.problems[problem], **kwargs)
+    if result.ok and not taskfile.domain.external:
+        verdict = verify_plan(taskfile.domain, taskfile.problems[problem], [a.as_list() for a in result.plan],
+                              result.tree.to_dict())
+        assert verdict.ok, verdict.errors
+    return result
 
 
 def steps(result) -> list[str]:

@@ -8,8 +8,10 @@ seen nearest its centroid (within ``recentre_radius``, default a quarter block) 
 centroid, as the paper crops blobs; when no single block is there (nothing, or blocks touching each other merged
 into one blob) the remembered window itself is cropped. A trace matches when every one of its maps
 differs from the observation by at most ``max_cells`` cells; the step matches when any of the N traces does
-(nearest neighbour). A mismatch suggests ``unknown_entity`` when a block is seen there with another shape than
-the one remembered (the 1x2 replaced by a 1x1), else ``unexpected_configuration``.
+(nearest neighbour). Observed blobs that share no cell with the remembered map are left out of the count
+(another object in the window, e.g. a distractor a few centimetres off, is not what the step did). A mismatch
+suggests ``unknown_entity`` when a block is seen there with another shape than the one remembered (the 1x2
+replaced by a 1x1), else ``unexpected_configuration``.
 
 An expectation made at the last primitive of a task is also that task's expectation (bubbled up, section 6.2):
 ``data["task_end"]`` and ``data["parent_task"]`` say so.
@@ -98,7 +100,26 @@ class GridMapExpectations:
         return compare(expectation, observations)
 
 
+def _touching(expected: Any, observed: Any) -> Any:
+    """``observed`` without the blobs that share no cell with what memory expected: another object in the window
+    (a distractor a few centimetres from the cell) is not what the step did. A block that landed elsewhere still
+    differs: the cells expected occupied are then empty."""
+    from scipy import ndimage
+
+    seen = np.asarray(observed.occupancy)
+    labels, count = ndimage.label(seen != 0, structure=np.ones((3, 3), dtype=int))
+    if count == 0:
+        return observed
+    wanted = np.asarray(expected.occupancy) != 0
+    keep = [k for k in range(1, count + 1) if np.any(wanted & (labels == k))]
+    if len(keep) == count:
+        return observed
+    return replace(observed, occupancy=np.where(np.isin(labels, keep), seen, 0).astype(np.uint8))
+
+
 def _distance(expected: Any, observed: Any, colour: bool, rotations: bool) -> int:
+    if not rotations:
+        observed = _touching(expected, observed)
     cells = grid_difference(expected, observed, rotations=rotations)
     if colour and not rotations:
         a, b = np.asarray(expected.occupancy), np.asarray(observed.occupancy)

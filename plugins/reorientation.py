@@ -19,7 +19,8 @@ the same re-orientation planned from the problem's initial state (the part's nor
 ``run.start_objects``), which the executor stores as the refinement (the failed attempt, its release and re-pick
 are not replayed on the next exposure). A held part whose method lets it go without a turn (a part jammed in an
 insertion) is only set down first (``keep_goal``: the goal is not rewritten): the turns are counted at the next
-failure, from how it landed.
+failure, from how it landed. A settle, or a number of turns, the run's repair history already tried is not
+proposed again (the part lands the same way: proposing it from each new step spent the attempt budget).
 
 Offers:
 
@@ -192,9 +193,10 @@ class Reorientation:
         start = int(localisation.get("step", failure.step if failure.step is not None else 0))
         end = max(len(failure.evidence.get("plan") or []), start + 1)
         initial = self._initial_normal(run, seen_name)
+        tried = {_tried_key(a["proposal"]["evidence"]) for a in ours}
         for name in names:
             settle = self._settle(world, domain, problem, state, name, part, run)
-            if settle is not None and off > GROSS_ANGLE:
+            if settle is not None and off > GROSS_ANGLE and (name, 0, True) not in tried:
                 # A held part is let go without a turn first (it may land any way: a jammed part springs free);
                 # the turns are counted once it lies where it can be seen, at the next failure.
                 evidence.update(method_task=name, turns=0, settle=True, keep_goal=True)
@@ -215,6 +217,9 @@ class Reorientation:
             if first is not None:  # the same repair from the start, for the refinement
                 replay = self._plan(domain, problem, problem.state,
                                     [(name, part)] * first + [tuple(t) for t in problem.tasks], run)
+            if (name, turns, False) in tried:
+                log.info("reorientation: %d x %s of %s was tried and failed: not again", turns, name, part)
+                continue
             evidence.update(method_task=name, turns=turns, replay_plan=replay)
             return [RepairProposal(
                 SPLICE, self.score, f"re-orient {part} by {turns} x {name} (its normal is "
@@ -288,6 +293,13 @@ class Reorientation:
         if result.status != "success" or result.tree is None:
             return None
         return result.tree
+
+
+def _tried_key(evidence: dict[str, Any]) -> tuple[str, int, bool]:
+    """What a re-orientation proposal would do, as the run's repair history has it: (task, turns, settle only). The
+    same settle or the same number of turns is not proposed twice in a run (it would start from another step each
+    time, so the executor's effect identity does not see the repeat)."""
+    return (str(evidence.get("method_task")), int(evidence.get("turns") or 0), bool(evidence.get("settle")))
 
 
 plugin = ConfiguredPlugin(Reorientation)

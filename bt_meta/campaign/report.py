@@ -93,6 +93,8 @@ def _html(summary: dict[str, Any], manifest: dict[str, Any], folder: Path, out: 
                  f"{summary['loops']}</li><li>false alarms (any failure on a nominal_equivalent variant): "
                  f"{fa['count']} of {fa['of']}</li><li>second exposure: {second['repaired']} repaired runs run "
                  f"again on the memory their repair wrote, {second['zero_attempts']} succeeded with zero attempts"
+                 + (f", {second['false_successes']} ended success with the task not done"
+                    if second.get("false_successes") else "")
                  + (f", mean attempts {second['attempts']['mean']:.2f}" if second["attempts"] else "")
                  + "</li></ul>")
     if summary["failing"]:

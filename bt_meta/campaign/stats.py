@@ -11,7 +11,8 @@ What a row counts (``rows`` are the database's episode rows):
   have done the impossible is not a success
 * **loops** -- runs stopped because the attempt budget was spent
 * **false alarms** -- runs of a ``nominal_equivalent`` variant with any failure classified
-* **second exposure** -- every repaired run run again on the memory its repair wrote: attempts then
+* **second exposure** -- every repaired run run again on the memory its repair wrote: attempts then; it counts as
+  done with zero attempts only when the simulator agrees (``false_successes``: ended success, task not done)
 
 Offers:
 
@@ -95,13 +96,20 @@ def summarise(rows: Iterable[dict[str, Any]], *, configurations: Sequence[str] |
         "false_alarms": {"count": len(false_alarms), "of": len(nominal),
                          "episodes": [_key(r) for r in false_alarms]},
         "second_exposure": {"repaired": len(second),
-                            "zero_attempts": sum(r["second_exposure"]["attempts"] == 0 and
-                                                 r["second_exposure"]["status"] == "success" for r in second),
+                            "zero_attempts": sum(_second_done(r["second_exposure"]) and
+                                                 r["second_exposure"]["attempts"] == 0 for r in second),
+                            "false_successes": sum(r["second_exposure"]["status"] == "success" and
+                                                   r["second_exposure"].get("achieved") is False for r in second),
                             "attempts": _mean([r["second_exposure"]["attempts"] for r in second]) if second else None},
         "crashed": sum(r["status"] == "crashed" for r in rows),
         "seconds": sum(float(r["seconds"]) for r in rows),
         "simulated_seconds": sum(float(r.get("simulated_seconds") or 0.0) for r in rows),
     }
+
+
+def _second_done(second: dict[str, Any]) -> bool:
+    """The second exposure succeeded: the executor says so and the simulator does not contradict it."""
+    return second.get("status") == "success" and second.get("achieved") is not False
 
 
 def _key(row: dict[str, Any]) -> str:

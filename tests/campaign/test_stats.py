@@ -39,15 +39,18 @@ def test_summary_counts_loops_false_alarms_and_second_exposure():
             _row("repairable", "failed", ["precondition"], loop=True),
             _row("repairable", "success", ["unknown_entity"],
                  second_exposure={"status": "success", "attempts": 0, "achieved": True}),
-            _row("repairable", "success", ["physical"], configuration="retry")]
+            _row("repairable", "success", ["physical"], configuration="retry"),
+            _row("repairable", "success", ["verification"],  # its second run claims success, the task is not done
+                 second_exposure={"status": "success", "attempts": 0, "achieved": False})]
     summary = summarise(rows)
     assert summary["loops"] == 1
     assert summary["false_alarms"]["count"] == 1 and summary["false_alarms"]["of"] == 2
-    assert summary["second_exposure"]["repaired"] == 1 and summary["second_exposure"]["zero_attempts"] == 1
+    assert summary["second_exposure"]["repaired"] == 2 and summary["second_exposure"]["zero_attempts"] == 1
+    assert summary["second_exposure"]["false_successes"] == 1
     assert summary["confusion"]["nominal_equivalent"] == {"none": 1, "unexpected_configuration": 1}
     table = {(r["expected"], r["configuration"]): r for r in summary["table"]}
-    assert table[("repairable", "dual")]["correct"] == 1 and table[("repairable", "dual")]["episodes"] == 2
-    assert table[("all", "dual")]["episodes"] == 4
+    assert table[("repairable", "dual")]["correct"] == 2 and table[("repairable", "dual")]["episodes"] == 3
+    assert table[("all", "dual")]["episodes"] == 5
     low, high = table[("all", "dual")]["wilson95"]
     assert low < table[("all", "dual")]["rate"] < high
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import time
 from types import SimpleNamespace
+from typing import Any
 
 import bt_meta_plugins.gridmap_expectations as gridmap_plugin
 import bt_meta_plugins.keypoint_expectations as keypoint_plugin
@@ -17,9 +18,9 @@ import numpy as np
 import pytest
 
 from bt_meta.bt.context import RunContext
-from bt_meta.bt.expectations import StepContext
+from bt_meta.bt.expectations import Expectation, StepContext
 from bt_meta.htn import State as HtnState
-from bt_meta.memory import Episode, EpisodicMemory, ObjectState, State, Step, Trace
+from bt_meta.memory import Episode, EpisodicMemory, GridMap, ObjectState, State, Step, Trace
 from bt_meta.perception.synthetic import blank, draw_block, top_view_projection
 from bt_meta.perception.topview import analyse
 from bt_meta.plugins import PluginHost
@@ -546,3 +547,35 @@ def test_a_shifted_nominal_equivalent_scene_raises_nothing_with_keypoint_monitor
             memory.close()
     assert outcome.report["status"] == "success", outcome.report["stop_reason"]
     assert outcome.report["failures"] == [] and outcome.report["attempts"] == []
+
+
+class WindowView:
+    """A top view that shows one fixed window (no single block found near the centroid: blobs merged)."""
+
+    def __init__(self, occupancy: list[str]) -> None:
+        self.occupancy = np.array([[0 if c == "." else 1 for c in row] for row in occupancy], dtype=np.uint8)
+
+    def block_near(self, centroid: Any, radius: float) -> None:
+        return None
+
+    def grid_map_at(self, centroid: Any, **kwargs: Any) -> GridMap:
+        return GridMap(self.occupancy, centroid=tuple(centroid))
+
+
+EXPECTED_LEG = ["......", "......", "..bb..", "..bb..", "..bb..", "..bb.."]  # the placed block on its leg
+
+
+@pytest.mark.parametrize(("observed", "matched"), [
+    (["....##", ".....#", "..bb..", "..bb..", "..bb..", "..bb.."], True),   # a distractor in the window's corner
+    (["...###", "...###", "..bb..", "..bb..", "..bb..", "..bb.."], False),  # one touching the placed block
+    (["bb....", "bb....", "......", "......", "..bb..", "..bb.."], False),  # the block landed a cell away
+    (["......", "......", "......", "......", "..bb..", "..bb.."], False),  # the block is not there
+])
+def test_gridmap_counts_only_blobs_that_meet_what_memory_expected(observed, matched):
+    expected = GridMap(WindowView(EXPECTED_LEG).occupancy, object_name="b5", colour="blue", shape="1x1",
+                       centroid=(0.672, -0.083))
+    expectation = Expectation(kind=gridmap_plugin.KIND, description="grid-maps after place(b5, 3, 2)", data={
+        "traces": [{"episode": 1, "maps": [expected]}], "max_cells": 2, "compare_colour": False,
+        "rotations": False, "recentre_radius": 0.25 * LB, "parent_task": "draw_tall_leg", "task_end": True})
+    comparison = gridmap_plugin.compare(expectation, {"image": WindowView(observed)})
+    assert comparison.matched is matched, comparison.evidence

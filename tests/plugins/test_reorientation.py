@@ -186,3 +186,27 @@ def test_upside_down_parts_are_repaired_by_reorientation_and_replayed_with_zero_
                     assert second.report["refinements_used"]
         finally:
             memory.close()
+
+
+def test_a_settle_or_turn_the_run_already_tried_is_not_proposed_again(tmp_path):
+    """Measured: a turned-over housing let go, re-picked and colliding on the way up was set down again from each
+    new step until the attempt budget was spent. What the repair history tried is not proposed again."""
+    housing = load_task_file(HOUSING)
+    memory = demonstration_memory(tmp_path / "h.sqlite", "InsertPart", "nominal", "housing")
+    try:
+        world = PartWorld("housing", UP, None, "housing", TURNED)
+        failure, context = failure_and_context(housing, "nominal", world, memory, done=5,
+                                               kind=FailureKind.UNEXPECTED_CONFIGURATION)
+        plugin = reorientation.Reorientation(memory)
+        settle = plugin.bt_meta_propose_repairs(failure, context)[0]
+        assert settle.evidence["settle"] is True
+        failure.evidence["repair_history"] = [{"proposal": {"action": settle.action, "evidence": settle.evidence},
+                                               "outcome": "failed_again"}]
+        again = plugin.bt_meta_propose_repairs(failure, context) or []
+        assert all(not p.evidence.get("settle") for p in again)
+        for proposal in again:  # a turn instead, once
+            failure.evidence["repair_history"].append({"proposal": {"action": proposal.action,
+                                                                    "evidence": proposal.evidence}})
+        assert plugin.bt_meta_propose_repairs(failure, context) is None
+    finally:
+        memory.close()

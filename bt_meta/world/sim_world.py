@@ -35,7 +35,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from bt_meta.bt.failures import FailureKind
 from bt_meta.errors import BtMetaError, ConfigError
@@ -164,12 +163,11 @@ def load_grounding(domain: str, task_file: str | Path | None = None, path: str |
                               f"{', '.join(str(p) for p in candidates)}): the simulator cannot run its primitives")
         path = found
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.MarkedYAMLError as error:
-        mark = error.problem_mark
-        raise ConfigError(f"not valid YAML: {error.problem}", path, mark.line + 1 if mark else None,
-                          mark.column + 1 if mark else None) from None
+    from bt_meta.safe_yaml import load_yaml
+    from bt_meta.user_files import read_user_text
+
+    data = load_yaml(read_user_text(path, what="grounding file", error=ConfigError), str(path), ConfigError,
+                     syntax="not valid YAML")
     if not isinstance(data, dict):
         raise ConfigError("a grounding file is a mapping", path, 1, 1)
     unknown = set(data) - _TOP_KEYS

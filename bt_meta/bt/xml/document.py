@@ -209,8 +209,7 @@ def parse_text(text: str | bytes, path: str = "<string>") -> TreeDocument:
 
 
 def parse_file(path: str | Path) -> TreeDocument:
-    try:
-        data = Path(path).read_bytes()
-    except OSError as error:
-        raise TreeXMLError(f"cannot read tree XML: {error.strerror or error}", str(path)) from None
+    from bt_meta.user_files import read_user_bytes  # regular files only, size-bounded, never blocks
+
+    data = read_user_bytes(path, what="tree XML file", error=TreeXMLError)
     return parse_text(data, str(path))

@@ -33,7 +33,7 @@ from py_trees.common import Status
 
 from bt_meta.bt.context import FAILURES_KEY, RUN_KEY, STATE_KEY, WORLD_KEY, RunContext
 from bt_meta.bt.failures import Failure
-from bt_meta.errors import BtMetaError, PluginError
+from bt_meta.errors import BtMetaError, PluginError, UnknownWorldError
 
 __all__ = ["HarnessError", "TreeHarness", "bt_blackboard", "bt_harness", "bt_plugins"]
 
@@ -115,11 +115,11 @@ class TreeHarness:
                                 problem=compiled.problem, options=options)
             if made.errors:
                 error = made.errors[0]
-                if isinstance(error.error, BtMetaError):
-                    raise error.error
+                if isinstance(error.error, BtMetaError) and not isinstance(error.error, PluginError):
+                    raise error.error  # e.g. the simulator's located error in a scene file
                 raise PluginError(error.message) from error.error
             if not made.results:
-                raise HarnessError(f"no plugin provides a world named {world!r}")
+                raise UnknownWorldError(f"no plugin provides a world named {world!r} (shipped: fake, sim)")
             world = made.first
         run = RunContext(world, plugins, domain=compiled.domain, problem=compiled.problem,
                          task_file=compiled.task_file)

@@ -45,6 +45,10 @@ class HarnessError(BtMetaError):
     """A harness request that cannot be answered: an unknown or ambiguous node, a status never reached."""
 
 
+class HarnessWorldError(HarnessError, UnknownWorldError):
+    """No plugin makes the world the harness was asked for: a harness error and bad input (CLI exit 2)."""
+
+
 def _status(value: Status | str) -> Status:
     if isinstance(value, Status):
         return value
@@ -119,7 +123,7 @@ class TreeHarness:
                     raise error.error  # e.g. the simulator's located error in a scene file
                 raise PluginError(error.message) from error.error
             if not made.results:
-                raise UnknownWorldError(f"no plugin provides a world named {world!r} (shipped: fake, sim)")
+                raise HarnessWorldError(f"no plugin provides a world named {world!r} (shipped: fake, sim)")
             world = made.first
         run = RunContext(world, plugins, domain=compiled.domain, problem=compiled.problem,
                          task_file=compiled.task_file)

@@ -257,6 +257,8 @@ class _Loader:
                 cursor += len(raw_line[indent:]) + 1
 
             def locate(off: int) -> tuple[int, int]:
+                if not starts:  # an empty block scalar: point at its indicator
+                    return node.start_mark.line + 1, node.start_mark.column + 1
                 k = max(bisect.bisect_right([o for o, _ in starts], off) - 1, 0)
                 return starts[k][1], indent + off - starts[k][0] + 1
 

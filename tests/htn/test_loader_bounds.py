@@ -198,3 +198,10 @@ def test_condition_size_is_computed_before_distributing():
     assert "more than 100000 atoms" in error_of(condition_file(long_clauses)).message
     assert dnf_size(parse_condition("not (p() and q()) or false")) == (2, 2)
     assert dnf_size(parse_condition("(p() or q()) and false")) == (0, 0)
+
+
+def test_an_empty_block_scalar_condition_is_located():
+    text = DOMAIN.rstrip("\n").replace("a: {}", "a:\n      precondition: |")  # at the very end of the file
+    assert error_of(text).location_message() == "t.yaml:5:21: empty condition (write 'true' for no condition)"
+    text = DOMAIN.replace("a: {}", "a:\n      precondition: |\n    b: {}")
+    assert error_of(text).message == "empty condition (write 'true' for no condition)"

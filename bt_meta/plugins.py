@@ -322,7 +322,7 @@ class PluginHost:
             seen.add(entry_point.name)
             try:
                 plugin = entry_point.load()
-            except Exception as error:
+            except (Exception, SystemExit) as error:
                 raise PluginLoadError(
                     f"entry point {entry_point.name} = {entry_point.value} failed to import: "
                     f"{type(error).__name__}: {error}"

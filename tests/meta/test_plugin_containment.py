@@ -218,3 +218,15 @@ def test_the_monitor_fails_the_node_on_garbage_and_keeps_ticking(bt_harness):
     failure = h.failures[0]
     assert failure.kind is FailureKind.INTERNAL and failure.plugin == "garbage"
     assert failure.evidence["hook"] == "bt_meta_expectations"
+
+
+def test_a_plugin_file_calling_sys_exit_at_import_is_a_located_load_error(tmp_path):
+    from bt_meta.plugins import PluginLoadError
+
+    folder = tmp_path / "plugins"
+    folder.mkdir()
+    (folder / "quitter.py").write_text("import sys\n\nsys.exit(4)\n")
+    with pytest.raises(PluginLoadError) as caught:
+        create_plugin_host([folder], entry_points=False, builtins=False)
+    assert caught.value.location_message() == (f"{folder / 'quitter.py'}:3: plugin file failed to import: "
+                                                "SystemExit: 4")

@@ -18,17 +18,26 @@ from bt_meta.memory.schema import SCHEMA_VERSION, sqlite_failure
 from bt_meta.resources import trees_dir
 
 LETTERS = str(trees_dir() / "letters.yaml")
-BLOCKS = """
+BLOCKS = f"""
 domain:
-  predicates: {done: []}
+  predicates: {{obj: [object], used: [object], never: []}}
   primitives:
-    finish: {add: [done()]}
+    use:
+      parameters: [?x]
+      precondition: not used(?x)
+      add: [used(?x)]
   tasks:
-    forever: []
+    all: []
   methods:
-    - {name: again, task: forever(), subtasks: [finish(), forever()]}
+    - name: more
+      task: all()
+      precondition: obj(?x) and not used(?x)
+      subtasks: [use(?x), all()]
+    - name: finished
+      task: all()
+      precondition: never()
 problems:
-  loop: {tasks: [forever()]}
+  explode: {{init: [{", ".join(f"obj(o{i})" for i in range(30))}], tasks: [all()]}}
 """
 
 
@@ -236,10 +245,20 @@ def test_signals_stop_the_cli_cleanly(tmp_path, signum, code, word):
 
 
 def test_plan_has_a_default_budget(capsys, tmp_path):
-    from bt_meta.commands.plan import DEFAULT_MAX_NODES, DEFAULT_MAX_SECONDS
+    from bt_meta.htn.budgets import DEFAULT_MAX_NODES, DEFAULT_MAX_SECONDS
 
-    assert (DEFAULT_MAX_NODES, DEFAULT_MAX_SECONDS) == (10_000_000, 60.0)
+    assert (DEFAULT_MAX_NODES, DEFAULT_MAX_SECONDS) == (10_000_000, 10.0)
     task = tmp_path / "loop.yaml"
     task.write_text(BLOCKS)
     code, out, _ = cli(capsys, "plan", str(task), "--max-nodes", "500")
-    assert code == 1 and "budget" in out
+    assert code == 1 and "budget exhausted: node budget of 500 expansions exhausted" in out
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(120)
+def test_commands_that_plan_stop_at_the_default_budget(capsys, tmp_path):
+    task = tmp_path / "explode.yaml"
+    task.write_text(BLOCKS)
+    code, out, err = cli(capsys, "compile", str(task))  # compile, tick and run plan under the default budget
+    assert code == 1 and out == ""
+    assert "budget_exhausted (budget exhausted: time budget of 10.0 s exhausted" in one_line(err)

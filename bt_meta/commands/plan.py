@@ -8,8 +8,8 @@ Offers:
 A domain that declares external predicates asks the loaded plugins for their truth at plan time (the
 ``bt_meta_external_predicate`` hook); a predicate no plugin answers ends the command with exit status 1.
 
-Unless ``--max-nodes`` / ``--max-seconds`` say otherwise a plan gets :data:`DEFAULT_MAX_NODES` expansions and
-:data:`DEFAULT_MAX_SECONDS` seconds.
+Unless ``--max-nodes`` / ``--max-seconds`` say otherwise a plan gets the budget of :mod:`bt_meta.htn.budgets`
+(10,000,000 expansions, 10 seconds).
 
 Exit status 0 with a plan, 1 when there is no plan or the budget ran out (with the reason), 2 on a file that
 does not load or a missing/unknown ``--problem``.
@@ -24,12 +24,8 @@ from bt_meta.commands._common import print_json
 from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
 from bt_meta.errors import UserInputError
 from bt_meta.htn import load_task_file, plan
+from bt_meta.htn.budgets import DEFAULT_MAX_NODES, DEFAULT_MAX_SECONDS
 
-# The budget a plan gets unless the command line gives another: a search that cannot end (a method that
-# decomposes a task into itself forever, an exponential problem) stops with exit 1 and "budget exhausted"
-# instead of running until it is killed. The shipped problems plan in well under a second and 20,000 expansions.
-DEFAULT_MAX_NODES = 10_000_000
-DEFAULT_MAX_SECONDS = 60.0
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("plan", help="plan a problem of a YAML task file (plan + decomposition tree)")

@@ -179,11 +179,30 @@ def load_grounding(domain: str, task_file: str | Path | None = None, path: str |
     for primitive, spec in data["skills"].items():
         if not isinstance(spec, dict) or spec.get("skill") not in SKILLS:
             raise ConfigError(f"skills.{primitive}: give `skill:` one of {', '.join(SKILLS)}", path)
+    for key in ("problems", "frames", "poses", "features"):
+        _mapping_of_mappings(data, key, path)
+    robot_pose = _mapping_of_scalars(data, "robot_pose", path)
+    try:
+        joints = {str(k): float(v) for k, v in robot_pose.items()}
+    except (TypeError, ValueError):
+        raise ConfigError("robot_pose: every joint value must be a number (radians)", path) from None
+    objects = {str(k): str(v) for k, v in _mapping_of_scalars(data, "objects", path).items()}
     return Grounding(path, str(data.get("domain", domain)), dict(data["problems"]), dict(data["skills"]),
-                     dict(data.get("frames") or {}), dict(data.get("poses") or {}),
-                     {str(k): float(v) for k, v in (data.get("robot_pose") or {}).items()},
-                     {str(k): str(v) for k, v in (data.get("objects") or {}).items()},
+                     dict(data.get("frames") or {}), dict(data.get("poses") or {}), joints, objects,
                      {str(k): dict(v) for k, v in (data.get("features") or {}).items()})
+
+
+def _mapping_of_mappings(data: dict[str, Any], key: str, path: Path) -> None:
+    value = data.get(key) or {}
+    if not isinstance(value, dict) or not all(isinstance(item, dict) for item in value.values()):
+        raise ConfigError(f"{key!r} must be a mapping of name -> mapping", path)
+
+
+def _mapping_of_scalars(data: dict[str, Any], key: str, path: Path) -> dict[Any, Any]:
+    value = data.get(key) or {}
+    if not isinstance(value, dict) or any(isinstance(item, (dict, list)) for item in value.values()):
+        raise ConfigError(f"{key!r} must be a mapping of name -> value", path)
+    return value
 
 
 # --------------------------------------------------------------------------------------------------------------

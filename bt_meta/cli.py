@@ -108,12 +108,6 @@ def _main(argv: Sequence[str] | None) -> int:
     except BrokenPipeError:
         _silence_stdout()
         return EXIT_OK
-    except RecursionError:
-        print("bt-meta: internal error: RecursionError (input nested too deeply for a check that missed it); "
-              f"set {TRACEBACK_ENV}=1 for the traceback", file=sys.stderr)
-        if os.environ.get(TRACEBACK_ENV):
-            raise
-        return EXIT_FAILURE
     except Exception as error:
         # A bug of bt-meta (or of a plugin outside a hook): one line, not a traceback, unless asked for.
         if os.environ.get(TRACEBACK_ENV):
@@ -124,7 +118,7 @@ def _main(argv: Sequence[str] | None) -> int:
 
 
 def _one_line(text: str) -> str:
-    return " ".join(text.split("\n")) if "\n" in text else text
+    return " ".join(text.splitlines())
 
 
 def _silence_stdout() -> None:

@@ -262,3 +262,34 @@ def test_commands_that_plan_stop_at_the_default_budget(capsys, tmp_path):
     code, out, err = cli(capsys, "compile", str(task))  # compile, tick and run plan under the default budget
     assert code == 1 and out == ""
     assert "budget_exhausted (budget exhausted: time budget of 10.0 s exhausted" in one_line(err)
+
+
+def test_a_bug_is_one_line_unless_the_traceback_is_asked_for(capsys, monkeypatch):
+    def broken(args):
+        raise TypeError("unsupported operand\nsecond line")
+
+    monkeypatch.setattr("bt_meta.cli.build_parser", _parser_with(broken))
+    monkeypatch.delenv("BT_META_TRACEBACK", raising=False)
+    code, _, err = cli(capsys, "validate", LETTERS)
+    assert code == 1
+    assert one_line(err) == ("bt-meta: internal error: TypeError: unsupported operand second line (set "
+                             "BT_META_TRACEBACK=1 for the traceback)")
+    monkeypatch.setenv("BT_META_TRACEBACK", "1")
+    with pytest.raises(TypeError):
+        main(["validate", LETTERS])
+
+
+def _parser_with(func):
+    from bt_meta import cli as cli_module
+
+    real = cli_module.build_parser
+
+    def build():
+        parser = real()
+        parser.set_defaults(func=func)
+        for action in parser._subparsers._group_actions:  # the subcommand parsers carry their own func default
+            for sub in action.choices.values():
+                sub.set_defaults(func=func)
+        return parser
+
+    return build

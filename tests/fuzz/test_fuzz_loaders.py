@@ -144,8 +144,13 @@ def mutate(rng: random.Random, bases: list[str]) -> str:
 
 
 CONDITION_ATOMS = ["p()", "q(?x)", "q(a)", "r(?x, ?y)", "r('a b', \"c\")", "?x == a", "?x != ?y", "true", "false",
-                   "ext(?x)", "undeclared(z)", "p(", "?", "'open", ")", "q(?x, ?y)", "not", "and", "?1", "p() p()",
-                   "r(?x,)"]
+                   "ext(?x)", "q(?z)", "not q(?x)"]
+BROKEN_ATOMS = ["undeclared(z)", "p(", "?", "'open", ")", "q(?x, ?y)", "not", "and", "?1", "p() p()", "r(?x,)",
+                "not ?w == a", "ext(?w)"]
+
+
+def _atom(rng: random.Random) -> str:
+    return rng.choice(BROKEN_ATOMS) if rng.random() < 0.04 else rng.choice(CONDITION_ATOMS)
 
 
 def condition(rng: random.Random, leaves: int = 40) -> str:
@@ -154,16 +159,16 @@ def condition(rng: random.Random, leaves: int = 40) -> str:
     roll = rng.random()
     if roll < 0.1:
         depth = rng.randrange(0, 1500)
-        return "(" * depth + rng.choice(CONDITION_ATOMS) + ")" * depth
+        return "(" * depth + _atom(rng) + ")" * depth
     if roll < 0.2:
-        return " and ".join([f"({rng.choice(CONDITION_ATOMS)} or p() or q(?x))"] * rng.randrange(1, 40))
+        return " and ".join([f"({_atom(rng)} or p() or q(?x))"] * rng.randrange(1, 40))
     text = _grammar(rng, rng.randrange(1, leaves))
     return mutate(rng, [text]) if roll > 0.85 else text
 
 
 def _grammar(rng: random.Random, leaves: int) -> str:
     if leaves <= 1:
-        return rng.choice(CONDITION_ATOMS)
+        return _atom(rng)
     left = rng.randrange(1, leaves)
     a, b = _grammar(rng, left), _grammar(rng, leaves - left)
     return rng.choice([f"{a} and {b}", f"({a} or {b})", f"not {a} and {b}", f"({a}) and not ({b})"])

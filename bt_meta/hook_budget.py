@@ -1,26 +1,26 @@
 """The time budget of one hook call: a plugin that sleeps or loops cannot stall a run.
 
-:class:`bt_meta.plugins.PluginHost` runs every hook implementation inside :func:`budgeted`. Where the call runs in
-the main thread of a POSIX process, a real-time interval timer (``SIGALRM``) raises :class:`HookTimeout` inside the
-late call at the point it has reached (a ``sleep``, a Python loop), so its ``finally`` blocks run and it ends at
-once; where it cannot be interrupted (another thread, or a C function that does not return to Python until it is
-done) it runs to its end. Either way the host discards the late call's result and records the call as an
-``internal`` failure naming the plugin, the hook and the budget; the run goes on.
+:class:`bt_meta.plugins.PluginHost` runs every hook implementation between :func:`enter` and :func:`leave`, which
+only note the call's deadline (a list append; no system call, so a hook call costs well under a microsecond more).
+A watchdog thread, started at the first budgeted call, looks at the deadlines every :data:`POLL_SECONDS`; when the
+call running in the main thread is past its deadline it sends the main thread ``SIGUSR2``, whose handler raises
+:class:`HookTimeout` inside the late call at the point it has reached (a ``sleep``, a Python loop), so its
+``finally`` blocks run and it ends at once. A call in another thread, or blocked in C code that does not return to
+Python until it is done, runs to its end. Either way the host discards the late call's result and records the call
+as an ``internal`` failure naming the plugin, the hook and the budget; the run goes on.
 
-An interval timer that was already set (pytest-timeout's, an outer hook call's) is kept: when it is due sooner it
-stays as it was, and after the call it is set again to what remains of it, with its previous signal handler
-called when it fires.
+No interval timer is touched (pytest-timeout's and a program's own ``SIGALRM`` keep working); a ``SIGUSR2`` that
+is not the watchdog's goes to the handler that was installed before.
 
 Offers:
 
 * :data:`BUDGET_ENV` -- ``BT_META_HOOK_BUDGET``, seconds per hook call (``0`` or ``off`` for none)
 * :data:`DEFAULT_HOOK_BUDGET` -- 60 seconds, well above any shipped plugin's slowest call (loading the simulator)
-* :func:`budget_from_environment` -- the budget ``$BT_META_HOOK_BUDGET`` asks for, else the default
+* :func:`budget_from_environment`, :func:`parse_budget` -- the budget asked for by the environment or a flag
 * :class:`HookTimeout` -- raised inside a call past its budget (a ``BaseException``: ``except Exception`` in a
   plugin does not swallow it)
-* :func:`budgeted` -- a context manager running one call under a budget
+* :func:`enter`, :func:`leave` -- bracket one call under a budget
 * :class:`HookBudgetExceeded` -- the error a late call is recorded with
-* :func:`parse_budget` -- seconds from a command-line or environment value
 """
 
 from __future__ import annotations
@@ -29,18 +29,19 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from typing import Any
 
 from bt_meta.errors import PluginError, UserInputError
 
 BUDGET_ENV = "BT_META_HOOK_BUDGET"
 DEFAULT_HOOK_BUDGET = 60.0
+POLL_SECONDS = 0.05
+INTERRUPT_SIGNAL = getattr(signal, "SIGUSR2", None)
 
-_CAN_INTERRUPT = hasattr(signal, "setitimer") and hasattr(signal, "SIGALRM")
-_deadlines: list[float] = []  # monotonic deadlines of the budgeted calls in progress, outermost first
+_deadlines: list[float] = []  # monotonic deadlines of the main thread's budgeted calls in progress, outermost first
+_pending: list[float] = []  # the deadline the watchdog interrupted for, until the handler has seen it
 _previous_handler: Any = None
+_watchdog: threading.Thread | None = None
 
 
 class HookTimeout(BaseException):
@@ -72,68 +73,78 @@ def budget_from_environment() -> float | None:
     return DEFAULT_HOOK_BUDGET if text is None else parse_budget(text)
 
 
-def _on_alarm(signum: int, frame: Any) -> None:
-    if _deadlines:
-        due = min(_deadlines)
-        if time.monotonic() >= due - 1e-3:
+def _on_interrupt(signum: int, frame: Any) -> None:
+    if _pending:
+        due = _pending.pop()
+        if due in _deadlines:
             raise HookTimeout(due)
+        return  # the late call ended while the signal was on its way
     previous = _previous_handler
     if callable(previous):
         previous(signum, frame)
 
 
-def _install_handler() -> bool:
-    global _previous_handler
-    current = signal.getsignal(signal.SIGALRM)
-    if current is _on_alarm:
-        return True
-    try:
-        signal.signal(signal.SIGALRM, _on_alarm)
-    except (ValueError, OSError):  # pragma: no cover - not the main thread after all
+def _watch(main_ident: int) -> None:
+    while True:
+        time.sleep(POLL_SECONDS)
+        deadlines = list(_deadlines)
+        if not deadlines or _pending or time.monotonic() < min(deadlines):
+            continue
+        if signal.getsignal(INTERRUPT_SIGNAL) is not _on_interrupt:  # type: ignore[arg-type]
+            continue  # someone replaced the handler: the late call runs to its end and loses its result
+        _pending.append(min(deadlines))
+        try:
+            signal.pthread_kill(main_ident, INTERRUPT_SIGNAL)  # type: ignore[arg-type]
+        except (OSError, ValueError):  # pragma: no cover - the main thread is gone
+            return
+
+
+_armed = False
+_main_ident = threading.main_thread().ident
+
+
+def _arm() -> bool:
+    """Install the handler and start the watchdog, once per process (main thread only)."""
+    global _previous_handler, _watchdog, _armed
+    if INTERRUPT_SIGNAL is None:
         return False
-    _previous_handler = current
+    try:
+        if signal.getsignal(INTERRUPT_SIGNAL) is not _on_interrupt:
+            _previous_handler = signal.signal(INTERRUPT_SIGNAL, _on_interrupt)
+    except (ValueError, OSError):  # pragma: no cover - an embedding that forbids handlers
+        return False
+    _watchdog = threading.Thread(target=_watch, args=(threading.get_ident(),), name="bt-meta hook budget",
+                                 daemon=True)
+    _watchdog.start()
+    _armed = True
     return True
 
 
-@contextmanager
-def budgeted(budget: float | None) -> Iterator[float | None]:
-    """Run the body under ``budget`` seconds; yields the call's deadline (``None`` without a budget).
+def _after_fork() -> None:
+    global _watchdog, _armed, _main_ident
+    _watchdog, _armed, _main_ident = None, False, threading.main_thread().ident
+    _deadlines.clear()
+    _pending.clear()
 
-    The caller catches :class:`HookTimeout` whose ``deadline`` is the one yielded (another deadline belongs to an
-    outer call and must be re-raised) and also compares the elapsed time with the budget, for calls that could
-    not be interrupted.
-    """
-    if budget is None:
-        yield None
-        return
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_after_fork)
+
+
+def enter(budget: float) -> float | None:
+    """Note the start of a call with ``budget`` seconds; returns its deadline when it can be interrupted (the main
+    thread), else ``None`` (the caller still compares the elapsed time with the budget afterwards)."""
+    if threading.get_ident() != _main_ident or not (_armed or _arm()):
+        return None
     deadline = time.monotonic() + budget
-    interrupt = _CAN_INTERRUPT and threading.current_thread() is threading.main_thread() and _install_handler()
-    if not interrupt:
-        yield deadline
-        return
-    started = time.monotonic()
     _deadlines.append(deadline)
-    old_delay, old_interval = signal.setitimer(signal.ITIMER_REAL, budget)
-    if 0 < old_delay < budget:
-        signal.setitimer(signal.ITIMER_REAL, old_delay, old_interval)  # the sooner timer stays
+    return deadline
 
-    def restore() -> None:
-        if deadline in _deadlines:
-            _deadlines.remove(deadline)
-        if old_delay > 0:
-            remaining = old_delay - (time.monotonic() - started)
-            signal.setitimer(signal.ITIMER_REAL, max(remaining, 1e-6), old_interval)
-        else:
-            signal.setitimer(signal.ITIMER_REAL, 0)
 
-    try:
-        yield deadline
-    finally:
-        try:
-            restore()
-        except HookTimeout:
-            restore()  # the alarm landed while restoring: the deadline is gone now, so this cannot be interrupted
-            raise
+def leave(deadline: float | None) -> None:
+    """Note the end of the call :func:`enter` returned ``deadline`` for."""
+    if deadline is not None and deadline in _deadlines:
+        _deadlines.remove(deadline)
 
 
 class HookBudgetExceeded(PluginError):

@@ -36,9 +36,9 @@ naming the plugin, the hook and what went wrong, the monitored node fails, and t
   ``42`` from ``bt_meta_expectations`` is ``plugin 'p' broke the contract of bt_meta_expectations: returned int
   42; ...``; hooks that return nothing may return anything, it is ignored;
 * a call longer than the host's time budget (``--hook-budget SECONDS``, ``$BT_META_HOOK_BUDGET``, default 60 s;
-  :mod:`bt_meta.hook_budget`): in the main thread the late call is interrupted where it is (a ``HookTimeout``
-  raised inside it, its ``finally`` blocks run); elsewhere, or inside C code that does not return to Python, it
-  runs to its end. Its result is discarded either way.
+  :mod:`bt_meta.hook_budget`): in the main thread a watchdog interrupts the late call where it is, within 50 ms of
+  its deadline (a ``HookTimeout`` raised inside it, its ``finally`` blocks run); in another thread, or inside C code
+  that does not return to Python, it runs to its end. Its result is discarded either way.
 
 ``bt_meta_on_failure`` is an observer: an error in it is noted on the failure it observed
 (``evidence["observer_errors"]``) and logged, never recorded as a failure of its own, so it cannot change which

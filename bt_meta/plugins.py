@@ -38,7 +38,7 @@ import pluggy
 from bt_meta import hookspecs
 from bt_meta._plugin_loading import PluginLoadError, import_plugin_file, plugin_files
 from bt_meta.errors import PluginError
-from bt_meta.hook_budget import HookBudgetExceeded, HookTimeout, budget_from_environment, budgeted
+from bt_meta.hook_budget import HookBudgetExceeded, HookTimeout, budget_from_environment, enter, leave
 from bt_meta.hook_contracts import HookContractError, check_result
 from bt_meta.hookspecs import PROJECT_NAME, hookimpl
 
@@ -249,15 +249,20 @@ class PluginHost:
         for impl in impls:
             args = [kwargs[name] for name in impl.argnames]
             deadline = None
-            started = time.monotonic()
+            started = 0.0
             try:
                 if budget is None:
                     value = impl.function(*args)
                 else:
-                    with budgeted(budget) as deadline:
+                    started = time.monotonic()
+                    deadline = enter(budget)
+                    try:
                         value = impl.function(*args)
+                    finally:
+                        leave(deadline)
             except HookTimeout as late:
-                if late.deadline != deadline:
+                leave(deadline)  # again: the interruption may have landed inside the first leave
+                if deadline is None or late.deadline != deadline:
                     raise  # an outer call's budget ran out: that call records it
                 overrun = HookBudgetExceeded(hook, budget or 0.0, time.monotonic() - started, interrupted=True)
                 result.errors.append(HookError(impl.plugin_name, hook, overrun, traceback.format_exc(limit=8)))

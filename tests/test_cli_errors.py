@@ -194,10 +194,12 @@ def corrupt_pages(path: Path) -> None:
 def test_page_corrupted_memory(capsys, tmp_path):
     path = tmp_path / "c.sqlite"
     corrupt_pages(path)
-    code, _, err = cli(capsys, "memory", "export", "--memory", str(path))
-    assert code == 2
-    assert one_line(err) == (f"{path}: memory query failed: the memory file is corrupted (database disk image is "
-                             "malformed); restore it from a backup or choose another file with --memory")
+    for command in ("ls", "export"):
+        code, out, err = cli(capsys, "memory", command, "--memory", str(path))
+        assert code == 2 and out == ""
+        assert one_line(err).startswith(f"{path}: the memory file is corrupted (*** in database main ***; Page ")
+    code, _, err = cli(capsys, "memory", "check", "--memory", str(path))  # SQLite's own check cannot read it either
+    assert code == 2 and "the memory file is corrupted (database disk image is malformed)" in one_line(err)
     with EpisodicMemory.open(path) as memory, pytest.raises(MemoryFileError, match="the memory file is corrupted"):
         memory.require_sound()
     code, _, err = cli(capsys, "record", LETTERS, "--problem", "A", "--memory", str(path))

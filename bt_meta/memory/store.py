@@ -30,6 +30,7 @@ from __future__ import annotations
 import json
 import os
 import sqlite3
+import stat
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -887,10 +888,18 @@ def _expectation(row: Sequence[Any], map_positions: dict[int | None, tuple[int, 
 
 
 def _check_header(path: Path) -> None:
+    # Non-blocking, and a regular file only: a named pipe or a device given as --memory must not hang the command.
     try:
-        with path.open("rb") as handle:
-            header = handle.read(len(SQLITE_HEADER))
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     except OSError as error:
         raise MemoryFileError(path, f"cannot read: {error.strerror}") from None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise MemoryFileError(path, "is not a regular file, so not a memory file")
+        header = os.read(fd, len(SQLITE_HEADER))
+    except OSError as error:
+        raise MemoryFileError(path, f"cannot read: {error.strerror}") from None
+    finally:
+        os.close(fd)
     if header and header != SQLITE_HEADER:
         raise MemoryFileError(path, "not a bt-meta memory: not a SQLite database; left untouched")

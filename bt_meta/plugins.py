@@ -359,8 +359,11 @@ def project_plugins_dir(file: str | Path | None) -> Path | None:
     """``<folder of file>/plugins`` when it exists (the project plugins folder), else ``None``."""
     if file is None:
         return None
-    candidate = Path(file).resolve().parent / "plugins"
-    return candidate if candidate.is_dir() else None
+    try:
+        candidate = Path(file).resolve().parent / "plugins"
+        return candidate if candidate.is_dir() else None
+    except (OSError, RuntimeError, ValueError):  # a NUL byte, a symlink loop: the file's loader reports it
+        return None
 
 
 def create_plugin_host(

@@ -295,3 +295,24 @@ def _parser_with(func):
         return parser
 
     return build
+
+
+@pytest.mark.timeout(30)
+def test_a_named_pipe_or_device_as_memory_does_not_hang(capsys, tmp_path):
+    fifo = tmp_path / "memory.sqlite"
+    os.mkfifo(fifo)
+    for command in (["memory", "ls"], ["refinements", "ls"]):
+        code, _, err = cli(capsys, *command, "--memory", str(fifo))
+        assert code == 2 and one_line(err) == f"{fifo}: is not a regular file, so not a memory file"
+    code, _, err = cli(capsys, "memory", "ls", "--memory", "/dev/zero")
+    assert code == 2 and "not a regular file" in one_line(err)
+
+
+@pytest.mark.parametrize("command", ["tick", "compile", "plan", "validate", "show"])
+def test_every_file_command_refuses_bad_paths_in_one_line(capsys, tmp_path, command):
+    (tmp_path / "a").symlink_to(tmp_path / "b")
+    (tmp_path / "b").symlink_to(tmp_path / "a")
+    for path in ("a\x00b.yaml", str(tmp_path / "a"), "x" * 5000, str(tmp_path)):
+        code, _, err = cli(capsys, command, path)
+        assert code == 2, (command, path[:20], err)
+        assert "internal error" not in one_line(err)

@@ -14,6 +14,7 @@ Exit statuses: 0 success, 1 the command ran but the outcome was a failure (no pl
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import os
 import pkgutil
@@ -68,18 +69,27 @@ def _on_sigterm(signum: int, frame: object) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; every way it can end is an exit status and at most one line on stderr."""
-    previous = _install_sigterm()
+    previous = None
     try:
+        previous = _install_sigterm()
         return _main(argv)
     except KeyboardInterrupt:
+        _ignore_further(signal.SIGINT)  # a second Ctrl-C during the cleanup must not turn into a traceback
         print("bt-meta: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     except Terminated:
+        _ignore_further(signal.SIGTERM)
         print("bt-meta: terminated", file=sys.stderr)
         return EXIT_TERMINATED
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _ignore_further(signum: int) -> None:
+    if threading.current_thread() is threading.main_thread():
+        with contextlib.suppress(ValueError, OSError):
+            signal.signal(signum, signal.SIG_IGN)
 
 
 def _install_sigterm() -> Any:

@@ -236,13 +236,17 @@ def wait_for_main(pid: int) -> None:
 def test_signals_stop_the_cli_cleanly(tmp_path, signum, code, word):
     task = tmp_path / "loop.yaml"
     task.write_text(BLOCKS)
-    process = subprocess.Popen([sys.executable, "-m", "bt_meta.cli", "plan", str(task), "--max-seconds", "100"],
+    script = Path(sys.executable).parent / "bt-meta"  # the console script a user runs, when installed beside python
+    command = [str(script)] if script.exists() else [sys.executable, "-m", "bt_meta.cli"]
+    process = subprocess.Popen([*command, "plan", str(task), "--max-seconds", "100"],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     wait_for_main(process.pid)
-    time.sleep(0.5)  # planning the endless task
+    time.sleep(1.0)  # planning the endless task
     process.send_signal(signum)
     _, err = process.communicate(timeout=60)
-    assert process.returncode == code, err
+    # A shell reports 128 + N both for exit(128 + N) and for death by signal N; CPython run with -m sometimes ends
+    # by re-raising SIGINT after main() returned 130, so either form counts, with the one line printed.
+    assert process.returncode in (code, -signum), err
     assert one_line(err) == f"bt-meta: {word}"
 
 

@@ -59,7 +59,7 @@ def import_plugin_file(path: Path) -> ModuleType:
     sys.modules[name] = module
     try:
         spec.loader.exec_module(module)
-    except Exception as error:
+    except (Exception, SystemExit) as error:  # a plugin calling sys.exit at import must not end the command
         del sys.modules[name]
         line = _line_in_file(error, path)
         detail = error.msg if isinstance(error, SyntaxError) else str(error)

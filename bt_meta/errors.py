@@ -11,6 +11,7 @@ Offers:
 * :class:`TaskFileError` -- a YAML task file that does not load or validate
 * :class:`TreeXMLError` -- a BehaviorTree.CPP XML file that does not load
 * :class:`ConfigError` -- a robot description or other configuration file that is wrong
+* :class:`UnknownWorldError` -- no plugin makes a world of the name asked for (``--world moon``)
 * :class:`PlanningError` -- the planner could not produce a plan (no plan, budget exhausted)
 * :class:`PluginError` -- a plugin could not be loaded or misbehaved
 * :class:`KinematicsError` -- kinematics used wrongly (a frame, arm or joint the robot does not have)
@@ -68,6 +69,10 @@ class TreeXMLError(UserInputError):
 
 class ConfigError(UserInputError):
     """A robot description, scene or other configuration file that is wrong."""
+
+
+class UnknownWorldError(UserInputError):
+    """No plugin makes a world of the name asked for: a bad argument, so exit status 2."""
 
 
 class PlanningError(BtMetaError):

@@ -27,9 +27,23 @@ Offers:
   ============================== ========== ===========================================================
 
 Containment: the monitor and the run call hooks through :meth:`bt_meta.plugins.PluginHost.call`, which calls
-implementations one by one; an exception in one becomes a :class:`~bt_meta.bt.failures.Failure` of kind
-``internal`` naming the plugin and the error, the monitored node fails, and the tree keeps ticking. Hook
-wrappers (``wrapper=True`` / ``hookwrapper=True``) are therefore not supported and are refused at load time.
+implementations one by one; each of these becomes a :class:`~bt_meta.bt.failures.Failure` of kind ``internal``
+naming the plugin, the hook and what went wrong, the monitored node fails, and the tree keeps ticking:
+
+* an exception, ``SystemExit`` included (a plugin calling ``sys.exit`` does not end the command;
+  ``KeyboardInterrupt`` still does);
+* a result of the wrong type -- each hook's "Return ..." below is checked (:mod:`bt_meta.hook_contracts`), so
+  ``42`` from ``bt_meta_expectations`` is ``plugin 'p' broke the contract of bt_meta_expectations: returned int
+  42; ...``; hooks that return nothing may return anything, it is ignored;
+* a call longer than the host's time budget (``--hook-budget SECONDS``, ``$BT_META_HOOK_BUDGET``, default 60 s;
+  :mod:`bt_meta.hook_budget`): in the main thread a watchdog interrupts the late call where it is, within 50 ms of
+  its deadline (a ``HookTimeout`` raised inside it, its ``finally`` blocks run); in another thread, or inside C code
+  that does not return to Python, it runs to its end. Its result is discarded either way.
+
+``bt_meta_on_failure`` is an observer: an error in it is noted on the failure it observed
+(``evidence["observer_errors"]``) and logged, never recorded as a failure of its own, so it cannot change which
+failure the meta-reasoner repairs. ``bt_meta_make_world`` errors surface as the command's error (no world, no run).
+Hook wrappers (``wrapper=True`` / ``hookwrapper=True``) cannot be contained and are refused at load time.
 Hooks nobody implements cost nothing on the tick path: monitors skip them.
 """
 

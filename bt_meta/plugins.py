@@ -15,7 +15,8 @@ Offers:
 
 * :data:`hookimpl` -- the marker plugin functions are decorated with
 * :class:`PluginHost` -- a pluggy manager plus safe, cached hook calls (:meth:`PluginHost.call`)
-* :class:`HookResult`, :class:`HookError` -- what a safe call returns: results and contained exceptions
+* :class:`HookResult`, :class:`HookError` -- what a safe call returns: results and contained exceptions, results of
+  the wrong type (:mod:`bt_meta.hook_contracts`) and calls past their time budget (:mod:`bt_meta.hook_budget`)
 * :func:`create_plugin_host` -- a host with the hookspecs, built-ins, entry points and folders loaded
 * :func:`project_plugins_dir` -- the project plugins folder for a task file
 * :class:`PluginLoadError` -- a plugin file or entry point that fails to import (``path:line: message``)
@@ -25,6 +26,7 @@ Offers:
 from __future__ import annotations
 
 import importlib.metadata
+import time
 import traceback
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -36,6 +38,8 @@ import pluggy
 from bt_meta import hookspecs
 from bt_meta._plugin_loading import PluginLoadError, import_plugin_file, plugin_files
 from bt_meta.errors import PluginError
+from bt_meta.hook_budget import HookBudgetExceeded, HookTimeout, budget_from_environment, enter, leave
+from bt_meta.hook_contracts import HookContractError, check_result
 from bt_meta.hookspecs import PROJECT_NAME, hookimpl
 
 __all__ = [
@@ -101,6 +105,10 @@ class HookError:
 
     @property
     def message(self) -> str:
+        if isinstance(self.error, HookContractError):
+            return f"plugin {self.plugin!r} broke the contract of {self.hook}: {self.error}"
+        if isinstance(self.error, HookBudgetExceeded):
+            return f"plugin {self.plugin!r}: {self.error}"
         return f"plugin {self.plugin!r} raised in {self.hook}: {type(self.error).__name__}: {self.error}"
 
     def to_dict(self) -> dict[str, Any]:
@@ -135,14 +143,24 @@ class HookResult:
 _EMPTY: tuple[Any, ...] = ()
 
 
+class _FromEnvironment:
+    """The default of a hook budget: ``$BT_META_HOOK_BUDGET``, else :data:`bt_meta.hook_budget.DEFAULT_HOOK_BUDGET`."""
+
+
+FROM_ENVIRONMENT = _FromEnvironment()
+
+
 class PluginHost:
     """A pluggy :class:`~pluggy.PluginManager` for the ``bt_meta`` hooks, with safe calls and a fast "anyone?".
 
     Register plugins through :meth:`register` (not on :attr:`manager` directly) so the cached implementation
-    lists stay right.
+    lists stay right. ``hook_budget`` is the time budget of each implementation call in seconds (``None``: no
+    budget; default: ``$BT_META_HOOK_BUDGET``, else 60 s; see :mod:`bt_meta.hook_budget`).
     """
 
-    def __init__(self) -> None:
+    def __init__(self, hook_budget: float | _FromEnvironment | None = FROM_ENVIRONMENT) -> None:
+        self.hook_budget: float | None = (budget_from_environment() if isinstance(hook_budget, _FromEnvironment)
+                                          else hook_budget)
         self.manager = pluggy.PluginManager(PROJECT_NAME)
         self.manager.add_hookspecs(hookspecs)
         self.sources: dict[str, str] = {}
@@ -216,22 +234,52 @@ class PluginHost:
         return bool(self.implementations(hook))
 
     def call(self, hook: str, /, **kwargs: Any) -> HookResult:
-        """Call every implementation of ``hook`` one by one; exceptions are contained as :class:`HookError`.
+        """Call every implementation of ``hook`` one by one; what goes wrong is contained as a :class:`HookError`.
 
-        For a firstresult hook the call stops at the first non-``None`` result, like pluggy.
+        Contained: an exception (``SystemExit`` included; ``KeyboardInterrupt`` still stops the program), a result
+        of the wrong type (:mod:`bt_meta.hook_contracts`), and a call past :attr:`hook_budget` (its result is
+        discarded). For a firstresult hook the call stops at the first valid non-``None`` result, like pluggy.
         """
         result = HookResult()
         impls = self.implementations(hook)
         if not impls:
             return result
         first = self._is_firstresult(hook)
+        budget = self.hook_budget
         for impl in impls:
+            args = [kwargs[name] for name in impl.argnames]
+            deadline = None
+            started = 0.0
             try:
-                value = impl.function(*[kwargs[name] for name in impl.argnames])
-            except Exception as error:
+                if budget is None:
+                    value = impl.function(*args)
+                else:
+                    started = time.monotonic()
+                    deadline = enter(budget)
+                    try:
+                        value = impl.function(*args)
+                    finally:
+                        leave(deadline)
+            except HookTimeout as late:
+                leave(deadline)  # again: the interruption may have landed inside the first leave
+                if deadline is None or late.deadline != deadline:
+                    raise  # an outer call's budget ran out: that call records it
+                overrun = HookBudgetExceeded(hook, budget or 0.0, time.monotonic() - started, interrupted=True)
+                result.errors.append(HookError(impl.plugin_name, hook, overrun, traceback.format_exc(limit=8)))
+                continue
+            except (Exception, SystemExit) as error:
                 result.errors.append(HookError(impl.plugin_name, hook, error, traceback.format_exc(limit=8)))
                 continue
+            if budget is not None and time.monotonic() - started > budget:
+                overrun = HookBudgetExceeded(hook, budget, time.monotonic() - started, interrupted=False)
+                result.errors.append(HookError(impl.plugin_name, hook, overrun, ""))
+                continue
             if value is not None:
+                try:
+                    check_result(hook, value)
+                except HookContractError as error:
+                    result.errors.append(HookError(impl.plugin_name, hook, error, ""))
+                    continue
                 result.results.append((impl.plugin_name, value))
                 if first:
                     break
@@ -279,7 +327,7 @@ class PluginHost:
             seen.add(entry_point.name)
             try:
                 plugin = entry_point.load()
-            except Exception as error:
+            except (Exception, SystemExit) as error:
                 raise PluginLoadError(
                     f"entry point {entry_point.name} = {entry_point.value} failed to import: "
                     f"{type(error).__name__}: {error}"
@@ -311,8 +359,11 @@ def project_plugins_dir(file: str | Path | None) -> Path | None:
     """``<folder of file>/plugins`` when it exists (the project plugins folder), else ``None``."""
     if file is None:
         return None
-    candidate = Path(file).resolve().parent / "plugins"
-    return candidate if candidate.is_dir() else None
+    try:
+        candidate = Path(file).resolve().parent / "plugins"
+        return candidate if candidate.is_dir() else None
+    except (OSError, RuntimeError, ValueError):  # a NUL byte, a symlink loop: the file's loader reports it
+        return None
 
 
 def create_plugin_host(
@@ -322,10 +373,12 @@ def create_plugin_host(
     entry_points: bool = True,
     builtins: bool = True,
     plugins: Iterable[tuple[str, Any]] = (),
+    hook_budget: float | _FromEnvironment | None = FROM_ENVIRONMENT,
 ) -> PluginHost:
     """A :class:`PluginHost` with built-ins, entry points, the project plugins folder of ``project_file`` and
-    each of ``plugin_dirs`` loaded, then the extra ``(name, plugin)`` pairs (tests use these)."""
-    host = PluginHost()
+    each of ``plugin_dirs`` loaded, then the extra ``(name, plugin)`` pairs (tests use these); ``hook_budget``
+    as for :class:`PluginHost`."""
+    host = PluginHost(hook_budget)
     if builtins:
         host.load_builtins()
     if entry_points:

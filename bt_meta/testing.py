@@ -33,7 +33,7 @@ from py_trees.common import Status
 
 from bt_meta.bt.context import FAILURES_KEY, RUN_KEY, STATE_KEY, WORLD_KEY, RunContext
 from bt_meta.bt.failures import Failure
-from bt_meta.errors import BtMetaError, PluginError
+from bt_meta.errors import BtMetaError, PluginError, UnknownWorldError
 
 __all__ = ["HarnessError", "TreeHarness", "bt_blackboard", "bt_harness", "bt_plugins"]
 
@@ -43,6 +43,10 @@ _POLICY_KEY = re.compile(r"^/p\d+_")
 
 class HarnessError(BtMetaError):
     """A harness request that cannot be answered: an unknown or ambiguous node, a status never reached."""
+
+
+class HarnessWorldError(HarnessError, UnknownWorldError):
+    """No plugin makes the world the harness was asked for: a harness error and bad input (CLI exit 2)."""
 
 
 def _status(value: Status | str) -> Status:
@@ -120,11 +124,11 @@ class TreeHarness:
                                 problem=compiled.problem, options=options)
             if made.errors:
                 error = made.errors[0]
-                if isinstance(error.error, BtMetaError):
-                    raise error.error
+                if isinstance(error.error, BtMetaError) and not isinstance(error.error, PluginError):
+                    raise error.error  # e.g. the simulator's located error in a scene file
                 raise PluginError(error.message) from error.error
             if not made.results:
-                raise HarnessError(f"no plugin provides a world named {world!r}")
+                raise HarnessWorldError(f"no plugin provides a world named {world!r} (shipped: fake, sim)")
             world = made.first
         run = RunContext(world, plugins, domain=compiled.domain, problem=compiled.problem,
                          task_file=compiled.task_file)

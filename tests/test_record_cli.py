@@ -40,7 +40,7 @@ def test_record_input_errors(capsys, tmp_path):
 def test_run_with_a_missing_explicit_memory_is_an_error(capsys, tmp_path):
     missing = tmp_path / "absent.sqlite"
     code, _, err = cli(capsys, "run", LETTERS, "--problem", "A", "--memory", str(missing))
-    assert code == 1 and "absent.sqlite" in err and "no episodic memory here" in err
+    assert code == 2 and "absent.sqlite" in err and "no episodic memory here" in err
     assert not missing.exists()
     code, _, err = cli(capsys, "run", LETTERS, "--problem", "A", "--repair", "--max-attempts", "-1")
     assert code == 2 and "--max-attempts must be at least 0" in err

@@ -213,9 +213,11 @@ def compile_task_file(
 ) -> CompiledTree:
     """Load a task file (a path or a loaded ``TaskFile``), plan its problem unless ``policy``, and compile.
 
-    Raises :class:`~bt_meta.errors.PlanningError` when the planner finds no plan.
+    Raises :class:`~bt_meta.errors.PlanningError` when the planner finds no plan; the plan gets the default
+    budget of :mod:`bt_meta.htn.budgets` unless ``plan_options`` give one.
     """
     from bt_meta.htn import load_task_file, plan
+    from bt_meta.htn.budgets import with_default_budget
 
     task_file = load_task_file(source) if isinstance(source, (str, Path)) else source
     domain = task_file.domain
@@ -226,7 +228,7 @@ def compile_task_file(
                               max_depth=max_depth, monitor=monitor)
         return CompiledTree(root, domain, chosen, task_file, None, registry, "policy")
     external = None if plugins is None else plugins.external_predicate
-    result = plan(domain, chosen, external=external, **(plan_options or {}))
+    result = plan(domain, chosen, external=external, **with_default_budget(plan_options))
     if result.status != "success" or result.tree is None:
         raise PlanningError(f"no plan for problem {chosen.name!r}: {result.status}"
                             + (f" ({result.message})" if result.message else ""))

@@ -197,9 +197,15 @@ class RunContext:
             result = plugins.call("bt_meta_on_failure", failure=failure, context=context)
             if result.results:
                 failure.evidence.setdefault("meta", {}).update({name: value for name, value in result.results})
+            if result.errors:
+                # An observer that breaks is noted on the failure it observed, never recorded as a failure of its
+                # own: that would become the run's latest failure and change (or prevent) the repair.
+                notes = failure.evidence.setdefault("observer_errors", [])
+                for error in result.errors:
+                    log.warning("%s", error.message)
+                    notes.append({"plugin": error.plugin, "hook": error.hook, "error": error.message})
+            if result.results or result.errors:
                 self.failure_records[index] = failure.to_dict()
-            for error in result.errors:
-                self._store(self._internal(error, context), notify=True)
         return failure
 
     def _store(self, failure: Failure, notify: bool) -> None:

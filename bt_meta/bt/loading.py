@@ -19,6 +19,7 @@ from bt_meta.bt.compiler import DEFAULT_POLICY_DEPTH, CompiledTree, assign_steps
 from bt_meta.bt.domain_nodes import domain_registry
 from bt_meta.bt.monitor import monitor_action
 from bt_meta.errors import UserInputError
+from bt_meta.user_files import MAX_USER_FILE_BYTES, check_path_text, read_user_bytes
 
 
 def is_xml(path: str | Path) -> bool:
@@ -28,9 +29,9 @@ def is_xml(path: str | Path) -> bool:
     if path.suffix.lower() in (".yaml", ".yml"):
         return False
     try:
-        head = path.read_text(encoding="utf-8", errors="replace")[:200].lstrip()
-    except OSError:
-        return False
+        head = read_user_bytes(path, max_bytes=MAX_USER_FILE_BYTES)[:200].decode("utf-8", errors="replace").lstrip()
+    except UserInputError:
+        return False  # the loader that runs next reports why the file cannot be read
     return head.startswith("<")
 
 
@@ -61,7 +62,7 @@ def load_runnable(
     adds other files' trees, ``stubs`` (a :class:`~bt_meta.bt.nodes.stubs.StubPolicy`) stubs unimplemented nodes."""
     from bt_meta.htn import load_task_file
 
-    path = Path(file)
+    path = Path(check_path_text(file, "file", UserInputError))
     if not path.is_file():
         raise UserInputError("no such file", path)
     if not is_xml(path):

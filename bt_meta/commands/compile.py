@@ -18,6 +18,7 @@ from pathlib import Path
 
 from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
 from bt_meta.errors import UserInputError
+from bt_meta.user_files import check_output_file, describe_os_error
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -44,6 +45,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserInputError("compile takes a YAML task file; a tree XML is already compiled", args.file)
     if args.depth is not None and args.depth < 1:
         raise UserInputError("--depth must be at least 1")
+    if args.output:
+        check_output_file(args.output, "output file (-o)")  # before the work, not after it
     from bt_meta.htn.hddl.files import load_task_input
 
     plugins = plugin_host_from_args(args, args.file)
@@ -56,7 +59,11 @@ def run(args: argparse.Namespace) -> int:
     tree_id = args.tree or re.sub(r"[^A-Za-z0-9_]", "_", default_id)
     text = tree_to_xml(compiled.root, tree_id=tree_id, registry=compiled.registry)
     if args.output:
-        Path(args.output).write_text(text, encoding="utf-8")
+        try:
+            Path(args.output).write_text(text, encoding="utf-8")
+        except OSError as error:
+            raise UserInputError(f"cannot write the output file (-o): {describe_os_error(error)}",
+                                 args.output) from None
         count = compiled.stats.get("primitives")
         what = f"{count} primitives" if count is not None else "policy tree"
         print(f"wrote {args.output} ({what}, tree {tree_id})", file=sys.stderr)

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from bt_meta.commands._common import print_json
 from bt_meta.errors import UserInputError
+from bt_meta.user_files import make_output_folder
 
 __all__ = ["DemoInputError", "register", "run"]
 
@@ -47,6 +48,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise DemoInputError("--out must be a folder, not a file", path=out)
+    make_output_folder(out, "--out folder", DemoInputError)  # before the work: the user asked for this folder
     progress = Progress(sys.stdout, quiet=args.json)
     result = run_demo(out, seed=args.seed, quick=args.quick, progress=progress)
     summary = result.summary()

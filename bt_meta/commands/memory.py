@@ -69,11 +69,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=lambda args: parser.print_help() or 2)
 
 
-def _open(args: argparse.Namespace) -> EpisodicMemory:
+def _open(args: argparse.Namespace, *, sound: bool = True) -> EpisodicMemory:
+    """The memory to inspect; unless ``sound=False`` (``memory check``, which reports what it finds) a corrupted
+    file is refused at once (exit 2) rather than listed or exported in part."""
     path = resolve_memory_path(args)
     # Inspecting must not create a memory; it may migrate one it can write (migrations only add).
     readonly = path.exists() and not os.access(path, os.W_OK)
-    return EpisodicMemory.open(path, create=False, readonly=readonly)
+    memory = EpisodicMemory.open(path, create=False, readonly=readonly)
+    if sound:
+        try:
+            memory.require_sound()
+        except BaseException:
+            memory.close()
+            raise
+    return memory
 
 
 def _time(stamp: float | None) -> str:
@@ -230,10 +239,11 @@ def _write_export(memory: EpisodicMemory, out: TextIO, as_document: bool) -> int
 
 
 def _check(args: argparse.Namespace) -> int:
-    with _open(args) as memory:
-        integrity = memory.integrity_check()
-        problems = memory.check()
-        episodes = len(memory.episodes())
+    with _open(args, sound=False) as memory:
+        integrity = memory.integrity_check().replace("\n", "; ")
+        # A corrupted file may fail the count queries themselves: SQLite's verdict is then the whole report.
+        problems = memory.check() if integrity == "ok" else []
+        episodes = len(memory.episodes()) if integrity == "ok" else 0
         ok = integrity == "ok" and not problems
         if args.json:
             print_json(

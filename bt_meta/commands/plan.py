@@ -11,6 +11,9 @@ it, see :func:`bt_meta.htn.hddl.find_domain_file`).
 A domain that declares external predicates asks the loaded plugins for their truth at plan time (the
 ``bt_meta_external_predicate`` hook); a predicate no plugin answers ends the command with exit status 1.
 
+Unless ``--max-nodes`` / ``--max-seconds`` say otherwise a plan gets the budget of :mod:`bt_meta.htn.budgets`
+(10,000,000 expansions, 10 seconds).
+
 Exit status 0 with a plan, 1 when there is no plan or the budget ran out (with the reason), 2 on a file that
 does not load or a missing/unknown ``--problem``.
 """
@@ -24,6 +27,7 @@ from bt_meta.commands._common import print_json
 from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
 from bt_meta.errors import UserInputError
 from bt_meta.htn import plan
+from bt_meta.htn.budgets import DEFAULT_MAX_NODES, DEFAULT_MAX_SECONDS
 from bt_meta.htn.hddl.files import load_task_input
 
 
@@ -34,8 +38,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                           "domain, the HDDL problem file")
     parser.add_argument("--json", action="store_true", help="print one JSON object: plan, tree, stats")
     parser.add_argument("--states", action="store_true", help="with --json: include each node's state_before")
-    parser.add_argument("--max-nodes", type=int, default=None, help="node budget (task expansions)")
-    parser.add_argument("--max-seconds", type=float, default=None, help="time budget in seconds")
+    parser.add_argument("--max-nodes", type=int, default=DEFAULT_MAX_NODES,
+                        help=f"node budget in task expansions (default {DEFAULT_MAX_NODES:,})")
+    parser.add_argument("--max-seconds", type=float, default=DEFAULT_MAX_SECONDS,
+                        help=f"time budget in seconds (default {DEFAULT_MAX_SECONDS:g})")
     add_plugin_arguments(parser)
     parser.set_defaults(func=run)
 

@@ -174,7 +174,8 @@ def record(args: argparse.Namespace) -> int:
     load_grounding(task_file.domain.name, args.file, args.grounding).problem(problem.name)
     options = world_options(args)
     plugins = plugin_host_from_args(args, args.file)
-    with EpisodicMemory.open(resolve_memory_path(args)) as memory:
+    with EpisodicMemory.open(resolve_memory_path(args, writing=True)) as memory:
+        memory.require_sound()
         shown = demonstrate(args.file, args.problem, memory, variant=args.variant, seed=args.seed,
                             max_ticks=args.max_ticks, grounding=args.grounding, plugins=plugins,
                             check_expectations=args.check_expectations, **options)

@@ -148,10 +148,15 @@ def _memory(args: argparse.Namespace) -> Iterator[Any]:
     plugins that open the memory themselves read the same file."""
     from bt_meta.memory import EpisodicMemory
 
-    path = resolve_memory_path(args)
     writes = args.record or args.record_failed or args.repair
+    path = resolve_memory_path(args, writing=bool(writes))
     if writes:
         memory = EpisodicMemory.open(path)
+        try:
+            memory.require_sound()
+        except BaseException:
+            memory.close()
+            raise
     elif args.memory:
         memory = EpisodicMemory.open(path, create=False, readonly=not os.access(path, os.W_OK))
     else:

@@ -5,6 +5,7 @@ Offers:
 * :class:`Var` -- a variable term (``?x`` in the text; ``Var("x")`` here); constants are plain ``str``
 * :func:`parse_condition`, :func:`parse_atom`, :func:`parse_parameter` -- text to syntax tree, raising
   :class:`ConditionSyntaxError` with the offset (0-based) of the offending character
+* :func:`dnf_size`, :func:`check_dnf_size` -- the size of a condition's distributed form, computed not built
 * :func:`compile_condition` -- syntax tree to a :class:`Condition`: checks predicates, arities and that every
   variable of ``not`` / ``==`` / ``!=`` / external atoms is bound first, and turns the condition into a
   disjunction of clauses (DNF) whose literals are matched left to right (SHOP2 style)
@@ -38,6 +39,13 @@ from bt_meta.htn.state import Atom, State
 REFERENCE_PROOFS_MIN = 500
 
 KEYWORDS = frozenset({"and", "or", "not", "true", "false"})
+
+# Bounds checked before the work they protect: parentheses and 'not's nested deeper than this are refused by the
+# parser (which recurses once per level); a condition whose disjunctive normal form would have more alternatives
+# or literals than these is refused from sizes computed on the syntax tree, before any clause is built.
+MAX_CONDITION_NESTING = 100
+MAX_ALTERNATIVES = 4096
+MAX_DNF_LITERALS = 100_000
 
 ExternalFn = Callable[[str, tuple, State], bool]
 
@@ -177,6 +185,13 @@ class _Parser:
         self.text = text
         self.tokens = tokenize(text)
         self.pos = 0
+        self.depth = 0
+
+    def nest(self, offset: int) -> None:
+        self.depth += 1
+        if self.depth > MAX_CONDITION_NESTING:
+            raise ConditionSyntaxError(f"condition nested deeper than {MAX_CONDITION_NESTING} levels of '(' and "
+                                       "'not'", offset)
 
     @property
     def tok(self) -> Token:
@@ -216,15 +231,20 @@ class _Parser:
     def unary(self) -> Expr:
         if self.tok.kind == "kw" and self.tok.text == "not":
             offset = self.take().offset
-            return NotExpr(self.unary(), offset)
+            self.nest(offset)
+            child = self.unary()
+            self.depth -= 1
+            return NotExpr(child, offset)
         return self.primary()
 
     def primary(self) -> Expr:
         tok = self.tok
         if tok.kind == "op" and tok.text == "(":
             self.take()
+            self.nest(tok.offset)
             inner = self.expr()
             self.expect_op(")", "')' to close the '(' opened before")
+            self.depth -= 1
             return inner
         if tok.kind == "kw" and tok.text in ("true", "false"):
             self.take()
@@ -342,6 +362,42 @@ class DomainContext:
 Step = tuple  # (kind, pred_or_left, args_or_right, node)
 
 
+def dnf_size(expr: Expr, negate: bool = False) -> tuple[int, int]:
+    """``(alternatives, literals)`` of the disjunctive normal form of ``expr``, computed without building it.
+
+    Counts are capped just past the bounds (:data:`MAX_ALTERNATIVES`, :data:`MAX_DNF_LITERALS`) so a condition
+    that would distribute to astronomically many clauses costs no more than one walk of its syntax tree.
+    """
+    cap_clauses, cap_literals = MAX_ALTERNATIVES + 1, MAX_DNF_LITERALS + 1
+    if isinstance(expr, (AtomExpr, CompareExpr)):
+        return 1, 1
+    if isinstance(expr, BoolExpr):
+        return (1, 0) if expr.value != negate else (0, 0)
+    if isinstance(expr, NotExpr):
+        return dnf_size(expr.child, not negate)
+    conjunctive = isinstance(expr, AndExpr) != negate
+    parts = [dnf_size(child, negate) for child in expr.children]  # type: ignore[union-attr]
+    if not conjunctive:
+        return min(sum(c for c, _ in parts), cap_clauses), min(sum(n for _, n in parts), cap_literals)
+    clauses, literals = 1, 0
+    for part_clauses, part_literals in parts:
+        # Every clause of the product joins one clause of each side: literals add up across the cross product.
+        literals = min(literals * part_clauses + part_literals * clauses, cap_literals)
+        clauses = min(clauses * part_clauses, cap_clauses)
+    return clauses, (literals if clauses else 0)
+
+
+def check_dnf_size(expr: Expr) -> None:
+    """Refuse a condition whose distributed form would pass the bounds, before it is distributed."""
+    clauses, literals = dnf_size(expr)
+    if clauses > MAX_ALTERNATIVES:
+        raise ConditionSyntaxError(f"condition too large once distributed (more than {MAX_ALTERNATIVES} "
+                                   "alternatives)", 0)
+    if literals > MAX_DNF_LITERALS:
+        raise ConditionSyntaxError(f"condition too large once distributed (more than {MAX_DNF_LITERALS} atoms "
+                                   "and comparisons in its alternatives)", 0)
+
+
 def _to_dnf(expr: Expr, negate: bool) -> list[list[tuple[str, Expr, bool]]]:
     """Clauses of (literal-kind, node, negated) in left-to-right order."""
     if isinstance(expr, AtomExpr):
@@ -357,9 +413,10 @@ def _to_dnf(expr: Expr, negate: bool) -> list[list[tuple[str, Expr, bool]]]:
     if conjunctive:
         clauses: list[list[tuple[str, Expr, bool]]] = [[]]
         for part in parts:
+            if len(clauses) * len(part) > MAX_ALTERNATIVES:  # checked before the product is built
+                raise ConditionSyntaxError(f"condition too large once distributed (more than {MAX_ALTERNATIVES} "
+                                           "alternatives)", 0)
             clauses = [left + right for left in clauses for right in part]
-            if len(clauses) > 4096:
-                raise ConditionSyntaxError("condition too large once distributed (more than 4096 alternatives)", 0)
         return clauses
     result: list[list[tuple[str, Expr, bool]]] = []
     for part in parts:
@@ -493,6 +550,7 @@ def compile_condition(source: str, expr: Expr, context: DomainContext, bound: It
     initially = frozenset(bound)
     clauses: list[list[Step]] = []
     bound_everywhere: set[str] | None = None
+    check_dnf_size(expr)
     for raw in _to_dnf(expr, False):
         have = set(initially)
         steps: list[Step] = []

@@ -10,11 +10,18 @@ nodes. One convenience goes beyond plain YAML: a flow list whose items are atoms
 ``[place(?b, 2, 1), done()]``, is read as a list of atoms. Plain YAML would split ``place(?b`` at the comma or
 refuse the ``?``; the loader reads such a list as one quoted scalar of the same length (positions unchanged)
 and splits it at the top-level commas itself.
+
+Bounds, checked before the work they protect: the file is read through :mod:`bt_meta.user_files` (regular files
+only, at most 8 MiB), composed through :mod:`bt_meta.safe_yaml` (nesting depth, alias count and alias expansion
+bounded, tag errors located), conditions are bounded by :mod:`bt_meta.htn.conditions` (nesting, size once
+distributed), and ``domain_file:`` chains are at most :data:`MAX_DOMAIN_FILE_CHAIN` long, never circular, and
+stay under the task file's folder or a root listed in ``$BT_META_DOMAIN_ROOTS``.
 """
 
 from __future__ import annotations
 
 import bisect
+import os
 import re
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
@@ -42,6 +49,14 @@ from bt_meta.htn.conditions import (
 )
 from bt_meta.htn.model import Domain, Method, Primitive, Problem, TaskDecl, TaskFile
 from bt_meta.htn.state import Atom, State
+from bt_meta.safe_yaml import compose_yaml, construct_yaml
+from bt_meta.user_files import check_path_text, read_user_text
+
+# A task file may name its domain's file only inside its own folder (and below) or inside a folder listed here
+# (os.pathsep-separated), so a task file cannot make bt-meta read and report on any file of the machine.
+DOMAIN_ROOTS_ENV = "BT_META_DOMAIN_ROOTS"
+# How many domain files one task file may chain through (a problem file naming a file that names another ...).
+MAX_DOMAIN_FILE_CHAIN = 8
 
 _PREDICATE_NAME = re.compile(r"[A-Za-z0-9_.+\-][A-Za-z0-9_.+\-/:]*")
 
@@ -149,10 +164,17 @@ def _skip_quoted(text: str, i: int) -> int:
 
 
 def _matching_bracket(text: str, i: int) -> int | None:
+    """The ``]`` closing the flow list opened at ``i`` when it holds no nested ``[`` or ``{``, else ``None``.
+
+    Stopping at the first nested bracket keeps the whole rewrite linear: otherwise every ``[`` of 40 KB of nested
+    brackets would scan to the end of the text.
+    """
     depth = 0
     j = i
     while j < len(text):
         ch = text[j]
+        if ch in "[{" and j > i:
+            return None
         if ch in "'\"" and (text[j - 1] in "([, \t\n"):
             j = _skip_quoted(text, j)
             continue
@@ -182,9 +204,12 @@ class Src:
 
 
 class _Loader:
-    def __init__(self, text: str, path: str, base_dir: Path | None) -> None:
+    def __init__(self, text: str, path: str, base_dir: Path | None, allowed_roots: Sequence[Path] = (),
+                 chain: tuple[str, ...] = ()) -> None:
         self.path = path
         self.base_dir = base_dir
+        self.allowed_roots = list(allowed_roots)
+        self.chain = chain  # the resolved files being loaded, outermost first (domain_file cycles)
         self.text, self.flow_starts = _rewrite_flow_lists(text)
         self.line_starts = [0]
         for index, ch in enumerate(self.text):
@@ -232,6 +257,8 @@ class _Loader:
                 cursor += len(raw_line[indent:]) + 1
 
             def locate(off: int) -> tuple[int, int]:
+                if not starts:  # an empty block scalar: point at its indicator
+                    return node.start_mark.line + 1, node.start_mark.column + 1
                 k = max(bisect.bisect_right([o for o, _ in starts], off) - 1, 0)
                 return starts[k][1], indent + off - starts[k][0] + 1
 
@@ -413,19 +440,13 @@ class _Loader:
 
     # -- the file ---------------------------------------------------------------------------------------------
     def load(self) -> TaskFile:
-        try:
-            root = yaml.compose(self.text, Loader=yaml.SafeLoader)
-        except yaml.MarkedYAMLError as exc:
-            mark = exc.problem_mark or exc.context_mark
-            message = f"YAML syntax error: {exc.problem or exc.context}"
-            if exc.context and exc.problem:
-                message += f" ({exc.context})"
-            where = (mark.line + 1, mark.column + 1) if mark is not None else None
-            raise self.error(message, where) from None
-        except yaml.YAMLError as exc:
-            raise self.error(f"YAML error: {exc}", None) from None
+        root = compose_yaml(self.text, self.path, TaskFileError)
         if root is None:
             raise self.error("empty task file: expected a mapping with 'domain:' and/or 'problems:'", (1, 1))
+        if not isinstance(root, yaml.MappingNode):
+            # Not echoing the value: a file that is not a task file at all should not be quoted back.
+            raise self.error(f"a task file must be a mapping with 'domain:' and/or 'problems:', found "
+                             f"{'a list' if isinstance(root, yaml.SequenceNode) else 'a single value'}", root)
         top = self.keys(root, "the task file", {"domain", "problems", "domain_file"})
         if "domain" in top and "domain_file" in top:
             raise self.error("a task file has either 'domain:' or 'domain_file:', not both", top["domain_file"][0])
@@ -444,11 +465,27 @@ class _Loader:
 
     def domain_file(self, node: yaml.Node) -> tuple[str, Domain]:
         name = self.scalar(node, "domain_file")
-        base = self.base_dir if self.base_dir is not None else Path.cwd()
-        target = (base / name).resolve() if not Path(name).is_absolute() else Path(name)
-        if not target.is_file():
+        try:
+            check_path_text(name, "domain file", TaskFileError)
+        except TaskFileError as exc:
+            raise self.error(exc.message, node) from None
+        base = (self.base_dir if self.base_dir is not None else Path.cwd()).resolve()
+        try:
+            target = (base / name).resolve()
+        except (OSError, RuntimeError):
+            raise self.error(f"domain file {name!r}: symlink loop", node) from None
+        allowed = [base, *self.allowed_roots]
+        if not any(target == root or root in target.parents for root in allowed):
+            raise self.error(f"domain file {name!r} is outside the task file's folder {base}; a domain file must be "
+                             f"in that folder or below it, or under a folder listed in ${DOMAIN_ROOTS_ENV}", node)
+        if str(target) in self.chain:
+            raise self.error(f"domain file {name!r} names a file that is already being loaded (a cycle: "
+                             f"{' -> '.join(Path(p).name for p in (*self.chain, str(target)))})", node)
+        if len(self.chain) >= MAX_DOMAIN_FILE_CHAIN:
+            raise self.error(f"domain file {name!r}: more than {MAX_DOMAIN_FILE_CHAIN} domain files chained", node)
+        if not target.exists():
             raise self.error(f"domain file {name!r} not found (looked for {target})", node)
-        loaded = load_task_file(target)
+        loaded = _load_file(target, self.allowed_roots, self.chain)
         return str(target), loaded.domain
 
     # -- domain ---------------------------------------------------------------------------------------------
@@ -648,7 +685,7 @@ class _Loader:
         if "expectations" in keys and not self.is_null(keys["expectations"][1]):
             exp_node = keys["expectations"][1]
             self.mapping(exp_node, f"the expectations of {what}")
-            expectations = yaml.constructor.SafeConstructor().construct_document(exp_node)
+            expectations = construct_yaml(exp_node, self.path, TaskFileError)
         return Primitive(name, params, ptypes, precondition, effects["add"], effects["delete"], cost, expectations,
                          key_node.start_mark.line + 1, key_node.start_mark.column + 1)
 
@@ -782,23 +819,45 @@ def _node_kind(node: yaml.Node, flow_starts: set[int] | None = None) -> str:
     return f"the value {node.value!r}"
 
 
-def load_task_text(text: str, path: str = "<string>", base_dir: str | Path | None = None) -> TaskFile:
-    """Load a task file from text; ``base_dir`` resolves a ``domain_file:`` (default: the path's folder)."""
+def domain_roots(extra: Iterable[str | Path] = ()) -> list[Path]:
+    """The folders besides a task file's own in which its ``domain_file:`` may lie: ``extra`` and the folders of
+    ``$BT_META_DOMAIN_ROOTS`` (separated by ``os.pathsep``; empty entries ignored)."""
+    listed = [entry for entry in os.environ.get(DOMAIN_ROOTS_ENV, "").split(os.pathsep) if entry.strip()]
+    roots = []
+    for entry in [*extra, *listed]:
+        try:
+            roots.append(Path(check_path_text(entry, "domain root", TaskFileError)).expanduser().resolve())
+        except (OSError, RuntimeError):
+            continue
+    return roots
+
+
+def load_task_text(text: str, path: str = "<string>", base_dir: str | Path | None = None, *,
+                   allowed_roots: Iterable[str | Path] = ()) -> TaskFile:
+    """Load a task file from text; ``base_dir`` resolves a ``domain_file:`` (default: the path's folder, else the
+    current folder), which must lie under ``base_dir`` or one of :func:`domain_roots` (``allowed_roots`` added)."""
     if base_dir is None and path != "<string>":
         base_dir = Path(path).resolve().parent
-    return _Loader(text, path, Path(base_dir) if base_dir is not None else None).load()
+    return _Loader(text, path, Path(base_dir) if base_dir is not None else None, domain_roots(allowed_roots)).load()
 
 
-def load_task_file(path: str | Path) -> TaskFile:
-    """Load and validate a YAML task file; every problem raises :class:`TaskFileError` with its position."""
+def load_task_file(path: str | Path, *, allowed_roots: Iterable[str | Path] = ()) -> TaskFile:
+    """Load and validate a YAML task file; every problem raises :class:`TaskFileError` with its position.
+
+    The file must be a regular file of at most 8 MiB (:func:`bt_meta.user_files.read_user_text`); a
+    ``domain_file:`` it names must lie under its folder or one of :func:`domain_roots` (``allowed_roots`` added).
+    """
+    return _load_file(path, domain_roots(allowed_roots), ())
+
+
+def _load_file(path: str | Path, roots: Sequence[Path], chain: tuple[str, ...]) -> TaskFile:
+    text = read_user_text(path, what="task file", error=TaskFileError)
     file_path = Path(path)
-    if not file_path.is_file():
-        raise TaskFileError("no such task file" if not file_path.exists() else "not a file", str(path))
     try:
-        text = file_path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise TaskFileError(f"cannot read the task file: {exc}", str(path)) from None
-    return _Loader(text, str(path), file_path.resolve().parent).load()
+        resolved = file_path.resolve()
+    except (OSError, RuntimeError):
+        raise TaskFileError("cannot resolve the task file's path (symlink loop)", str(path)) from None
+    return _Loader(text, str(path), resolved.parent, roots, (*chain, str(resolved))).load()
 
 
 def problem_from_atoms(domain: Domain, name: str, *, init: Iterable[Sequence[str]], tasks: Iterable[Sequence[str]],

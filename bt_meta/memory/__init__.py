@@ -11,6 +11,7 @@ Offers:
 * query results: :class:`EpisodeSummary`, :class:`StepRecord`, :class:`PlanStep`, :class:`GridMapMatch`;
   :func:`grid_distance`, the metric of the grid-map retrieval
 * :class:`MemoryStoreError` -- an unusable memory file (corrupt, foreign, newer schema, unwritable), naming its path
+* :class:`MemoryFileError` -- the subclass for a file the user must fix (bad input: the CLI exits 2)
 * :func:`add_memory_argument` / :func:`resolve_memory_path` -- the ``--memory PATH`` flag and ``BT_META_MEMORY``
   every memory-using command shares; the default file is ``./.bt-meta/memory.sqlite``
 * :data:`SCHEMA_VERSION` -- the schema version this bt-meta writes
@@ -19,7 +20,7 @@ Offers:
 from __future__ import annotations
 
 from bt_meta.memory.location import ENV_VAR, add_memory_argument, resolve_memory_path
-from bt_meta.memory.schema import SCHEMA_VERSION, MemoryStoreError
+from bt_meta.memory.schema import SCHEMA_VERSION, MemoryFileError, MemoryStoreError
 from bt_meta.memory.store import (
     EpisodeSummary,
     EpisodicMemory,
@@ -48,6 +49,7 @@ __all__ = [
     "Expectation",
     "GridMap",
     "GridMapMatch",
+    "MemoryFileError",
     "MemoryStoreError",
     "ObjectState",
     "PlanStep",

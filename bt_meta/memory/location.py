@@ -37,17 +37,31 @@ def resolve_memory_path(
     *,
     environ: Mapping[str, str] | None = None,
     cwd: Path | None = None,
+    writing: bool = False,
 ) -> Path:
     """The absolute memory path: the ``--memory`` flag wins over ``$BT_META_MEMORY``, which wins over the default.
 
-    An empty flag or variable counts as unset. ``~`` is expanded; relative paths are taken from ``cwd``.
+    An empty flag or variable counts as unset. ``~`` is expanded; relative paths are taken from ``cwd``. With
+    ``writing``, a path the user chose whose folder does not exist is a
+    :class:`~bt_meta.memory.MemoryFileError` (a mistyped ``--memory`` must not silently create folders); only the
+    default's own ``.bt-meta/`` folder is created when the memory is opened.
     """
     environ = os.environ if environ is None else environ
     base = Path.cwd() if cwd is None else cwd
     chosen = getattr(args, "memory", None) if args is not None else None
     if not chosen:
         chosen = environ.get(ENV_VAR) or None
+    if chosen:
+        from bt_meta.errors import UserInputError
+        from bt_meta.user_files import check_path_text
+
+        chosen = check_path_text(chosen, "memory file", UserInputError)
     path = Path(chosen).expanduser() if chosen else DEFAULT_RELATIVE
     if not path.is_absolute():
         path = base / path
+    if writing and chosen and not path.parent.is_dir():
+        from bt_meta.memory.schema import MemoryFileError
+
+        raise MemoryFileError(path, f"the folder {path.parent} does not exist (bt-meta creates only the default "
+                                    f"./{DEFAULT_RELATIVE.as_posix()}; create the folder or choose another --memory)")
     return path

@@ -32,7 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from bt_meta.errors import BtMetaError
+from bt_meta.errors import BtMetaError, UserInputError
 
 #: "BTMM" -- marks a SQLite file as a bt-meta memory.
 APPLICATION_ID = 0x42544D4D
@@ -45,6 +45,34 @@ class MemoryStoreError(BtMetaError):
         self.path = str(path)
         self.message = message
         super().__init__(f"{self.path}: {message}")
+
+
+class MemoryFileError(MemoryStoreError, UserInputError):
+    """The memory file the user chose is not usable as it is: not SQLite, another program's, of a newer schema,
+    corrupted, locked by another process, read-only, or in a folder that does not exist. Bad input: exit 2."""
+
+    def __init__(self, path: str | Path, message: str) -> None:
+        UserInputError.__init__(self, message, str(path))
+
+
+_CORRUPT = ("malformed", "not a database", "file is encrypted", "disk image", "database corrupt")
+
+
+def sqlite_failure(path: str | Path, error: sqlite3.Error, doing: str) -> MemoryStoreError:
+    """The error to raise for ``error`` met while ``doing``: a :class:`MemoryFileError` when the file itself is the
+    problem (corrupted, locked, read-only, unopenable), else a :class:`MemoryStoreError` with SQLite's words."""
+    text = str(error)
+    lowered = text.lower()
+    if "locked" in lowered or "busy" in lowered:
+        return MemoryFileError(path, f"{doing}: the database is locked by another process; try again when it is done")
+    if "readonly" in lowered or "read-only" in lowered:
+        return MemoryFileError(path, f"{doing}: the memory file is read-only")
+    if any(word in lowered for word in _CORRUPT):
+        return MemoryFileError(path, f"{doing}: the memory file is corrupted ({text}); restore it from a backup or "
+                                     "choose another file with --memory")
+    if "unable to open" in lowered:
+        return MemoryFileError(path, f"{doing}: {text}")
+    return MemoryStoreError(path, f"{doing}: {text}")
 
 
 @dataclass(frozen=True)
@@ -223,15 +251,18 @@ def read_version(connection: sqlite3.Connection, path: str | Path) -> int:
         application_id = connection.execute("PRAGMA application_id").fetchone()[0]
         tables = connection.execute("SELECT count(*) FROM sqlite_master").fetchone()[0]
     except sqlite3.DatabaseError as error:
-        raise MemoryStoreError(path, f"not a bt-meta memory: not a readable SQLite database ({error})") from None
+        lowered = str(error).lower()
+        if any(word in lowered for word in ("locked", "busy", "readonly", "malformed", "disk image")):
+            raise sqlite_failure(path, error, "cannot open the memory") from None
+        raise MemoryFileError(path, f"not a bt-meta memory: not a readable SQLite database ({error})") from None
     if application_id not in (0, APPLICATION_ID):
-        raise MemoryStoreError(
+        raise MemoryFileError(
             path, f"not a bt-meta memory: SQLite application id {application_id:#x} belongs to another program"
         )
     if application_id == 0 and (version != 0 or tables):
-        raise MemoryStoreError(path, "not a bt-meta memory: a SQLite database of another program; left untouched")
+        raise MemoryFileError(path, "not a bt-meta memory: a SQLite database of another program; left untouched")
     if version > SCHEMA_VERSION:
-        raise MemoryStoreError(
+        raise MemoryFileError(
             path,
             f"memory schema version {version} is newer than this bt-meta understands ({SCHEMA_VERSION}); "
             "upgrade bt-meta or choose another file with --memory",
@@ -247,7 +278,7 @@ def migrate(connection: sqlite3.Connection, path: str | Path) -> int:
     try:
         connection.execute("BEGIN IMMEDIATE")
     except sqlite3.OperationalError as error:
-        raise MemoryStoreError(path, f"cannot migrate the memory schema from v{found}: {error}") from None
+        raise sqlite_failure(path, error, f"cannot migrate the memory schema from v{found}") from None
     try:
         # Another process may have migrated between our read and our lock.
         current = read_version(connection, path)
@@ -260,6 +291,6 @@ def migrate(connection: sqlite3.Connection, path: str | Path) -> int:
     except BaseException as error:
         connection.execute("ROLLBACK")
         if isinstance(error, sqlite3.Error):
-            raise MemoryStoreError(path, f"migrating the memory schema from v{found} failed: {error}") from None
+            raise sqlite_failure(path, error, f"migrating the memory schema from v{found} failed") from None
         raise
     return found

@@ -30,6 +30,7 @@ from __future__ import annotations
 import json
 import os
 import sqlite3
+import stat
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -38,7 +39,15 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from bt_meta.memory.schema import SCHEMA_VERSION, MemoryStoreError, migrate, read_version
+from bt_meta.errors import UserInputError
+from bt_meta.memory.schema import (
+    SCHEMA_VERSION,
+    MemoryFileError,
+    MemoryStoreError,
+    migrate,
+    read_version,
+    sqlite_failure,
+)
 from bt_meta.memory.trace import (
     Episode,
     Expectation,
@@ -49,6 +58,7 @@ from bt_meta.memory.trace import (
     Trace,
     json_tuple,
 )
+from bt_meta.user_files import check_path_text
 
 BUSY_TIMEOUT_MS = 10_000
 SQLITE_HEADER = b"SQLite format 3\x00"
@@ -231,20 +241,20 @@ class EpisodicMemory:
         ``readonly``), is not a SQLite database, belongs to another program, has a newer schema, or its folder
         cannot be created or written. Nothing existing is ever deleted or overwritten.
         """
-        path = Path(path).expanduser().absolute()
+        path = Path(check_path_text(path, "memory file", UserInputError)).expanduser().absolute()
         if path.is_dir():
-            raise MemoryStoreError(path, "is a folder, not a memory file")
+            raise MemoryFileError(path, "is a folder, not a memory file")
         if path.exists():
             _check_header(path)
         elif create and not readonly:
             try:
                 path.parent.mkdir(parents=True, exist_ok=True)
             except OSError as error:
-                raise MemoryStoreError(path, f"cannot create the folder {path.parent}: {error.strerror}") from None
+                raise MemoryFileError(path, f"cannot create the folder {path.parent}: {error.strerror}") from None
             if not os.access(path.parent, os.W_OK | os.X_OK):
-                raise MemoryStoreError(path, f"the folder {path.parent} is not writable")
+                raise MemoryFileError(path, f"the folder {path.parent} is not writable")
         else:
-            raise MemoryStoreError(
+            raise MemoryFileError(
                 path, "no episodic memory here (record a demonstration first, or choose a file with --memory)"
             )
         try:
@@ -255,14 +265,14 @@ class EpisodicMemory:
             else:
                 connection = sqlite3.connect(str(path), isolation_level=None, timeout=BUSY_TIMEOUT_MS / 1000)
         except sqlite3.Error as error:
-            raise MemoryStoreError(path, f"cannot open: {error}") from None
+            raise sqlite_failure(path, error, "cannot open") from None
         try:
             connection.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
             connection.execute("PRAGMA foreign_keys = ON")
             version = read_version(connection, path)
             if readonly:
                 if version != SCHEMA_VERSION:
-                    raise MemoryStoreError(
+                    raise MemoryFileError(
                         path, f"memory schema v{version} needs migrating to v{SCHEMA_VERSION}; open it writable once"
                     )
             else:
@@ -276,8 +286,7 @@ class EpisodicMemory:
             raise
         except sqlite3.Error as error:
             connection.close()
-            reason = "not writable" if "readonly" in str(error) else str(error)
-            raise MemoryStoreError(path, f"cannot open the memory: {reason}") from None
+            raise sqlite_failure(path, error, "cannot open the memory") from None
         return cls(connection, path, readonly)
 
     def close(self) -> None:
@@ -297,7 +306,7 @@ class EpisodicMemory:
         try:
             return run(self._connection)
         except sqlite3.Error as error:
-            raise MemoryStoreError(self.path, f"memory query failed: {error}") from None
+            raise sqlite_failure(self.path, error, "memory query failed") from None
 
     # -- writing -------------------------------------------------------------------------------------------
 
@@ -360,7 +369,7 @@ class EpisodicMemory:
         try:
             connection.execute("BEGIN IMMEDIATE")
         except sqlite3.Error as error:
-            raise MemoryStoreError(self.path, f"cannot write a trace: {error}") from None
+            raise sqlite_failure(self.path, error, "cannot write a trace") from None
         try:
             episode_id = connection.execute(
                 "INSERT INTO episodes (task, task_file, problem, variant, seed, started, finished, outcome, config,"
@@ -425,7 +434,7 @@ class EpisodicMemory:
             if connection.in_transaction:
                 connection.execute("ROLLBACK")
             if isinstance(error, sqlite3.Error):
-                raise MemoryStoreError(self.path, f"writing a trace failed, nothing was stored: {error}") from None
+                raise sqlite_failure(self.path, error, "writing a trace failed, nothing was stored") from None
             raise
         finally:
             self._index = None
@@ -683,6 +692,15 @@ class EpisodicMemory:
         rows = self._query(lambda c: c.execute("PRAGMA integrity_check").fetchall())
         return "\n".join(str(r[0]) for r in rows)
 
+    def require_sound(self) -> None:
+        """Raise :class:`MemoryFileError` unless SQLite's ``quick_check`` finds the file sound: writers call it
+        before a run, so a trace is never recorded into a corrupted file that only some queries would notice."""
+        verdict = self._query(lambda c: [str(r[0]) for r in c.execute("PRAGMA quick_check(5)").fetchall()])
+        if verdict != ["ok"]:
+            found = "; ".join(verdict).replace("\n", "; ")[:160]
+            raise MemoryFileError(self.path, f"the memory file is corrupted ({found}); restore it from a backup or "
+                                             "choose another file with --memory")
+
     def check(self) -> list[str]:
         """Every way a stored trace is incomplete (declared counts that its rows do not match); empty when sound."""
         checks = (
@@ -870,10 +888,18 @@ def _expectation(row: Sequence[Any], map_positions: dict[int | None, tuple[int, 
 
 
 def _check_header(path: Path) -> None:
+    # Non-blocking, and a regular file only: a named pipe or a device given as --memory must not hang the command.
     try:
-        with path.open("rb") as handle:
-            header = handle.read(len(SQLITE_HEADER))
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     except OSError as error:
-        raise MemoryStoreError(path, f"cannot read: {error.strerror}") from None
+        raise MemoryFileError(path, f"cannot read: {error.strerror}") from None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise MemoryFileError(path, "is not a regular file, so not a memory file")
+        header = os.read(fd, len(SQLITE_HEADER))
+    except OSError as error:
+        raise MemoryFileError(path, f"cannot read: {error.strerror}") from None
+    finally:
+        os.close(fd)
     if header and header != SQLITE_HEADER:
-        raise MemoryStoreError(path, "not a bt-meta memory: not a SQLite database; left untouched")
+        raise MemoryFileError(path, "not a bt-meta memory: not a SQLite database; left untouched")

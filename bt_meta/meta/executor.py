@@ -42,7 +42,7 @@ from bt_meta.bt.compiler import compile_plan
 from bt_meta.bt.context import RunContext
 from bt_meta.bt.domain_nodes import domain_registry
 from bt_meta.bt.failures import Failure, FailureKind
-from bt_meta.errors import BtMetaError
+from bt_meta.errors import BtMetaError, PluginError, UnknownWorldError
 from bt_meta.htn.state import atom_text
 from bt_meta.meta.proposals import PlanState, ProposalError, apply_proposal, plan_effect
 from bt_meta.meta.reasoner import Attempt, Decision, Diagnosis, Limits, MetaReasoner
@@ -581,8 +581,11 @@ def run_task_file(
         made = plugins.call("bt_meta_make_world", name=world, domain=task_file.domain, problem=chosen,
                             options={"faults": list(faults)})
         if made.errors:
-            raise made.errors[0].error
+            error = made.errors[0]
+            if isinstance(error.error, BtMetaError) and not isinstance(error.error, PluginError):
+                raise error.error  # e.g. the simulator's located error in a scene file
+            raise PluginError(error.message) from error.error
         if not made.results:
-            raise BtMetaError(f"no plugin provides a world named {world!r}")
+            raise UnknownWorldError(f"no plugin provides a world named {world!r} (shipped: fake, sim)")
         world = made.first
     return MetaExecutor(task_file.domain, chosen, world, plugins, task_file=task_file, **options).run()

@@ -254,7 +254,8 @@ class RefinementStore:
              tolerance: dict[str, float] | None = None) -> RefinementStore:
         """Open the memory file at ``path`` (created unless ``create=False`` or ``readonly``, migrated unless
         ``readonly``); errors are :class:`~bt_meta.memory.MemoryStoreError` naming the path."""
-        from bt_meta.memory import EpisodicMemory, MemoryStoreError
+        from bt_meta.memory import EpisodicMemory
+        from bt_meta.memory.schema import sqlite_failure
 
         memory = EpisodicMemory.open(path, readonly=readonly, create=create)  # checks, creates, migrates
         resolved = memory.path
@@ -266,7 +267,7 @@ class RefinementStore:
             else:
                 connection = sqlite3.connect(str(resolved), isolation_level=None, timeout=10)
         except sqlite3.Error as error:
-            raise MemoryStoreError(resolved, f"cannot open: {error}") from None
+            raise sqlite_failure(resolved, error, "cannot open") from None
         return cls(connection, resolved, readonly, tolerance)
 
     def close(self) -> None:
@@ -279,12 +280,12 @@ class RefinementStore:
         self.close()
 
     def _query(self, sql: str, params: Sequence[Any] = ()) -> list[tuple[Any, ...]]:
-        from bt_meta.memory import MemoryStoreError
+        from bt_meta.memory.schema import sqlite_failure
 
         try:
             return self._connection.execute(sql, params).fetchall()
         except sqlite3.Error as error:
-            raise MemoryStoreError(self.path, f"refinement query failed: {error}") from None
+            raise sqlite_failure(self.path, error, "refinement query failed") from None
 
     # -- writing -------------------------------------------------------------------------------------------------
 

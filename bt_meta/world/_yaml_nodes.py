@@ -16,6 +16,8 @@ from typing import Any
 import yaml
 
 from bt_meta.errors import ConfigError
+from bt_meta.safe_yaml import construct_yaml
+from bt_meta.user_files import check_path_text
 
 __all__ = ["YamlNodeReader", "shipped_yaml_path"]
 
@@ -23,7 +25,7 @@ __all__ = ["YamlNodeReader", "shipped_yaml_path"]
 def shipped_yaml_path(name: str | Path, folder: Path, unknown: Callable[[str], str], missing: str) -> Path:
     """``name`` without a YAML suffix is ``folder/NAME.yaml``; ``unknown(shipped names)`` words the error when
     that does not exist, ``missing`` when a given path does not."""
-    path = Path(name)
+    path = Path(check_path_text(name, "YAML file", ConfigError))
     if path.suffix not in (".yaml", ".yml"):
         path = folder / f"{name}.yaml"
         if not path.is_file():
@@ -74,7 +76,7 @@ class YamlNodeReader:
     def scalar(self, node: yaml.Node, what: str) -> Any:
         if not isinstance(node, yaml.ScalarNode):
             raise self.error(f"{what} must be a single value", node)
-        return yaml.safe_load(yaml.serialize(node))
+        return construct_yaml(node, str(self.path), ConfigError)
 
     def string(self, node: yaml.Node, what: str) -> str:
         value = self.scalar(node, what)

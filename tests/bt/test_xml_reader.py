@@ -391,7 +391,7 @@ def test_parallel_thresholds_are_checked_when_literal():
 def test_missing_file():
     with pytest.raises(TreeXMLError) as info:
         load_tree_file("/nonexistent/tree.xml")
-    assert info.value.message == "cannot read tree XML: No such file or directory"
+    assert info.value.message == "no such tree XML file"
 
 
 # ----------------------------------------------------------------------------------------------------- TreeNodesModel

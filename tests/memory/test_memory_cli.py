@@ -100,16 +100,16 @@ def test_env_var_and_flag_choose_the_memory(stored, monkeypatch, tmp_path, capsy
     assert main(["memory", "ls"]) == 0
     assert len(capsys.readouterr().out.splitlines()) == 4
     other = tmp_path / "other.sqlite"
-    assert main(["memory", "ls", "--memory", str(other)]) == 1  # the flag wins, and that file does not exist
+    assert main(["memory", "ls", "--memory", str(other)]) == 2  # the flag wins, and that file does not exist
     err = capsys.readouterr().err
-    assert err.startswith(f"bt-meta: {other}: no episodic memory here") and "Traceback" not in err
+    assert err.startswith(f"{other}: no episodic memory here") and "Traceback" not in err
     assert not other.exists()
 
 
 def test_default_memory_is_in_the_project_folder(monkeypatch, tmp_path, make_trace, capsys):
     monkeypatch.delenv(ENV_VAR, raising=False)
     monkeypatch.chdir(tmp_path)
-    assert main(["memory", "ls"]) == 1
+    assert main(["memory", "ls"]) == 2
     assert f"{tmp_path / '.bt-meta' / 'memory.sqlite'}: no episodic memory here" in capsys.readouterr().err
     assert not (tmp_path / ".bt-meta").exists()
     with EpisodicMemory.open(resolve_memory_path()) as memory:
@@ -144,8 +144,8 @@ def test_corrupt_memory_is_one_line_without_traceback(tmp_path):
         text=True,
         check=False,
     )
-    assert result.returncode == 1
-    assert result.stderr.strip() == f"bt-meta: {path}: not a bt-meta memory: not a SQLite database; left untouched"
+    assert result.returncode == 2
+    assert result.stderr.strip() == f"{path}: not a bt-meta memory: not a SQLite database; left untouched"
     assert path.read_text() == "not a database at all\n"
 
 

@@ -197,7 +197,7 @@ def test_cli_export_finds_the_recorded_task_file(tmp_path, capsys):
 
 def test_cli_errors(tmp_path, capsys):
     missing = tmp_path / "none.sqlite"
-    assert main(["refinements", "ls", "--memory", str(missing)]) == 1  # like `bt-meta memory ls`
+    assert main(["refinements", "ls", "--memory", str(missing)]) == 2  # like `bt-meta memory ls`
     assert "no episodic memory here" in capsys.readouterr().err
     assert not missing.exists()
     task = tmp_path / "t.yaml"

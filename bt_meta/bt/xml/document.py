@@ -368,18 +368,11 @@ MAX_FILE_BYTES = 16 * 1024 * 1024
 
 
 def _read(path: Path) -> bytes:
-    """The one place tree XML files are read (the main file, includes, extra files): regular files only, bounded."""
-    try:
-        if not path.is_file():
-            what = "No such file or directory" if not path.exists() else "not a regular file"
-            raise TreeXMLError(f"cannot read tree XML: {what}", str(path))
-        size = path.stat().st_size
-        if size > MAX_FILE_BYTES:
-            raise TreeXMLError(f"tree XML is {size:,} bytes; at most {MAX_FILE_BYTES:,} are read", str(path))
-        return path.read_bytes()
-    except (OSError, ValueError) as error:
-        message = getattr(error, "strerror", None) or str(error)
-        raise TreeXMLError(f"cannot read tree XML: {message}", str(path)) from None
+    """The one place tree XML files are read (the main file, includes, extra files): regular files only, bounded,
+    never blocking on a pipe or a device (:func:`bt_meta.user_files.read_user_bytes`)."""
+    from bt_meta.user_files import read_user_bytes
+
+    return read_user_bytes(path, what="tree XML file", max_bytes=MAX_FILE_BYTES, error=TreeXMLError)
 
 
 def _resolve_includes(

@@ -232,14 +232,11 @@ class _RobotFile(YamlNodeReader):
     # -- the file ----------------------------------------------------------------------------------------------
 
     def load(self) -> RobotDescription:
-        try:
-            with self.path.open(encoding="utf-8") as stream:
-                root = yaml.compose(stream, Loader=yaml.SafeLoader)
-        except yaml.MarkedYAMLError as error:
-            mark = error.problem_mark or error.context_mark
-            line = mark.line + 1 if mark else None
-            column = mark.column + 1 if mark else None
-            raise ConfigError(f"not valid YAML: {error.problem or error}", self.path, line, column) from None
+        from bt_meta.safe_yaml import compose_yaml
+        from bt_meta.user_files import read_user_text
+
+        text = read_user_text(self.path, what="robot description", error=ConfigError)
+        root = compose_yaml(text, str(self.path), ConfigError, syntax="not valid YAML")
         if root is None:
             raise ConfigError("the robot description is empty", self.path, 1, 1)
         top = self.mapping(root, "robot description")

@@ -213,14 +213,11 @@ class _SceneFile(YamlNodeReader):
         return Location(str(self.path), node.start_mark.line + 1, node.start_mark.column + 1)
 
     def load(self) -> Scene:
-        text = self.path.read_text(encoding="utf-8")
-        try:
-            root = yaml.compose(text, Loader=yaml.SafeLoader)
-        except yaml.MarkedYAMLError as error:
-            mark = error.problem_mark or error.context_mark
-            line = mark.line + 1 if mark else None
-            column = mark.column + 1 if mark else None
-            raise ConfigError(f"not valid YAML: {error.problem or error}", self.path, line, column) from None
+        from bt_meta.safe_yaml import compose_yaml
+        from bt_meta.user_files import read_user_text
+
+        text = read_user_text(self.path, what="scene file", error=ConfigError)
+        root = compose_yaml(text, str(self.path), ConfigError, syntax="not valid YAML")
         if root is None:
             raise ConfigError("the scene file is empty", self.path, 1, 1)
         top = self.mapping(root, "a scene file", _SCENE_KEYS)

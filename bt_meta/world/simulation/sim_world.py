@@ -36,7 +36,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from bt_meta.bt.failures import FailureKind
 from bt_meta.errors import BtMetaError, ConfigError
@@ -174,12 +173,11 @@ def load_grounding(domain: str, task_file: str | Path | None = None, path: str |
                               f"{', '.join(str(p) for p in candidates)}): the simulator cannot run its primitives")
         path = found
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.MarkedYAMLError as error:
-        mark = error.problem_mark
-        raise ConfigError(f"not valid YAML: {error.problem}", path, mark.line + 1 if mark else None,
-                          mark.column + 1 if mark else None) from None
+    from bt_meta.safe_yaml import load_yaml
+    from bt_meta.user_files import read_user_text
+
+    data = load_yaml(read_user_text(path, what="grounding file", error=ConfigError), str(path), ConfigError,
+                     syntax="not valid YAML")
     if not isinstance(data, dict):
         raise ConfigError("a grounding file is a mapping", path, 1, 1)
     unknown = set(data) - _TOP_KEYS
@@ -197,10 +195,12 @@ def load_grounding(domain: str, task_file: str | Path | None = None, path: str |
             raise ConfigError("`robot:` names a shipped robot (baxter, panda) or a robot description file", path)
         if robot.endswith((".yaml", ".yml")):
             robot = str(path.parent / robot)
+    for key in ("problems", "frames", "poses", "features"):
+        _mapping_of_mappings(data, key, path)
+    objects = {str(k): str(v) for k, v in _mapping_of_scalars(data, "objects", path).items()}
     return Grounding(path, str(data.get("domain", domain)), dict(data["problems"]), dict(data["skills"]),
                      dict(data.get("frames") or {}), dict(data.get("poses") or {}),
-                     _robot_poses(data.get("robot_pose"), path),
-                     {str(k): str(v) for k, v in (data.get("objects") or {}).items()},
+                     _robot_poses(data.get("robot_pose"), path), objects,
                      {str(k): dict(v) for k, v in (data.get("features") or {}).items()}, robot)
 
 
@@ -221,6 +221,19 @@ def _robot_poses(value: Any, path: Path) -> dict[str, dict[str, float]]:
         except (TypeError, ValueError):
             raise ConfigError(f"robot_pose of {robot}: joint values are numbers (radians or metres)", path) from None
     return out
+
+
+def _mapping_of_mappings(data: dict[str, Any], key: str, path: Path) -> None:
+    value = data.get(key) or {}
+    if not isinstance(value, dict) or not all(isinstance(item, dict) for item in value.values()):
+        raise ConfigError(f"{key!r} must be a mapping of name -> mapping", path)
+
+
+def _mapping_of_scalars(data: dict[str, Any], key: str, path: Path) -> dict[Any, Any]:
+    value = data.get(key) or {}
+    if not isinstance(value, dict) or any(isinstance(item, (dict, list)) for item in value.values()):
+        raise ConfigError(f"{key!r} must be a mapping of name -> value", path)
+    return value
 
 
 # --------------------------------------------------------------------------------------------------------------

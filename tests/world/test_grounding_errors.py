@@ -1,0 +1,35 @@
+"""A grounding file of the wrong shape is one ConfigError naming the key (found by the loader fuzz campaign)."""
+
+from __future__ import annotations
+
+import pytest
+from bt_meta.world.simulation.sim_world import load_grounding
+
+from bt_meta.errors import ConfigError
+
+BASE = "domain: letters\nproblems:\n  A: {scene: letters_A}\nskills:\n  place: {skill: place, frame: letter}\n"
+
+
+@pytest.mark.parametrize(("extra", "message"), [
+    ("frames:\n  letter\n", "'frames' must be a mapping of name -> mapping"),
+    ("poses: [1, 2]\n", "'poses' must be a mapping of name -> mapping"),
+    ("features: {f: 3}\n", "'features' must be a mapping of name -> mapping"),
+    ("robot_pose: {left_s0: [1]}\n", "'robot_pose' must be a mapping of name -> value"),
+    ("robot_pose: {left_s0: wide}\n", "robot_pose: every joint value must be a number (radians)"),
+    ("objects: {a: {b: c}}\n", "'objects' must be a mapping of name -> value"),
+    ("frames: {x: !!int nope}\n", "YAML tag error: cannot read the !!int value 'nope': ValueError"),
+])
+def test_wrong_shapes(tmp_path, extra, message):
+    path = tmp_path / "g.yaml"
+    path.write_text(BASE + extra)
+    with pytest.raises(ConfigError) as caught:
+        load_grounding("letters", path=path)
+    assert caught.value.message == message
+    assert caught.value.path == str(path)
+
+
+def test_the_shipped_shape_loads(tmp_path):
+    path = tmp_path / "g.yaml"
+    path.write_text(BASE + "robot_pose: {left_s0: 0.8}\nobjects: {b0: block_0}\n")
+    grounding = load_grounding("letters", path=path)
+    assert grounding.robot_pose == {"left_s0": 0.8} and grounding.objects == {"b0": "block_0"}

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import pytest
-from bt_meta.world.simulation.sim_world import load_grounding
 
 from bt_meta.errors import ConfigError
+from bt_meta.world.simulation.sim_world import load_grounding
 
 BASE = "domain: letters\nproblems:\n  A: {scene: letters_A}\nskills:\n  place: {skill: place, frame: letter}\n"
 
@@ -14,8 +14,11 @@ BASE = "domain: letters\nproblems:\n  A: {scene: letters_A}\nskills:\n  place: {
     ("frames:\n  letter\n", "'frames' must be a mapping of name -> mapping"),
     ("poses: [1, 2]\n", "'poses' must be a mapping of name -> mapping"),
     ("features: {f: 3}\n", "'features' must be a mapping of name -> mapping"),
-    ("robot_pose: {left_s0: [1]}\n", "'robot_pose' must be a mapping of name -> value"),
-    ("robot_pose: {left_s0: wide}\n", "robot_pose: every joint value must be a number (radians)"),
+    ("robot_pose: {left_s0: [1]}\n", "robot_pose: joint values are numbers (radians or metres)"),
+    ("robot_pose: {left_s0: wide}\n", "robot_pose: joint values are numbers (radians or metres)"),
+    ("robot_pose: {panda: {j1: wide}}\n", "robot_pose of panda: joint values are numbers (radians or metres)"),
+    ("robot_pose: {panda: {j1: 1}, j2: 0.5}\n", "robot_pose mixes joint values and per-robot mappings: use one form"),
+    ("robot_pose: [1, 2]\n", "robot_pose is a mapping: joint -> value, or robot name -> {joint: value}"),
     ("objects: {a: {b: c}}\n", "'objects' must be a mapping of name -> value"),
     ("frames: {x: !!int nope}\n", "YAML tag error: cannot read the !!int value 'nope': ValueError"),
 ])
@@ -32,4 +35,4 @@ def test_the_shipped_shape_loads(tmp_path):
     path = tmp_path / "g.yaml"
     path.write_text(BASE + "robot_pose: {left_s0: 0.8}\nobjects: {b0: block_0}\n")
     grounding = load_grounding("letters", path=path)
-    assert grounding.robot_pose == {"left_s0": 0.8} and grounding.objects == {"b0": "block_0"}
+    assert grounding.robot_pose == {"*": {"left_s0": 0.8}} and grounding.objects == {"b0": "block_0"}

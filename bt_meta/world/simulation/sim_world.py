@@ -219,7 +219,8 @@ def _robot_poses(value: Any, path: Path) -> dict[str, dict[str, float]]:
         try:
             out[str(robot)] = {str(k): float(v) for k, v in joints.items()}
         except (TypeError, ValueError):
-            raise ConfigError(f"robot_pose of {robot}: joint values are numbers (radians or metres)", path) from None
+            where = "robot_pose" if robot == "*" else f"robot_pose of {robot}"
+            raise ConfigError(f"{where}: joint values are numbers (radians or metres)", path) from None
     return out
 
 

@@ -69,7 +69,11 @@ def _mean(values: Sequence[float], seed: int = 0, resamples: int = 2000) -> dict
 
 def summarise(rows: Iterable[dict[str, Any]], *, configurations: Sequence[str] | None = None) -> dict[str, Any]:
     rows = list(rows)
-    configurations = list(configurations or dict.fromkeys(r["configuration"] for r in rows))
+    if not configurations:  # the paper's order first, then any other, as first seen
+        seen = list(dict.fromkeys(r["configuration"] for r in rows))
+        configurations = [c for c in ("dual", "symbolic", "low_level", "retry") if c in seen]
+        configurations += [c for c in seen if c not in configurations]
+    configurations = list(configurations)
     expected_values = [e for e in ("nominal_equivalent", "repairable", "limit:reachability", "limit:collision",
                                    "unrepairable") if any(r["expected"] == e for r in rows)]
     table = []

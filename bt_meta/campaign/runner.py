@@ -94,12 +94,15 @@ def check_ray_address(address: str, timeout: float = 3.0) -> None:
                               "<command line>") from None
 
 
-def _pool_results(tasks: Sequence[dict[str, Any]], workers: int) -> Iterator[dict[str, Any]]:
+def _pool_results(tasks: Sequence[dict[str, Any]], workers: int, function: Callable[[dict[str, Any]], Any] | None = None
+                  ) -> Iterator[Any]:
+    """``function`` (default :func:`~bt_meta.campaign.episode.run_episode`) of every task, as they finish."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     from bt_meta.campaign.episode import run_episode
 
+    run_episode = function or run_episode  # type: ignore[assignment]
     if workers <= 1:
         for task in tasks:
             yield run_episode(task)
@@ -110,11 +113,11 @@ def _pool_results(tasks: Sequence[dict[str, Any]], workers: int) -> Iterator[dic
         for future in as_completed(futures):
             yield future.result()
     finally:
-        # Taken before shutdown, which drops the pool's process table (None afterwards).
         processes = list((getattr(pool, "_processes", None) or {}).values())
         pool.shutdown(wait=False, cancel_futures=True)
-        for process in processes:  # episodes in flight are run again later
-            process.terminate()
+        for process in processes:  # the episodes still in flight are run again by the next run
+            if process.is_alive():
+                process.terminate()
 
 
 def _ray_results(tasks: Sequence[dict[str, Any]], address: str, workers: int | None) -> Iterator[dict[str, Any]]:

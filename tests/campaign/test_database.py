@@ -91,3 +91,22 @@ def test_perfect_and_perceived_sensing_are_never_mixed(tmp_path):
         db.check_sensing("perceived")
         with pytest.raises(CampaignDirError, match="ran with perceived sensing, this run asks for perfect"):
             db.check_sensing("perfect")
+
+
+def test_the_local_pool_streams_every_result_and_leaves_no_worker_behind():
+    import multiprocessing
+
+    from bt_meta.campaign.runner import _pool_results
+
+    tasks = [{"k": k} for k in range(5)]
+    results = list(_pool_results(tasks, 2, json.dumps))
+    assert sorted(results) == sorted(json.dumps(t) for t in tasks)
+    stopped = _pool_results(tasks, 2, json.dumps)
+    next(stopped)
+    stopped.close()  # the driver stops early (an interrupt): the workers are terminated
+    import time
+
+    deadline = time.monotonic() + 10
+    while multiprocessing.active_children() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert multiprocessing.active_children() == []

@@ -9,6 +9,15 @@ from bt_meta.campaign.stats import correct, summarise, wilson_interval
 from bt_meta.experiments.ablation import wilson
 
 
+def test_bootstrap_interval_is_seeded_and_brackets_the_mean():
+    from bt_meta.campaign.stats import _mean
+
+    values = [1.0, 2.0, 2.0, 3.0, 7.0]
+    a, b = _mean(values, seed=3), _mean(values, seed=3)
+    assert a == b and a["low"] < a["mean"] == 3.0 < a["high"]
+    assert _mean([2.0, 2.0]) == {"mean": 2.0, "low": 2.0, "high": 2.0}
+
+
 def test_wilson_interval_agrees_with_the_closed_form():
     for k, n in ((0, 10), (3, 10), (10, 10), (47, 120)):
         assert wilson_interval(k, n) == pytest.approx(wilson(k, n), abs=1e-9)

@@ -2,13 +2,14 @@
 
 Offers:
 
-* :class:`YamlNodeReader` -- the node helpers (mapping, required key, scalar, string, list) shared by the robot
-  and scene file readers; each subclass adds the numbers and checks of its own format
+* :class:`YamlNodeReader` -- the node helpers (mapping, required key, scalar, string, number, list) shared by the
+  robot, catalogue and scene file readers; each subclass adds the numbers and checks of its own format
 * :func:`shipped_yaml_path` -- a shipped name (``baxter``) or a ``.yaml``/``.yml`` path, as an existing file
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -83,6 +84,14 @@ class YamlNodeReader:
         if not isinstance(value, str) or not value:
             raise self.error(f"{what} must be a non-empty string", node)
         return value
+
+    def number(self, node: yaml.Node, what: str, *, positive: bool = False) -> float:
+        value = self.scalar(node, what)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise self.error(f"{what} must be a number", node)
+        if positive and value <= 0:
+            raise self.error(f"{what} must be positive", node)
+        return float(value)
 
     def sequence(self, node: yaml.Node, what: str) -> list[yaml.Node]:
         if not isinstance(node, yaml.SequenceNode):

@@ -199,14 +199,6 @@ class _RobotFile(YamlNodeReader):
 
     # -- node helpers ------------------------------------------------------------------------------------------
 
-    def number(self, node: yaml.Node, what: str, *, positive: bool = False) -> float:
-        value = self.scalar(node, what)
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise self.error(f"{what} must be a number", node)
-        if positive and value <= 0:
-            raise self.error(f"{what} must be positive", node)
-        return float(value)
-
     def integer(self, node: yaml.Node, what: str) -> int:
         value = self.scalar(node, what)
         if isinstance(value, bool) or not isinstance(value, int) or value < 0:

@@ -187,14 +187,6 @@ class _CatalogueFile(YamlNodeReader):
         return CatalogueEntry(name, description, (part,), mass, colour, friction, role, tuple(features), primary,
                               frames, self.path)
 
-    def number(self, node: yaml.Node, what: str, *, positive: bool = False) -> float:
-        value = self.scalar(node, what)
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise self.error(f"{what} must be a number", node)
-        if positive and value <= 0:
-            raise self.error(f"{what} must be positive", node)
-        return float(value)
-
     def vector(self, node: yaml.Node, what: str, *, positive: bool = False) -> tuple[float, float, float]:
         items = self.sequence(node, what)
         if len(items) != 3:

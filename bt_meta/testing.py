@@ -13,6 +13,7 @@ Offers:
 * :class:`HarnessError` -- a node that does not exist, a status never reached
 * fixtures: ``bt_harness`` (a factory: ``bt_harness(path_or_yaml_text, problem=..., faults=[...])``),
   ``bt_plugins`` (a factory for plugin hosts), ``bt_blackboard`` (clears bt-meta's blackboard keys around a test)
+* :func:`free_groot2_port` -- a port P with P and P+1 free on 127.0.0.1, for a test that serves Groot2 (it uses both)
 
 Statuses are recorded *during* each tick, as every node finishes its part of it: BehaviorTree.CPP control nodes
 reset their children when they finish, so reading ``behaviour.status`` afterwards would mostly show INVALID.
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import re
 import shutil
+import socket
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
@@ -35,7 +37,7 @@ from bt_meta.bt.context import FAILURES_KEY, RUN_KEY, STATE_KEY, WORLD_KEY, RunC
 from bt_meta.bt.failures import Failure
 from bt_meta.errors import BtMetaError, PluginError, UnknownWorldError
 
-__all__ = ["HarnessError", "TreeHarness", "bt_blackboard", "bt_harness", "bt_plugins"]
+__all__ = ["HarnessError", "TreeHarness", "bt_blackboard", "bt_harness", "bt_plugins", "free_groot2_port"]
 
 _BT_META_KEYS = (RUN_KEY, WORLD_KEY, STATE_KEY, FAILURES_KEY)
 _POLICY_KEY = re.compile(r"^/p\d+_")
@@ -299,3 +301,20 @@ if pytest is not None:
             return create_plugin_host(dirs, entry_points=entry_points, plugins=plugins)
 
         return make
+
+
+def free_groot2_port() -> int:
+    """A port P with P and P+1 free on 127.0.0.1 right now (a Groot2 server binds both); free, not reserved."""
+    for _ in range(200):
+        with socket.socket() as probe:
+            probe.bind(("127.0.0.1", 0))
+            port = probe.getsockname()[1]
+        if port >= 65000:
+            continue
+        with socket.socket() as second:
+            try:
+                second.bind(("127.0.0.1", port + 1))
+            except OSError:
+                continue
+        return port
+    raise RuntimeError("no free port pair on 127.0.0.1")

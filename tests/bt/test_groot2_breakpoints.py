@@ -9,7 +9,6 @@ with BehaviorTree.CPP in ``test_groot2_differential.py``.
 from __future__ import annotations
 
 import json
-import socket
 import struct
 import threading
 import time
@@ -26,26 +25,13 @@ from bt_meta.bt.groot2.server import Groot2Server
 from bt_meta.bt.nodes.ticking import tick_exactly_once
 from bt_meta.bt.registry import NodeType, default_registry
 from bt_meta.bt.xml.reader import load_tree_text
+from bt_meta.testing import free_groot2_port
 
 pytestmark = pytest.mark.usefixtures("clean_blackboard")
 TREE = """<root BTCPP_format="4"><BehaviorTree ID="MainTree">
   <Sequence><Step name="first"/><Step name="second"/></Sequence>
 </BehaviorTree></root>"""
 
-
-def free_port() -> int:
-    for _ in range(200):
-        with socket.socket() as probe:
-            probe.bind(("127.0.0.1", 0))
-            port = probe.getsockname()[1]
-        if port < 65000:
-            with socket.socket() as second:
-                try:
-                    second.bind(("127.0.0.1", port + 1))
-                except OSError:
-                    continue
-            return port
-    raise RuntimeError("no free port pair")
 
 
 class Setup:
@@ -63,7 +49,7 @@ class Setup:
         self.root = load_tree_text(TREE, registry)
         self.tree = PublishedTree.build(self.root, registry=registry)
         self.observer = StatusObserver(self.tree)
-        self.server = Groot2Server(self.tree, self.observer, free_port(), host="127.0.0.1", seed=1)
+        self.server = Groot2Server(self.tree, self.observer, free_groot2_port(), host="127.0.0.1", seed=1)
         self.req = context.socket(zmq.REQ)
         self.sub = context.socket(zmq.SUB)
         for sock in (self.req, self.sub):

@@ -23,6 +23,7 @@ import zmq
 
 from bt_meta.bt.groot2.btlog import read_btlog
 from bt_meta.cli import main
+from bt_meta.testing import free_groot2_port
 
 TREE = """<root BTCPP_format="4" main_tree_to_execute="MainTree">
   <BehaviorTree ID="MainTree">
@@ -40,21 +41,6 @@ TREE = """<root BTCPP_format="4" main_tree_to_execute="MainTree">
 """
 TIMEOUT_MS = 3000
 
-
-def free_port() -> int:
-    for _ in range(200):
-        with socket.socket() as probe:
-            probe.bind(("127.0.0.1", 0))
-            port = probe.getsockname()[1]
-        if port >= 65000:
-            continue
-        with socket.socket() as second:
-            try:
-                second.bind(("127.0.0.1", port + 1))
-            except OSError:
-                continue
-        return port
-    raise RuntimeError("no free port pair")
 
 
 def request(context: zmq.Context, port: int, letter: str, *extra: bytes, attempts: int = 40) -> list[bytes]:
@@ -119,7 +105,7 @@ def tree_file(tmp_path: Path) -> Path:
 def test_tick_serves_what_btcpp_serves_and_holds_until_a_signal(
     signum: int, context: zmq.Context, tree_file: Path, tmp_path: Path
 ) -> None:
-    port = free_port()
+    port = free_groot2_port()
     log = tmp_path / "run.btlog"
     process = start_tick(tree_file, port, "--btlog", str(log))
     try:
@@ -132,7 +118,7 @@ def test_tick_serves_what_btcpp_serves_and_holds_until_a_signal(
     assert "SUCCESS after 1 ticks" in out
 
     tree = btpy.BehaviorTreeFactory().create_tree_from_text(TREE)
-    btcpp_port = free_port()
+    btcpp_port = free_groot2_port()
     publisher = btpy.Groot2Publisher(tree, btcpp_port)
     logger_path = tmp_path / "btcpp.btlog"
     logger = btpy.FileLogger(tree, str(logger_path))
@@ -165,7 +151,7 @@ def test_btlog_written_by_tick_without_a_server(tree_file: Path, tmp_path: Path,
 
 @pytest.mark.parametrize("busy_offset", [0, 1])
 def test_port_in_use_is_a_clear_error_naming_it_before_any_work(busy_offset: int, tree_file: Path, capsys) -> None:
-    port = free_port()
+    port = free_groot2_port()
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", port + busy_offset))
         busy.listen()
@@ -184,7 +170,7 @@ def test_server_bind_failure_names_the_port(tree_file: Path) -> None:
     from bt_meta.bt.groot2.server import Groot2PortError, Groot2Server
     from bt_meta.bt.xml.reader import load_tree_text
 
-    port = free_port()
+    port = free_groot2_port()
     tree = PublishedTree.build(load_tree_text(TREE))
     with socket.socket() as busy, StatusObserver(tree) as observer:
         busy.bind(("127.0.0.1", port))
@@ -262,7 +248,7 @@ def test_a_session_follows_a_run_that_replaces_its_tree(context: zmq.Context, tm
 
     first = load_tree_text(TREE)
     second = load_tree_text(TREE.replace('<AlwaysSuccess name="done"/>', '<AlwaysFailure name="done"/>'))
-    port = free_port()
+    port = free_groot2_port()
     session = Groot2Session.start(first, port=port, host="127.0.0.1")
     try:
         session.after_tick(tick_once(first))
@@ -290,7 +276,7 @@ def test_a_session_follows_a_run_that_replaces_its_tree(context: zmq.Context, tm
 @pytest.mark.slow
 def test_run_with_repair_serves_the_segment_being_run(context: zmq.Context, tmp_path: Path) -> None:
     tasks = Path(__file__).resolve().parents[2] / "trees" / "letters.yaml"
-    port = free_port()
+    port = free_groot2_port()
     command = [sys.executable, "-m", "bt_meta.cli", "run", str(tasks), "--problem", "A", "--repair",
                "--memory", str(tmp_path / "m.sqlite"), "--groot2", str(port), "--groot2-host", "127.0.0.1", "--hold"]
     errors = tmp_path / "stderr.txt"

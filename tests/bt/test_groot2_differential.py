@@ -13,7 +13,6 @@ from __future__ import annotations
 import gc
 import importlib.util
 import json
-import socket
 import struct
 import sys
 import time
@@ -34,6 +33,7 @@ from bt_meta.bt.groot2.tree_xml import full_tree_xml
 from bt_meta.bt.nodes.ticking import tick_exactly_once, tick_once
 from bt_meta.bt.registry import NodeType, default_registry
 from bt_meta.bt.xml.reader import load_tree_text
+from bt_meta.testing import free_groot2_port
 
 pytestmark = pytest.mark.usefixtures("clean_blackboard")
 TIMEOUT_MS = 3000
@@ -53,22 +53,6 @@ def _conformance() -> ModuleType:
 
 conformance = _conformance()
 
-
-def free_port() -> int:
-    """A port P with P and P+1 free on 127.0.0.1 right now (Groot2 uses both)."""
-    for _ in range(200):
-        with socket.socket() as probe:
-            probe.bind(("127.0.0.1", 0))
-            port = probe.getsockname()[1]
-        if port >= 65000:
-            continue
-        with socket.socket() as second:
-            try:
-                second.bind(("127.0.0.1", port + 1))
-            except OSError:
-                continue
-        return port
-    raise RuntimeError("no free port pair")
 
 
 class Client:
@@ -116,12 +100,12 @@ class Pair:
         self.generated = conformance.generate(seed, forever=(mode == "exactly_once"), depth=4)
         self.mode = mode
         self.btcpp_step = conformance.btcpp_stepper(self.generated, mode)
-        btcpp_port = free_port()
+        btcpp_port = free_groot2_port()
         self.publisher = btpy.Groot2Publisher(self.btcpp_step.tree, btcpp_port)
         py_trees.blackboard.Blackboard.storage.clear()
         self.root, self.tree = our_tree(self.generated)
         self.observer = StatusObserver(self.tree)
-        self.server = Groot2Server(self.tree, self.observer, free_port(), seed=seed)
+        self.server = Groot2Server(self.tree, self.observer, free_groot2_port(), seed=seed)
         self.btcpp = Client(context, btcpp_port)
         self.ours = Client(context, self.server.port)
 

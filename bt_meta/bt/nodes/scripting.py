@@ -51,8 +51,8 @@ class _ScriptSource:
         return self._script
 
 
-class Script(py_trees.behaviour.Behaviour):
-    """BT.CPP ``Script``."""
+class _ScriptNode(py_trees.behaviour.Behaviour):
+    """A leaf that runs the script of its ``code`` port in the blackboard environment bound at load."""
 
     def __init__(self, name: str, code: PortValue) -> None:
         super().__init__(name)
@@ -60,6 +60,10 @@ class Script(py_trees.behaviour.Behaviour):
 
     def bind_environment(self, env: BlackboardEnvironment) -> None:
         self.source.env = env
+
+
+class Script(_ScriptNode):
+    """BT.CPP ``Script``."""
 
     def update(self) -> Status:
         script = self.source.script()
@@ -68,15 +72,8 @@ class Script(py_trees.behaviour.Behaviour):
         return Status.SUCCESS
 
 
-class ScriptCondition(py_trees.behaviour.Behaviour):
+class ScriptCondition(_ScriptNode):
     """BT.CPP ``ScriptCondition``."""
-
-    def __init__(self, name: str, code: PortValue) -> None:
-        super().__init__(name)
-        self.source = _ScriptSource(code)
-
-    def bind_environment(self, env: BlackboardEnvironment) -> None:
-        self.source.env = env
 
     def update(self) -> Status:
         script = self.source.script()

@@ -4,11 +4,13 @@ Variant ``k`` of seed ``s`` draws from ``numpy.random.default_rng([s, k])``: the
 files, and variant ``k`` does not depend on how many others are drawn. Each perturbation of the spec applies with
 its probability to one object drawn from its ``objects``; a draw that changes nothing is drawn again. New
 positions (spares, distractors, shifts) are rejection-sampled on free table space, clear of the other objects and
-of the places the task puts things (unless a distractor is meant to block one).
+of the places the task puts things (unless a distractor is meant to block one). Obstacles (``obstacles``) never
+overlap an object's footprint (a shelf may stand over one that fits under its board); whether one is in the way
+is not decided here but by the labeller, on the true scene.
 
 Each variant is written as an ordinary scene file (``variants/<name>.yaml``): the nominal objects plus one variant
-``perturbed`` made of ``override`` / ``remove`` / ``add``, so ``bt-meta run`` and the scene loader read it as any
-shipped scene. Its expected outcome comes from :mod:`bt_meta.campaign.labeller`.
+``perturbed`` made of ``override`` / ``remove`` / ``add`` / ``obstacles``, so ``bt-meta run`` and the scene loader
+read it as any shipped scene. Its expected outcome comes from :mod:`bt_meta.campaign.labeller`.
 
 Offers:
 
@@ -16,6 +18,7 @@ Offers:
 * :func:`scene_text` -- the scene file of a variant
 * :func:`generate` -- write ``n`` variants, label them, write the manifest
 * :class:`Placed` -- one object of a variant (name, type, colour, position, rpy in degrees)
+* :class:`Obstacle` -- one static obstacle a variant adds (shape, dimensions, footprint centre, yaw)
 * :data:`VARIANT_NAME` -- the variant's name inside its scene file
 """
 
@@ -32,7 +35,7 @@ import numpy as np
 
 from bt_meta.campaign.spec import Perturbation, Spec
 
-__all__ = ["VARIANT_NAME", "Placed", "draw_variant", "generate", "scene_text"]
+__all__ = ["VARIANT_NAME", "Obstacle", "Placed", "draw_variant", "generate", "scene_text"]
 
 VARIANT_NAME = "perturbed"
 
@@ -66,6 +69,51 @@ class Placed:
                 *(round(v, 2) for v in self.rpy)]
 
 
+@dataclass(frozen=True)
+class Obstacle:
+    """A static obstacle of a variant: its footprint centre on the table, its yaw (degrees) and dimensions (m)."""
+
+    name: str
+    shape: str
+    dimensions: dict[str, Any]
+    x: float
+    y: float
+    yaw: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "shape": self.shape, **self.dimensions,
+                "pose": [round(self.x, 4), round(self.y, 4), "table", 0, 0, round(self.yaw, 2)]}
+
+    def walls(self) -> list[tuple[float, float, float, float]]:
+        """The footprint's standing parts as rectangles (centre x, centre y, half x, half y) in the obstacle's
+        frame; a post is one square of its diameter; a shelf's top board is not a standing part."""
+        if self.shape == "post":
+            r = float(self.dimensions["radius"])
+            return [(0.0, 0.0, r, r)]
+        sx, sy, _ = self.dimensions["size"]
+        if self.shape == "shelf":
+            t = float(self.dimensions.get("thickness", 0.02))
+            return [(0.0, -(sy - t) / 2.0, sx / 2.0, t / 2.0), (0.0, (sy - t) / 2.0, sx / 2.0, t / 2.0)]
+        return [(0.0, 0.0, sx / 2.0, sy / 2.0)]
+
+    def bounding_radius(self) -> float:
+        if self.shape == "post":
+            return float(self.dimensions["radius"])
+        sx, sy, _ = self.dimensions["size"]
+        return 0.5 * math.hypot(sx, sy)
+
+    def distance(self, x: float, y: float) -> float:
+        """Distance (m) from a point on the table to the nearest standing part of the footprint."""
+        yaw = math.radians(self.yaw)
+        c, s = math.cos(yaw), math.sin(yaw)
+        u, v = c * (x - self.x) + s * (y - self.y), -s * (x - self.x) + c * (y - self.y)
+        best = math.inf
+        for cx, cy, hx, hy in self.walls():
+            dx, dy = max(abs(u - cx) - hx, 0.0), max(abs(v - cy) - hy, 0.0)
+            best = min(best, math.hypot(dx, dy))
+        return best
+
+
 def _radius(type_name: str) -> float:
     """Half the diagonal of an object's footprint (any yaw)."""
     from bt_meta.world.simulation.objects import make_model
@@ -84,6 +132,7 @@ class _Draw:
         self.rng = rng
         self.table = table
         self.changes: list[dict[str, Any]] = []
+        self.obstacles: list[Obstacle] = []
         self._names = {o.name for o in objects}
 
     def index(self, name: str) -> int | None:
@@ -107,6 +156,8 @@ class _Draw:
                 continue
             if math.hypot(other.x - x, other.y - y) < r + _radius(other.type) + CLEARANCE:
                 return False
+        if any(o.distance(x, y) < r + CLEARANCE for o in self.obstacles):
+            return False
         return near_targets or all(math.hypot(tx - x, ty - y) >= TARGET_CLEARANCE for tx, ty in self.targets)
 
     def sample_free(self, type_name: str, region: tuple[tuple[float, float], tuple[float, float]],
@@ -241,9 +292,94 @@ def _out_of_reach(draw: _Draw, p: Perturbation, obj: Placed) -> dict[str, Any] |
     return {"kind": "out_of_reach", "object": obj.name, "position": [round(spot[0], 4), round(spot[1], 4)]}
 
 
+def _obstacle_shape(draw: _Draw, p: Perturbation, shape: str, under: tuple[float, float]) -> dict[str, Any]:
+    """Dimensions of an obstacle of ``shape`` drawn from the spec's ranges; a shelf leaves room under its board
+    for an object of ``under`` = (footprint radius, height)."""
+    lo, hi = p.params["size"]
+    h_lo, h_hi = p.params["height"]
+    size = [float(draw.rng.uniform(lo, hi)) for _ in range(2)]
+    height = float(draw.rng.uniform(h_lo, h_hi))
+    if shape == "post":
+        return {"radius": size[0] / 2.0, "height": height}
+    if shape == "wall":
+        return {"size": [size[0] * 2.0, 0.02, height]}
+    if shape == "shelf":
+        thickness = 0.02
+        radius, tall = under
+        inner = max(size[1], 2.0 * (radius + CLEARANCE) + 0.01)
+        return {"size": [size[0], inner + 2.0 * thickness, max(height, tall + 0.03 + thickness)],
+                "thickness": thickness}
+    return {"size": [size[0], size[1], height]}
+
+
+def _obstacles(draw: _Draw, p: Perturbation, obj: Placed | None) -> dict[str, Any] | None:
+    """Static obstacles: the first, with ``on_work_probability``, within ``offset`` of a place the task puts
+    something or of ``obj`` (a shelf centred over it); the others (and a first that is not) on free table space."""
+    from bt_meta.world.simulation.objects import make_model
+
+    lo, hi = p.params["count"]
+    count = int(draw.rng.integers(lo, hi + 1))
+    (x_lo, x_hi), (y_lo, y_hi) = draw.table
+    added, near = [], None
+    for k in range(count):
+        shape = str(draw.rng.choice(p.params["shapes"]))
+        work = None
+        if k == 0 and draw.rng.random() < p.params["on_work_probability"]:
+            points = [(tx, ty, f"target ({tx:.3f}, {ty:.3f})") for tx, ty in draw.targets]
+            if obj is not None:
+                points.append((obj.x, obj.y, f"object {obj.name}"))
+            if points:
+                work = points[int(draw.rng.integers(len(points)))]
+        under = (0.03, 0.04)
+        if work is not None and work[2].startswith("object") and obj is not None:
+            low, high = make_model(obj.type).extent()
+            under = (_radius(obj.type), float(max(high - low)))
+        dimensions = _obstacle_shape(draw, p, shape, under)
+        placed = None
+        for _ in range(_TRIES):
+            yaw = float(draw.rng.uniform(-90.0, 90.0))
+            if work is not None:
+                off_lo, off_hi = p.params["offset"]
+                distance = 0.0 if shape == "shelf" else float(draw.rng.uniform(off_lo, off_hi))
+                angle = float(draw.rng.uniform(0.0, 2.0 * math.pi))
+                x, y = work[0] + distance * math.cos(angle), work[1] + distance * math.sin(angle)
+            else:
+                x, y = float(draw.rng.uniform(x_lo, x_hi)), float(draw.rng.uniform(y_lo, y_hi))
+            candidate = Obstacle(draw.fresh_name("obstacle"), shape, dimensions, x, y, yaw)
+            if _obstacle_fits(draw, candidate, clear=work is None):
+                placed = candidate
+                break
+        if placed is None:
+            continue
+        draw.obstacles.append(placed)
+        added.append(placed.name)
+        if work is not None:
+            near = work[2]
+    if not added:
+        return None
+    return {"kind": "obstacles", "obstacles": [o.to_dict() for o in draw.obstacles if o.name in added],
+            "near": near}
+
+
+def _obstacle_fits(draw: _Draw, obstacle: Obstacle, *, clear: bool) -> bool:
+    """On the table, off every object's footprint and every other obstacle; ``clear``: also away from the places
+    the task puts things."""
+    (x_lo, x_hi), (y_lo, y_hi) = draw.table
+    r = obstacle.bounding_radius()
+    if not (x_lo + r <= obstacle.x <= x_hi - r and y_lo + r <= obstacle.y <= y_hi - r):
+        return False
+    for other in draw.objects:
+        if obstacle.distance(other.x, other.y) < _radius(other.type) + CLEARANCE:
+            return False
+    for other in draw.obstacles:
+        if math.hypot(other.x - obstacle.x, other.y - obstacle.y) < r + other.bounding_radius() + CLEARANCE:
+            return False
+    return not clear or all(obstacle.distance(tx, ty) >= TARGET_CLEARANCE for tx, ty in draw.targets)
+
+
 _APPLY: dict[str, Callable[[_Draw, Perturbation, Any], dict[str, Any] | None]] = {
     "shift": _shift, "turn": _turn, "rotate": _rotate, "colour": _colour, "replace_shape": _replace_shape,
-    "remove": _remove, "distractor": _distractor, "out_of_reach": _out_of_reach,
+    "remove": _remove, "distractor": _distractor, "out_of_reach": _out_of_reach, "obstacles": _obstacles,
 }
 
 
@@ -260,7 +396,7 @@ def draw_variant(nominal: Sequence[Placed], spec: Spec, seed: int, index: int, *
             if rng.random() >= p.probability:
                 continue
             obj = None if p.kind == "distractor" else _choose_target(draw, p, names)
-            if obj is None and p.kind != "distractor":
+            if obj is None and p.kind not in ("distractor", "obstacles"):
                 continue
             change = _APPLY[p.kind](draw, p, obj)
             if change is not None:
@@ -318,12 +454,23 @@ def scene_text(scene: Any, name: str, objects: Sequence[Placed], changes: Sequen
     if added:
         lines.append("    add:")
         lines += [f"      - {_flow(o)}" for o in added]
-    if not (overrides or removed or added):  # pragma: no cover - draw_variant always changes something
+    obstacles = [o for c in changes if c["kind"] == "obstacles" for o in c["obstacles"]]
+    if obstacles:
+        lines.append("    obstacles:")
+        lines += [f"      - {_obstacle_flow(o)}" for o in obstacles]
+    if not (overrides or removed or added or obstacles):  # pragma: no cover - draw_variant always changes something
         raise ValueError("a variant that changes nothing")
     return "\n".join(lines) + "\n"
 
 
+def _obstacle_flow(entry: dict[str, Any]) -> str:
+    return "{" + ", ".join(f"{k}: {json.dumps(v) if isinstance(v, list) else v}" for k, v in entry.items()) + "}"
+
+
 def _change_text(change: dict[str, Any]) -> str:
+    if change["kind"] == "obstacles":
+        items = ", ".join(f"{o['shape']} at {o['pose'][0]} {o['pose'][1]}" for o in change["obstacles"])
+        return f"obstacles ({items}{', near ' + change['near'] if change.get('near') else ''})"
     def text(value: Any) -> str:
         return " ".join(str(v) for v in value) if isinstance(value, (list, tuple)) else str(value)
 

@@ -51,6 +51,10 @@ BLOCKING_RADIUS = 0.6
 GRASP_HEIGHT = 0.004
 """Gripper above the object's top at the grasp (the place and move_to skills use 2-4 mm)."""
 APPROACH_HEIGHT = 0.08
+PATH_STEPS = 24
+"""Waypoints checked on a joint-space line (move_to checks one per tick: about as many for these motions)."""
+CANDIDATES = 3
+"""Objects tried per place before it counts as blocked (the nominal one first)."""
 
 
 @dataclass(frozen=True)
@@ -127,6 +131,7 @@ class Labeller:
             self.nominal_up = {name: _up(world.sim.object_transform(name)) for name in world.sim.object_names()}
             self.nominal_xy = {name: world.sim.object_transform(name)[:2, 3].copy()
                                for name in world.sim.object_names()}
+            self.jobs = self._jobs(world)
         finally:
             world.close()
         self.cells = letter_cells(self.plan, self.shapes) if family.truth == "letters" else []
@@ -175,6 +180,19 @@ class Labeller:
             out.append((float(point[0]), float(point[1]), float(point[2])))
         return out
 
+    def _jobs(self, world: Any) -> list[tuple[str | None, tuple[float, float, float]]]:
+        """(the object the nominal plan puts there, where): each letter ``place`` at its centre; for the other
+        families each grasped object to each of :attr:`targets`."""
+        frame = next((spec.get("frame") for spec in self.grounding.skills.values() if spec.get("frame")), None)
+        out: list[tuple[str | None, tuple[float, float, float]]] = []
+        for action in self.plan:
+            if action.name == "place" and frame is not None:
+                gx, gy, _ = world.ground_cell(str(frame), str(action.args[1]), str(action.args[2]))
+                out.append((str(action.args[0]), (gx, gy, world.sim.table.top_z)))
+        if out:
+            return out
+        return [(name, target) for name in (self.family.grasped or ()) for target in self.targets]
+
     # -- the label ------------------------------------------------------------------------------------------
 
     def label(self, scene_path: str | Path, variant: str | None, changes: Sequence[dict[str, Any]] = ()) -> Label:
@@ -208,6 +226,10 @@ class Labeller:
                 if math.hypot(xy[0] - tx, xy[1] - ty) < BLOCKING_RADIUS * LB:
                     return Label("limit:collision", f"{name} occupies a place the task puts something "
                                  f"({tx:.3f}, {ty:.3f})", {"object": name, "target": [tx, ty]})
+        if sim.obstacles():
+            blocked = self._obstacle_label(world, roles, feasible, present)
+            if blocked is not None:
+                return blocked
         # 3. repairable or nominal-equivalent
         for name in self.needed:
             nominal = self.nominal.get(name)
@@ -274,12 +296,178 @@ class Labeller:
         for height, allowed in ((APPROACH_HEIGHT, False), (GRASP_HEIGHT, True)):
             target = top_down(transform[0, 3], transform[1, 3], top + height, yaw)
             world.allow_hand(name, "right", allowed)
-            result = world.ik.solve("right", pin.SE3(target[:3, :3], target[:3, 3]), q, seed=0)
-            world.allow_hand(name, "right", False)
+            try:
+                result = world.ik.solve("right", pin.SE3(target[:3, :3], target[:3, 3]), q, seed=0)
+                if result.success and allowed and world.sim.obstacles():  # the descent, against obstacles
+                    hit = self._path_hit(world, q, result.q)
+                    if hit is not None:
+                        return False, "collision", f"{name}: the descent to the grasp runs into {hit}"
+            finally:
+                world.allow_hand(name, "right", False)
             if not result.success:
                 return False, result.kind, f"{name}: {result.message}"
             q = result.q
         return True, None, ""
+
+    # -- obstacles --------------------------------------------------------------------------------------------
+
+    def _obstacle_label(self, world: Any, roles: dict[str, list[str]], feasible: dict[str, tuple[bool, str | None,
+                        str]], present: dict[str, Any]) -> Label | None:
+        """``limit:collision`` / ``repairable`` when static obstacles are in the way of the pick-and-places."""
+        q0 = world.current_q()
+        hit = self._hit(world, q0)
+        if hit is not None:
+            return Label("limit:collision", f"the robot's start configuration runs into {hit}", {"contact": hit})
+        stand_in = None
+        for nominal, target in self.jobs:
+            if self.family.truth == "letters":
+                shape = present[nominal].shape if nominal in present else self.shapes.get(str(nominal))
+                pool = [n for n in roles["blocks"] if present[n].shape == shape] or list(roles["blocks"])
+            else:
+                pool = list(roles.get(str(nominal), ()))
+            pool = sorted(pool, key=lambda n: n != nominal)
+            usable = [n for n in pool if feasible.get(n, (False, None, ""))[0]][:CANDIDATES]
+            messages = []
+            for name in usable:
+                message = self._carry_hit(world, name, target, q0)
+                if message is None:
+                    break
+                messages.append(message)
+            else:
+                if messages:
+                    return Label("limit:collision", f"nothing can be put at ({target[0]:.3f}, {target[1]:.3f}) "
+                                 f"clear of the obstacles: {messages[0]}", {"target": list(target[:2])})
+                continue
+            if messages and usable[0] == nominal and stand_in is None:
+                stand_in = Label("repairable", f"{messages[0]}; another object gets there clear of the obstacles",
+                                 {"object": nominal, "target": list(target[:2])})
+        return stand_in
+
+    def _hit(self, world: Any, q: np.ndarray) -> str | None:
+        """The first contact of configuration ``q`` (and what the robot carries) with a static obstacle."""
+        obstacles = set(world.sim.obstacles())
+        for contact in world.collision.all_contacts(q):
+            if world.contact_object(contact.first) in obstacles or world.contact_object(contact.second) in obstacles:
+                return str(contact)
+        return None
+
+    def _path_hit(self, world: Any, q_from: np.ndarray, q_to: np.ndarray) -> str | None:
+        """The first obstacle contact on the joint-space line from ``q_from`` to ``q_to``."""
+        for k in range(1, PATH_STEPS + 1):
+            hit = self._hit(world, q_from + (q_to - q_from) * (k / PATH_STEPS))
+            if hit is not None:
+                return hit
+        return None
+
+    def _line_hit(self, world: Any, q_from: np.ndarray, start: np.ndarray, goal: np.ndarray) -> str | None:
+        """The first obstacle contact (or no solution) along the gripper's straight line from ``start`` to
+        ``goal`` (4x4 poses), each waypoint solved from the one before, as move_to's fallback does."""
+        import pinocchio as pin
+
+        rotation = pin.log3(start[:3, :3].T @ goal[:3, :3])
+        steps = max(PATH_STEPS, math.ceil(float(np.linalg.norm(goal[:3, 3] - start[:3, 3])) / 0.01))
+        q = q_from
+        for k in range(1, steps + 1):
+            f = k / steps
+            pose = pin.SE3(start[:3, :3] @ pin.exp3(rotation * f), start[:3, 3] + (goal[:3, 3] - start[:3, 3]) * f)
+            result = world.ik.solve("right", pose, q, seed=0, check_collisions=False)
+            if not result.success:
+                return f"no solution on the straight line ({result.message})"
+            q = result.q
+            hit = self._hit(world, q)
+            if hit is not None:
+                return hit
+        return None
+
+    def _lift_first_hit(self, world: Any, q_from: np.ndarray, start: np.ndarray, goal: np.ndarray,
+                        q_goal: np.ndarray, clearance: float = 0.06) -> str | None:
+        """move_to's second fallback: straight up by ``clearance`` (or to the goal's height), then the joint-space
+        line to ``q_goal``; the first obstacle contact or failure, or None."""
+        top = start.copy()
+        top[2, 3] += max(clearance, float(goal[2, 3] - start[2, 3]))
+        hit = self._line_hit(world, q_from, start, top)
+        if hit is not None:
+            return hit
+        q_top, why = self._solve(world, top, q_from)
+        if q_top is None:
+            return why
+        return self._path_hit(world, q_top, q_goal)
+
+    def _solve(self, world: Any, pose: np.ndarray, q: np.ndarray) -> tuple[np.ndarray | None, str | None]:
+        """IK for a gripper pose: a collision-free solution, else (when only other objects are in the way, which the
+        skills allow for) the unchecked one if it clears the obstacles. (q, the obstacle contact or failure)."""
+        import pinocchio as pin
+
+        target = pin.SE3(pose[:3, :3], pose[:3, 3])
+        result = world.ik.solve("right", target, q, seed=0)
+        if result.success:
+            return result.q, None
+        free = world.ik.solve("right", target, q, seed=0, check_collisions=False)
+        if not free.success:
+            return None, f"no IK solution ({free.message})"
+        hit = self._hit(world, free.q)
+        return (free.q, None) if hit is None else (None, hit)
+
+    def _carry_hit(self, world: Any, name: str, target: tuple[float, float, float], q0: np.ndarray) -> str | None:
+        """Why ``name`` cannot be picked up and put at ``target`` clear of the obstacles, or None."""
+        from bt_meta.world.simulation.objects import pose_to_matrix
+        from bt_meta.world.skills.place import GRIPPER_YAW, nearest_yaw, object_yaw, symmetry, top_down
+
+        sim = world.sim
+        transform = sim.object_transform(name)
+        model = sim.object_model(name)
+        yaw = nearest_yaw(object_yaw(transform), symmetry(model), GRIPPER_YAW)
+        top = world.stack_top(name)
+        above = top_down(transform[0, 3], transform[1, 3], top + APPROACH_HEIGHT, yaw)
+        grasp = top_down(transform[0, 3], transform[1, 3], top + GRASP_HEIGHT, yaw)
+        world.allow_hand(name, "right", True)
+        try:
+            q1, why = self._solve(world, above, q0)
+            if q1 is None:
+                return f"reaching above {name}: {why}"
+            if (hit := self._path_hit(world, q0, q1)) is not None:
+                return f"reaching for {name} runs into {hit}"
+            q2, why = self._solve(world, grasp, q1)
+            if q2 is None:
+                return f"grasping {name}: {why}"
+            parts = [p for p in world.collision.objects if world.contact_object(p) == name]
+            saved = {p: world.collision.pose(p) for p in parts}
+            hand = getattr(world, "_hand_links", {}).get("right", [])
+            for part in parts:
+                world.collision.attach(part, world.end_effector("right"), q2, allow=hand)
+            try:
+                lifted = grasp.copy()
+                lifted[2, 3] += APPROACH_HEIGHT
+                q3, why = self._solve(world, lifted, q2)
+                if q3 is None:
+                    return f"lifting {name}: {why}"
+                if (hit := self._path_hit(world, q2, q3)) is not None:
+                    return f"lifting {name} runs into {hit}"
+                held = np.linalg.inv(grasp) @ transform
+                goal_yaw = nearest_yaw(object_yaw(transform), symmetry(model), object_yaw(transform))
+                block = pose_to_matrix((target[0], target[1], target[2] + model.lowest_z(0.0, 0.0) + 0.002,
+                                        0.0, 0.0, goal_yaw))
+                down = block @ np.linalg.inv(held)
+                over = down.copy()
+                over[2, 3] += APPROACH_HEIGHT
+                q4, why = self._solve(world, over, q3)
+                if q4 is None:
+                    return f"carrying {name} over ({target[0]:.3f}, {target[1]:.3f}): {why}"
+                hit = self._path_hit(world, q3, q4)
+                if hit is not None and (line := self._line_hit(world, q3, lifted, over)) is not None \
+                        and self._lift_first_hit(world, q3, lifted, over, q4) is not None:
+                    return f"carrying {name} to ({target[0]:.3f}, {target[1]:.3f}) runs into {hit} ({line})"
+                q5, why = self._solve(world, down, q4)
+                if q5 is None:
+                    return f"lowering {name} at ({target[0]:.3f}, {target[1]:.3f}): {why}"
+                if (hit := self._path_hit(world, q4, q5)) is not None:
+                    return f"lowering {name} at ({target[0]:.3f}, {target[1]:.3f}) runs into {hit}"
+                return None
+            finally:
+                for part in parts:
+                    world.collision.detach(part, pose=saved[part])
+        finally:
+            world.allow_hand(name, "right", False)
 
     def _fill(self, roles: dict[str, list[str]], feasible: dict[str, tuple[bool, str | None, str]],
               present: dict[str, Any]) -> Label | None:

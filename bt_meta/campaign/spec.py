@@ -15,6 +15,10 @@ Kinds and their parameters (lengths in metres, angles in degrees; see docs/campa
 * ``distractor`` -- ``count: [lo, hi]``, ``types: [...]``, ``colours: [...]``, ``on_target_probability: p``:
   add objects the task does not name; with probability ``p`` one lies where the task puts something
 * ``out_of_reach`` -- put the object somewhere on the table outside the arm's workspace
+* ``obstacles`` -- ``count: [lo, hi]``, ``shapes: [...]`` (box, wall, post, shelf), ``size: [lo, hi]`` (the
+  footprint's side, a wall's length, a post's diameter), ``height: [lo, hi]``, ``on_work_probability: p``,
+  ``offset: [lo, hi]``: add static obstacles; with probability ``p`` the first stands within ``offset`` of a place
+  the task puts something or of an object drawn from ``objects`` (a shelf over it), else clear of everything
 
 Every mistake -- an unknown kind, parameter, object, colour or type -- is a :class:`SpecError` at
 ``path:line:column``.
@@ -55,6 +59,9 @@ KINDS: dict[str, dict[str, tuple[str, Any]]] = {
     "distractor": {"count": ("count", (1, 2)), "types": ("types", ("megablok_1x1",)),
                    "colours": ("colours", ("green",)), "on_target_probability": ("probability", 0.0)},
     "out_of_reach": {},
+    "obstacles": {"count": ("count", (1, 1)), "shapes": ("shapes", ("box", "wall", "post", "shelf")),
+                  "size": ("length", (0.04, 0.12)), "height": ("length", (0.05, 0.20)),
+                  "on_work_probability": ("probability", 0.5), "offset": ("range", (0.0, 0.05))},
 }
 _COMMON = {"probability", "objects"}
 
@@ -164,6 +171,11 @@ class _SpecReader:
             if values[0] > values[1]:
                 raise self.error(f"{name}: [lo, hi] with lo <= hi", node)
             return tuple(values)
+        if kind_of == "length":
+            values = self.numbers(node, name, 2)
+            if not 0.0 < values[0] <= values[1]:
+                raise self.error(f"{name}: [lo, hi] metres with 0 < lo <= hi", node)
+            return tuple(values)
         if kind_of == "count":
             values = self.numbers(node, name, 2)
             if not all(float(v).is_integer() and v >= 0 for v in values) or values[0] > values[1]:
@@ -177,6 +189,10 @@ class _SpecReader:
             from bt_meta.world.simulation.objects import COLOURS
 
             return self.names(node, name, COLOURS, "colour")
+        if kind_of == "shapes":
+            from bt_meta.world.simulation.obstacles import OBSTACLE_SHAPES
+
+            return self.names(node, name, OBSTACLE_SHAPES, "obstacle shape")
         if kind_of == "types":
             from bt_meta.world.simulation.objects import OBJECT_TYPES
 

@@ -53,7 +53,8 @@ def test_perturbations_do_what_they_say():
                 moved = next((o for o in objects if o.name == change["object"]), None)
                 assert moved is None or moved.x >= 0.85 or any(
                     c.get("object") == change["object"] for c in changes if c is not change)
-    assert kinds == {"shift", "turn", "rotate", "colour", "replace_shape", "remove", "distractor", "out_of_reach"}
+    assert kinds == {"shift", "turn", "rotate", "colour", "replace_shape", "remove", "distractor", "out_of_reach",
+                     "obstacles"}
 
 
 
@@ -71,3 +72,40 @@ def test_a_shape_replacement_with_no_room_changes_nothing():
     b0 = next(o for o in draw.objects if o.name == "b0")
     assert _replace_shape(draw, replace_shape, b0) is None
     assert draw.objects == list(nominal)
+
+
+def _obstacle_spec(tmp_path, on_work):
+    scene = load_scene("letters_A")
+    path = tmp_path / "spec.yaml"
+    path.write_text("perturbations:\n  - obstacles: {probability: 1, count: [1, 2], on_work_probability: "
+                    f"{on_work}}}\n", encoding="utf-8")
+    return scene, load_spec(path, [o.name for o in scene.objects]), placed_objects(scene)
+
+
+def test_obstacles_stand_off_every_object_and_load_as_the_variants_obstacles(tmp_path):
+    """Obstacles never overlap an object (the physics would throw it); clear ones keep off the task's places;
+    over-the-work ones come near them; the scene file gives the simulator the same obstacles."""
+    from bt_meta.campaign.generator import TARGET_CLEARANCE, Obstacle, _radius
+
+    targets = [(0.55, 0.10), (0.61, 0.06)]
+    for on_work in (0.0, 1.0):
+        scene, spec, nominal = _obstacle_spec(tmp_path, on_work)
+        near = 0
+        for k in range(12):
+            objects, changes = draw_variant(nominal, spec, 2, k, targets=targets)
+            (change,) = changes
+            assert change["kind"] == "obstacles" and objects == list(nominal)
+            near += change["near"] is not None
+            for entry in change["obstacles"]:
+                dims = {key: entry[key] for key in ("size", "radius", "height", "thickness") if key in entry}
+                obstacle = Obstacle(entry["name"], entry["shape"], dims, entry["pose"][0], entry["pose"][1],
+                                    entry["pose"][5])
+                assert all(obstacle.distance(o.x, o.y) >= _radius(o.type) for o in objects)
+                if on_work == 0.0:
+                    assert all(obstacle.distance(tx, ty) >= TARGET_CLEARANCE for tx, ty in targets)
+            path = tmp_path / f"v{k}.yaml"
+            path.write_text(scene_text(scene, f"v{k}", objects, changes), encoding="utf-8")
+            loaded = load_scene(path)
+            assert [o.name for o in loaded.obstacles_for(VARIANT_NAME)] == [o["name"] for o in change["obstacles"]]
+            assert loaded.obstacles_for(None) == scene.obstacles
+        assert (near == 0) if on_work == 0.0 else near >= 9  # a first obstacle that fits nowhere near is dropped

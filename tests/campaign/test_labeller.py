@@ -56,6 +56,24 @@ LETTER_CASES = {
 }
 
 
+# Static obstacles on the true scene: the labeller decides by kinematics and collision checks, not by intent.
+OBSTACLE_CASES = {
+    "post_clear_of_everything": ("nominal_equivalent", "obstacles: [{name: o, shape: post, radius: 0.02, "
+                                 "height: 0.15, pose: [0.98, -0.58, table, 0, 0, 0]}]"),
+    "shelf_clear_of_everything": ("nominal_equivalent", "obstacles: [{name: o, shape: shelf, size: [0.10, 0.12, "
+                                  "0.10], pose: [0.95, 0.30, table, 0, 0, 0]}]"),
+    "box_over_a_cell": ("limit:collision", "obstacles: [{name: o, shape: box, size: [0.05, 0.05, 0.06], "
+                        "pose: [0.55, 0.10, table, 0, 0, 0]}]"),
+    "post_beside_a_cell": ("limit:collision", "obstacles: [{name: o, shape: post, radius: 0.012, height: 0.25, "
+                           "pose: [0.55, 0.135, table, 0, 0, 0]}]"),
+    "shelf_over_a_block": ("limit:collision", "obstacles: [{name: o, shape: shelf, size: [0.10, 0.11, 0.10], "
+                           "pose: [0.55, -0.31, table, 0, 0, 0]}]"),
+    "shelf_over_a_block_with_spare": ("repairable", "obstacles: [{name: o, shape: shelf, size: [0.10, 0.11, 0.07], "
+                                      "pose: [0.55, -0.31, table, 0, 0, 0]}]\n    add: [{name: s, type: "
+                                      "megablok_1x1, colour: blue, pose: [0.72, -0.52, table, 0, 0, 0]}]"),
+}
+
+
 @pytest.fixture(scope="module")
 def letters_labeller():
     from bt_meta.campaign.families import family
@@ -76,6 +94,18 @@ def test_letters_labels(letters_labeller, tmp_path, case):
     assert label.expected == expected, label.reason
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("case", sorted(OBSTACLE_CASES))
+def test_letters_obstacle_labels(letters_labeller, tmp_path, case):
+    expected, change = OBSTACLE_CASES[case]
+    path = tmp_path / f"{case}.yaml"
+    path.write_text(NOMINAL_A + f"    {change}\n", encoding="utf-8")
+    label = letters_labeller.label(path, "perturbed")
+    assert label.expected == expected, label.reason
+    if expected == "limit:collision":
+        assert "<-> o" in label.reason  # the contact with the obstacle's geometry
+
+
 NOMINAL_MAGNETIC = """scene: hand
 objects:
   - {name: reference, type: magnet_reference, pose: [0.62, -0.10, table, 0, 0, 0]}
@@ -90,6 +120,10 @@ MAGNETIC_CASES = {
     "upside_down": ("repairable", "override: {active: {pose: [0.58, -0.40, table, 180, 0, 0]}}"),
     "removed": ("unrepairable", "remove: [active]"),
     "far": ("limit:reachability", "override: {active: {pose: [0.98, 0.30, table, 0, 0, 0]}}"),
+    "wall_clear": ("nominal_equivalent", "obstacles: [{name: o, shape: wall, size: [0.20, 0.02, 0.15], "
+                   "pose: [0.95, 0.30, table, 0, 0, 0]}]"),
+    "shelf_over_the_active_part": ("limit:collision", "obstacles: [{name: o, shape: shelf, size: [0.12, 0.13, "
+                                   "0.12], pose: [0.58, -0.40, table, 0, 0, 0]}]"),
 }
 
 

@@ -71,3 +71,14 @@ def test_cli_reports_a_bad_spec_with_its_location_and_exit_2(tmp_path, capsys):
 def test_cli_unknown_family_exits_2(tmp_path, capsys):
     assert main(["campaign", "generate", "letters_Z", "-o", str(tmp_path / "C")]) == 2
     assert "unknown family 'letters_Z'" in capsys.readouterr().err
+
+
+def test_obstacles_parameters_are_checked_and_located(tmp_path):
+    spec = load_spec(_write(tmp_path, "perturbations:\n  - obstacles: {shapes: [post, shelf], size: [0.02, 0.05]}\n"),
+                     ["b0"])
+    (obstacles,) = spec.perturbations
+    assert obstacles.params["shapes"] == ("post", "shelf") and obstacles.params["size"] == (0.02, 0.05)
+    error = _error(tmp_path, "perturbations:\n  - obstacles: {shapes: [box, teapot]}\n")
+    assert (error.line, error.column) == (2, 31) and "unknown obstacle shape 'teapot'" in error.message
+    error = _error(tmp_path, "perturbations:\n  - obstacles: {height: [0, 0.1]}\n")
+    assert error.line == 2 and "0 < lo <= hi" in error.message

@@ -3,7 +3,9 @@
 Per expected outcome and configuration: rate of the expected outcome reached with its Wilson 95 % interval,
 attempts and seconds (bootstrap intervals), loops; the confusion table of expected outcome against the failure
 kinds classified; false alarms on ``nominal_equivalent`` variants; second-exposure attempts; every episode that
-did not reach its expected outcome linked to its own run report (``episodes/*.json``).
+did not reach its expected outcome linked to its own run report: ``episodes/<episode>.html``, rendered from the
+episode's JSON by the demo's run-report code (:func:`bt_meta.demo.report.render_run_report`: the failure, its
+kinds, the attempts, what was tried and why each proposal failed), beside the JSON it came from.
 
 Offers:
 
@@ -39,8 +41,29 @@ def build_report(folder: str | Path, out: str | Path) -> dict[str, Any]:
                            "stop_reason": r.get("stop_reason"), "run_report": r.get("run_report")}
                           for r in rows if not correct(r)]
     out.parent.mkdir(parents=True, exist_ok=True)
+    for r in summary["failing"]:
+        r["run_report_html"] = _episode_page(folder, r, out)
     out.write_text(_html(summary, manifest, folder, out), encoding="utf-8")
     return summary
+
+
+def _episode_page(folder: Path, row: dict[str, Any], out: Path) -> str | None:
+    """Render an episode's JSON run report as HTML beside it; its path relative to ``folder`` (None without one)."""
+    import json
+
+    from bt_meta.demo.report import render_run_report
+
+    if not row.get("run_report"):
+        return None
+    source = folder / str(row["run_report"])
+    try:
+        run = json.loads(source.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None  # the link to the JSON stays; a missing or torn file is not the report's to mend
+    page = source.with_suffix(".html")
+    title = f"{row['variant']} / {row['configuration']} / seed {row['seed']}"
+    page.write_text(render_run_report(run, title=title, back=os.path.relpath(out, page.parent)), encoding="utf-8")
+    return str(page.relative_to(folder))
 
 
 def _html(summary: dict[str, Any], manifest: dict[str, Any], folder: Path, out: Path) -> str:
@@ -102,11 +125,15 @@ def _html(summary: dict[str, Any], manifest: dict[str, Any], folder: Path, out: 
                      "<th>configuration</th><th>seed</th><th>expected</th><th>status</th><th>kinds</th>"
                      "<th>stop reason</th><th>run report</th></tr>")
         for r in summary["failing"]:
-            link = os.path.relpath(folder / str(r["run_report"]), out.parent) if r.get("run_report") else ""
+            links = []
+            for key in ("run_report_html", "run_report"):
+                if r.get(key):
+                    link = os.path.relpath(folder / str(r[key]), out.parent)
+                    links.append(f"<a href='{e(link)}'>{'HTML' if key.endswith('html') else 'JSON'}</a>")
             parts.append(f"<tr><td>{e(r['variant'])}</td><td>{e(r['configuration'])}</td><td>{r['seed']}</td>"
                          f"<td>{e(r['expected'])}</td><td>{e(str(r['status']))}</td>"
                          f"<td>{e(', '.join(r.get('kinds') or []))}</td><td>{e(str(r.get('stop_reason') or ''))}"
-                         f"</td><td><a href='{e(link)}'>{e(Path(link).name)}</a></td></tr>")
+                         f"</td><td>{' '.join(links)}</td></tr>")
         parts.append("</table>")
     parts.append("</body></html>\n")
     return "\n".join(parts)

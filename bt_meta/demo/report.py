@@ -9,6 +9,9 @@ Offers:
 
 * :func:`write_report` -- ``report.html`` of a :class:`~bt_meta.demo.runner.DemoResult`
 * :func:`render_report` -- the same as a string
+* :func:`render_run_report` -- one run's report page from its JSON (an executor report and what the caller knows
+  of the run: a campaign episode's variant, configuration, seed, expected outcome): the failures with their kinds
+  and evidence, each repair attempt, what was tried for what was not repaired and why each proposal failed
 * :func:`grid_svg` -- a grid-map (the ``render`` text of :mod:`bt_meta.perception.gridmap`) as coloured cells
 """
 
@@ -24,7 +27,7 @@ import yaml
 
 from bt_meta.demo.svg import TreeNode, line_plot_svg, tree_svg
 
-__all__ = ["grid_svg", "render_report", "write_report"]
+__all__ = ["grid_svg", "render_report", "render_run_report", "write_report"]
 
 _CELL_COLOURS = {".": "#ffffff", "b": "#1e63d6", "r": "#d62f2f", "g": "#2e9d44", "y": "#e8c619", "#": "#777777"}
 
@@ -342,6 +345,101 @@ def render_report(result: Any) -> str:
             "<h2>Second pass: the same variants again</h2>", *(_run_section(o) for o in second),
             "<h2>Learned refinements</h2>", _refinements(summary)]
     return ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>bt-meta demo report</title>"
+            f"<style>{_CSS}</style></head><body>{''.join(body)}</body></html>\n")
+
+
+def _step(entry: dict[str, Any]) -> str:
+    args = ", ".join(str(a) for a in entry.get("args") or [])
+    return f"{entry.get('step')} {entry.get('action') or ''}({args})"
+
+
+def _failures(failures: list[dict[str, Any]]) -> str:
+    if not failures:
+        return "<p class='small'>No failure was classified.</p>"
+    rows = "".join(
+        f"<tr><td>{number}</td><td>{_e(_step(f))}</td><td><b>{_e(f.get('kind'))}</b><br><span class=small>by "
+        f"{_e((f.get('evidence') or {}).get('classified_by') or 'monitor')}</span></td>"
+        f"<td>{_e(_short(f.get('message', ''), 400))}{_evidence(_plain(f.get('evidence') or {}))}</td></tr>"
+        for number, f in enumerate(failures, 1))
+    return f"<table class='fit'><tr><th style='width:3%'>#</th><th style='width:17%'>step</th><th style='width:14%'>" \
+           f"kind</th><th>message and evidence</th></tr>{rows}</table>"
+
+
+def _attempts(attempts: list[dict[str, Any]]) -> str:
+    if not attempts:
+        return "<p class='small'>No repair was attempted.</p>"
+    rows = []
+    for attempt in attempts:
+        proposal = attempt.get("proposal") or {}
+        failure = attempt.get("failure") or {}
+        rows.append(
+            f"<tr><td>{_e(attempt.get('number'))}</td><td><b>{_e(attempt.get('kind'))}</b> at "
+            f"{_e(_step(failure))}</td><td><b>{_e(proposal.get('action'))}</b> "
+            f"{float(proposal.get('score') or 0.0):.2f} by {_e(proposal.get('plugin'))}: "
+            f"{_e(_short(proposal.get('description', ''), 200))}</td><td>{_e(attempt.get('change'))}</td>"
+            f"<td>{_status_pill(str(attempt.get('outcome')))}</td></tr>")
+    return ("<table><tr><th>#</th><th>failure</th><th>proposal applied</th><th>change</th><th>outcome</th></tr>"
+            + "".join(rows) + "</table>")
+
+
+def _tried(reported: list[dict[str, Any]]) -> str:
+    if not reported:
+        return ""
+    parts = ["<h2>Not repaired: what was tried</h2>"]
+    for entry in reported:
+        rows = "".join(
+            f"<tr><td>{_e(t.get('attempt') if t.get('attempt') is not None else '-')}</td><td><b>"
+            f"{_e(t.get('action'))}</b> by {_e(t.get('plugin'))}: {_e(_short(t.get('description', ''), 200))}</td>"
+            f"<td>{_status_pill(str(t.get('outcome')))}</td><td>{_e(_short(t.get('why', ''), 500))}</td></tr>"
+            for t in entry.get("tried") or [])
+        parts.append(f"<h3><b>{_e(entry.get('kind'))}</b> at step {_e(_step(entry))}</h3><p>"
+                     f"{_e(_short(entry.get('message', ''), 400))}</p>{_evidence(_plain(entry.get('evidence') or {}))}"
+                     + (f"<table class='fit'><tr><th style='width:5%'>attempt</th><th style='width:35%'>proposal</th>"
+                        f"<th style='width:10%'>outcome</th><th>why it failed</th></tr>{rows}</table>" if rows else
+                        "<p class='small'>Nothing was proposed.</p>"))
+    return "".join(parts)
+
+
+def render_run_report(run: dict[str, Any], *, title: str = "run report", back: str | None = None) -> str:
+    """A run's report page: ``run`` holds ``report`` (an executor report's dict) and what the caller knows of the
+    run (``variant``, ``configuration``, ``seed``, ``expected``, ``status``, ``kinds``, ``error``, ...)."""
+    report = run.get("report") or {}
+    known = [(key, run[key]) for key in ("family", "variant", "configuration", "seed", "sensing", "expected")
+             if run.get(key) is not None]
+    status = str(run.get("status") or report.get("status"))
+    facts = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in known)
+    facts += (f"<tr><th>status</th><td>{_status_pill(status)}</td></tr>"
+              f"<tr><th>failure kinds</th><td>{_e(', '.join(run.get('kinds') or []) or '-')}</td></tr>"
+              f"<tr><th>repair attempts</th><td>{len(report.get('attempts') or [])}</td></tr>"
+              f"<tr><th>stop reason</th><td>{_e(report.get('stop_reason') or run.get('stop_reason') or '-')}</td></tr>"
+              f"<tr><th>task done (simulator)</th><td>{_truth(report if 'achieved' in report else run)}</td></tr>"
+              f"<tr><th>time</th><td>{_e(run.get('seconds', report.get('seconds')))} s wall, "
+              f"{_e(report.get('simulated_seconds', run.get('simulated_seconds')))} s simulated, "
+              f"{_e(report.get('ticks'))} ticks, {_e(report.get('segments'))} segment(s)</td></tr>")
+    body = [f"<h1>{_e(title)}</h1>"]
+    if back:
+        body.append(f"<p class='small'><a href='{_e(back)}'>back to the campaign report</a></p>")
+    body.append(f"<table>{facts}</table>")
+    if run.get("error"):
+        body.append(f"<h2>Error</h2><pre>{_e(run['error'])}</pre>")
+    body += ["<h2>Failures classified</h2>", _failures(list(report.get("failures") or [])),
+             "<h2>Repair attempts</h2>", _attempts(list(report.get("attempts") or [])),
+             _tried(list(report.get("reported") or []))]
+    executed = report.get("executed") or []
+    if executed:
+        rows = "".join(f"<tr><td>{_e(e.get('segment'))}</td><td>{_e(_step(e))}</td>"
+                       f"<td>{_status_pill('success' if e.get('status') == 'SUCCESS' else 'failed')}</td></tr>"
+                       for e in executed)
+        body.append(f"<h2>Executed steps</h2><table><tr><th>segment</th><th>step</th><th>status</th></tr>{rows}"
+                    "</table>")
+    plans = "".join(f"<p class='small'>{name}: {_e(' ; '.join(' '.join(map(str, s)) for s in report[key]))}</p>"
+                    for key, name in (("initial_plan", "initial"), ("plan", "final")) if report.get(key))
+    if plans:
+        body.append(f"<details><summary>Plans</summary>{plans}</details>")
+    second = run.get("second_exposure")
+    if second:
+        body.append(f"<h2>Second exposure</h2><pre>{_e(json.dumps(second, indent=1, default=str))}</pre>")
+    return (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>{_e(title)}</title>"
             f"<style>{_CSS}</style></head><body>{''.join(body)}</body></html>\n")
 
 

@@ -16,7 +16,8 @@ import pytest
 from bt_meta.cli import main
 from bt_meta.demo.report import grid_svg
 from bt_meta.demo.scenario import demonstrations, variants
-from bt_meta.demo.svg import TreeNode, line_plot_svg, tree_from_behaviour, tree_svg
+from bt_meta.demo.svg import TreeNode, tree_from_behaviour, tree_svg
+from bt_meta.plotting import line_plot
 
 
 def test_tree_svg_colours_nodes_by_status():
@@ -54,13 +55,13 @@ def test_tree_from_behaviour_derives_sequence_and_guard_statuses():
 
 
 def test_line_plot_and_grid_pictures_are_well_formed():
-    svg = line_plot_svg({"R_n this run": [(0, 90.0), (1, None), (2, 180.0)], "mean": [(0, 180.0), (2, 180.0)]},
+    svg = line_plot({"R_n this run": [(0, 90.0), (1, None), (2, 180.0)], "mean": [(0, 180.0), (2, 180.0)]},
                         title="R_n", x_label="step", y_label="deg", bands={"mean": [(0, 170, 190), (2, 175, 185)]},
                         markers=[(0, "failure")])
     ElementTree.fromstring(svg)
     assert "failure" in svg and "R_n this run" in svg and "mean: min-max" in svg  # drawn by matplotlib
     assert "<path" in svg and "fill-opacity: 0.3" in svg  # the band is filled, visibly
-    assert "no data" in line_plot_svg({}, title="empty", x_label="x", y_label="y")
+    assert "no data" in line_plot({}, title="empty", x_label="x", y_label="y")
     grid = grid_svg("..bb\nr..b", title="remembered")
     ElementTree.fromstring(grid)
     assert grid.count("<rect") == 8

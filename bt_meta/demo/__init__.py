@@ -12,7 +12,7 @@ Offers (each in its own module):
 * :data:`CONFIGURATIONS`, :func:`plugin_host` -- which plugins a run has: dual, symbolic, low-level, retry
   (``configurations``)
 * :class:`Progress`, :class:`RunCapture`, :class:`CapturingExecutor` -- what the demo watches (``capture``)
-* :func:`tree_svg`, :func:`line_plot_svg` -- the inline SVG pictures (``svg``)
+* :func:`tree_svg` -- the behaviour tree as an inline SVG picture (``svg``; plots: :mod:`bt_meta.plotting`)
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from bt_meta.demo.configurations import CONFIGURATIONS, plugin_host
 from bt_meta.demo.report import write_report
 from bt_meta.demo.runner import DemoResult, record_demonstration, run_demo, run_variant
 from bt_meta.demo.scenario import Demonstration, VariantRun, demonstrations, variants
-from bt_meta.demo.svg import line_plot_svg, tree_svg
+from bt_meta.demo.svg import tree_svg
 
 __all__ = [
     "CONFIGURATIONS",
@@ -33,7 +33,6 @@ __all__ = [
     "RunCapture",
     "VariantRun",
     "demonstrations",
-    "line_plot_svg",
     "plugin_host",
     "record_demonstration",
     "run_demo",

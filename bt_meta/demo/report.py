@@ -25,7 +25,8 @@ from typing import Any
 
 import yaml
 
-from bt_meta.demo.svg import TreeNode, line_plot_svg, tree_svg
+from bt_meta.demo.svg import TreeNode, tree_svg
+from bt_meta.plotting import line_plot
 
 __all__ = ["grid_svg", "render_report", "render_run_report", "write_report"]
 
@@ -241,9 +242,9 @@ def _keypoints(outcome: Any) -> str:
             band.append((float(i), remembered[key]["min"], remembered[key]["max"]))
         label = f"{name} mean of {data['traces']} trace(s)"
         series[label] = mean
-        plots.append(line_plot_svg(series, title=f"{name} ({data['active']} vs {data['reference']})",
-                                   x_label="executed step (in order, repairs included)", y_label=f"{name} ({unit})",
-                                   bands={label: band}, markers=markers))
+        plots.append(line_plot(series, title=f"{name} ({data['active']} vs {data['reference']})",
+                               x_label="executed step (in order, repairs included)", y_label=f"{name} ({unit})",
+                               bands={label: band}, markers=markers))
     calls = ", ".join(f"{i}: {e['call']}" for i, e in enumerate(observed))
     return ("<h4>Keypoint relations over the executed steps</h4><div class='row'>" + "".join(plots) +
             f"</div><p class='small'>Executed steps: {_e(calls)}. The band is the min..max over the remembered traces "

@@ -1,12 +1,13 @@
-"""Inline SVG pictures for the demo report: trees drawn by hand (no graphviz binary needed), plots by matplotlib.
+"""Inline SVG pictures of behaviour trees for the demo report, drawn by hand (no graphviz binary needed).
+
+The report's plots are matplotlib's (:mod:`bt_meta.plotting`); the tree stays hand-drawn: neither matplotlib nor
+a package already installed lays out a tree with per-node status colours without a graphviz binary.
 
 Offers:
 
 * :class:`TreeNode` -- one behaviour of a py_trees tree as the picture needs it (name, kind, status, children)
 * :func:`tree_from_behaviour` -- a py_trees tree to :class:`TreeNode` s, statuses from a node-id -> status map
 * :func:`tree_svg` -- the tree as a left-to-right indented diagram, boxes coloured by status
-* :func:`line_plot_svg` -- one or more series over steps (R_p, R_n) with bands and markers (matplotlib, through
-  :mod:`bt_meta.plotting`, the plotting code the campaign report uses too)
 * :data:`STATUS_COLOURS` -- the colour of each node status
 """
 
@@ -17,7 +18,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["STATUS_COLOURS", "TreeNode", "line_plot_svg", "tree_from_behaviour", "tree_svg"]
+__all__ = ["STATUS_COLOURS", "TreeNode", "tree_from_behaviour", "tree_svg"]
 
 STATUS_COLOURS = {
     "SUCCESS": "#4caf50",
@@ -151,20 +152,3 @@ def _label(node: TreeNode) -> str:
     if node.kind == "Monitor":
         return f"{prefix}Monitor"
     return f"{prefix}{node.name}"
-
-
-def line_plot_svg(
-    series: Mapping[str, Sequence[tuple[float, float | None]]],
-    *,
-    title: str,
-    x_label: str,
-    y_label: str,
-    bands: Mapping[str, Sequence[tuple[float, float, float]]] | None = None,
-    markers: Sequence[tuple[float, str]] = (),
-) -> str:
-    """Series of (x, y) points (``None`` y breaks the line), an optional band (x, low, high) per series (the
-    expectation's min..max), and vertical markers (x, label) such as the failing step -- drawn by matplotlib
-    (:func:`bt_meta.plotting.line_plot`), which lays out labels and legend without clipping them."""
-    from bt_meta.plotting import line_plot
-
-    return line_plot(series, title=title, x_label=x_label, y_label=y_label, bands=bands, markers=markers)

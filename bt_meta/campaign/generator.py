@@ -335,12 +335,17 @@ def _obstacles(draw: _Draw, p: Perturbation, obj: Placed | None) -> dict[str, An
             low, high = make_model(obj.type).extent()
             under = (_radius(obj.type), float(max(high - low)))
         dimensions = _obstacle_shape(draw, p, shape, under)
+        beside = 0.0  # an obstacle near an object stands beside its footprint (offset from its edge), not in it
+        if work is not None:
+            beside = max((_radius(o.type) + CLEARANCE for o in draw.objects
+                          if math.hypot(o.x - work[0], o.y - work[1]) < _radius(o.type)), default=0.0)
         placed = None
         for _ in range(_TRIES):
             yaw = float(draw.rng.uniform(-90.0, 90.0))
             if work is not None:
                 off_lo, off_hi = p.params["offset"]
-                distance = 0.0 if shape == "shelf" else float(draw.rng.uniform(off_lo, off_hi))
+                distance = 0.0 if shape == "shelf" else (beside + _half_width(shape, dimensions)
+                                                          + float(draw.rng.uniform(off_lo, off_hi)))
                 angle = float(draw.rng.uniform(0.0, 2.0 * math.pi))
                 x, y = work[0] + distance * math.cos(angle), work[1] + distance * math.sin(angle)
             else:
@@ -359,6 +364,13 @@ def _obstacles(draw: _Draw, p: Perturbation, obj: Placed | None) -> dict[str, An
         return None
     return {"kind": "obstacles", "obstacles": [o.to_dict() for o in draw.obstacles if o.name in added],
             "near": near}
+
+
+def _half_width(shape: str, dimensions: dict[str, Any]) -> float:
+    """Half the narrowest side of an obstacle's footprint (a post's radius)."""
+    if shape == "post":
+        return float(dimensions["radius"])
+    return 0.5 * float(min(dimensions["size"][:2]))
 
 
 def _obstacle_fits(draw: _Draw, obstacle: Obstacle, *, clear: bool) -> bool:

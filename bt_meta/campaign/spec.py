@@ -17,8 +17,8 @@ Kinds and their parameters (lengths in metres, angles in degrees; see docs/campa
 * ``out_of_reach`` -- put the object somewhere on the table outside the arm's workspace
 * ``obstacles`` -- ``count: [lo, hi]``, ``shapes: [...]`` (box, wall, post, shelf), ``size: [lo, hi]`` (the
   footprint's side, a wall's length, a post's diameter), ``height: [lo, hi]``, ``on_work_probability: p``,
-  ``offset: [lo, hi]``: add static obstacles; with probability ``p`` the first stands within ``offset`` of a place
-  the task puts something or of an object drawn from ``objects`` (a shelf over it), else clear of everything
+  ``offset: [lo, hi]``: add static obstacles; with probability ``p`` the first stands ``offset`` from a place the
+  task puts something or from the edge of an object drawn from ``objects`` (a shelf over it), else clear of both
 
 Every mistake -- an unknown kind, parameter, object, colour or type -- is a :class:`SpecError` at
 ``path:line:column``.

@@ -173,7 +173,7 @@ def _final_state(domain: Any, steps: Sequence[Sequence[str]], state: Any, extern
             env = next(iter(primitive.satisfiers(state, args, external)), None)
             if env is None:
                 env = primitive.ground(args).bindings
-            add, delete = primitive.effects(env)
+            add, delete = primitive.effects(env, state, external)
         except (BtMetaError, KeyError, TypeError, ValueError):
             continue
         state = state.apply(add=add, delete=delete)

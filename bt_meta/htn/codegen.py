@@ -45,8 +45,9 @@ import threading
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from bt_meta.htn.axioms import _IN_PROGRESS as _REFERENCE_IN_PROGRESS
 from bt_meta.htn.conditions import DNEG, DPOS, EQ, EXT, NEG, NEQ, NEXT, POS, QEX, QNEX, Term, Var, uses_external
+from bt_meta.htn.fastpath import IN_PROGRESS as _REFERENCE_IN_PROGRESS
+from bt_meta.htn.fastpath import Unsupported
 from bt_meta.htn.state import Atom, atom_hash
 
 INLINE_CLAUSES = 3  # a non-recursive derived predicate with more rule clauses than this is called, not inlined
@@ -64,8 +65,7 @@ def _locked(generate: Callable[..., Any]) -> Callable[..., Any]:
     return wrapper
 
 
-class Unsupported(Exception):
-    """The generator does not handle this condition; the reference matcher is used instead."""
+__all__ = ["Generated", "Unsupported"]  # Unsupported lives in bt_meta.htn.fastpath; importable from here too
 
 
 def _name(ident: str) -> ast.Name:

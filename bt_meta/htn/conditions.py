@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from bt_meta.errors import PlanningError
+from bt_meta.htn.fastpath import Unsupported
 from bt_meta.htn.state import Atom, State
 
 # From this many facts on, generated preconditions prove ground derived atoms with AxiomSet.holds, whose memo a
@@ -607,8 +608,6 @@ class Condition:
 
     def _generate(self, bound: tuple[str, ...], reference_proofs: bool) -> list[Any]:
         """The generated matcher of each clause (:mod:`bt_meta.htn.codegen`), or [] to keep the reference one."""
-        from bt_meta.htn.codegen import Unsupported
-
         generated = self.context.axioms.generated(reference_proofs)
         if generated is None:
             return []

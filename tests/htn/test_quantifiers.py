@@ -327,3 +327,16 @@ def test_quantified_guards_compile_into_behaviour_trees(taskfile):
     assert not guard.holds(State([("block", "a"), ("clear", "a"), ("painted", "a")]))
     compiled = compile_task_file(taskfile, "p")
     assert compiled.root is not None
+
+
+def test_a_domain_with_quantifiers_and_conditional_effects_is_written_back_unchanged(taskfile):
+    from bt_meta.meta.refinements import task_file_yaml
+
+    again = load_task_text(task_file_yaml(taskfile.domain, taskfile.problems.values()))
+    for name, primitive in taskfile.domain.primitives.items():
+        copy = again.domain.primitives[name]
+        assert [(e.variables, e.types, e.when.source, e.add, e.delete) for e in copy.conditional] == \
+            [(e.variables, e.types, e.when.source, e.add, e.delete) for e in primitive.conditional]
+    for name in taskfile.problems:
+        assert [a.as_list() for a in plan(again.domain, again.problems[name], max_seconds=20).plan] == \
+            [a.as_list() for a in plan(taskfile.domain, taskfile.problems[name], max_seconds=20).plan]

@@ -663,8 +663,14 @@ def _seeded_spec(clauses: list[list[Step]]) -> tuple | None:
     return (object(), clause[0], Clause(clause[1:]), tuple(sorted(names)), clause)
 
 
-def compile_condition(source: str, expr: Expr, context: DomainContext, bound: Iterable[str]) -> Condition:
-    """Check and compile; raises :class:`ConditionSyntaxError` at the offending offset."""
+def compile_condition(source: str, expr: Expr, context: DomainContext, bound: Iterable[str],
+                      _quantified: dict[tuple[int, bool], Step] | None = None) -> Condition:
+    """Check and compile; raises :class:`ConditionSyntaxError` at the offending offset.
+
+    ``_quantified`` (internal): each quantifier's compiled literal by node and polarity, shared with the
+    quantifiers inside, so a quantifier that distribution copies into many clauses is compiled once.
+    """
+    quantified: dict[tuple[int, bool], Step] = {} if _quantified is None else _quantified
     initially = frozenset(bound)
     clauses: list[list[Step]] = []
     bound_everywhere: set[str] | None = None
@@ -690,7 +696,12 @@ def compile_condition(source: str, expr: Expr, context: DomainContext, bound: It
                     steps.append((DPOS if derived else POS, node.pred, node.args, node))
             elif kind == "quant":
                 assert isinstance(node, QuantExpr)
-                steps.append(_compile_quantifier(source, node, negated, context, have))
+                _require_bound(free_variables(node), have, node, f"'{node.op}'")
+                key = (id(node), negated)
+                step = quantified.get(key)
+                if step is None:
+                    step = quantified[key] = _compile_quantifier(source, node, negated, context, quantified)
+                steps.append(step)
             else:
                 assert isinstance(node, CompareExpr)
                 _require_bound(_vars_of((node.left, node.right)), have, node, f"'{node.op}'")
@@ -702,10 +713,9 @@ def compile_condition(source: str, expr: Expr, context: DomainContext, bound: It
 
 
 def _compile_quantifier(source: str, node: QuantExpr, negated: bool, context: DomainContext,
-                        have: set[str]) -> Step:
+                        quantified: dict[tuple[int, bool], Step]) -> Step:
     """``exists V: F`` -> QEX of ``types(V) and F``; ``forall V: F`` -> QNEX of ``types(V) and not F``."""
     free = free_variables(node)
-    _require_bound(free, have, node, f"'{node.op}'")
     type_atoms: list[Expr] = []
     for name, type_name, offset in node.variables:
         if context.arities.get(type_name) != 1 or type_name in context.external:
@@ -714,7 +724,7 @@ def _compile_quantifier(source: str, node: QuantExpr, negated: bool, context: Do
                                        f"(known: {', '.join(unary) or 'none'})", offset)
         type_atoms.append(AtomExpr(type_name, (Var(name),), offset, (offset,)))
     body = node.body if node.op == "exists" else NotExpr(node.body, node.offset)
-    sub = compile_condition(source, AndExpr((*type_atoms, body)), context, [v.name for v in free])
+    sub = compile_condition(source, AndExpr((*type_atoms, body)), context, [v.name for v in free], quantified)
     kind = QEX if (node.op == "exists") != negated else QNEX
     return (kind, sub, tuple(free), node)
 

@@ -750,7 +750,10 @@ class _Loader:
             when_src = self.condition_src(keys["when"][1], f"the when condition of {where}") \
                 if "when" in keys else None
             when = self.compile(when_src, context, inner)
-            condition = compile_condition(when.source, AndExpr((*type_atoms, when.expr)), context, bound)
+            try:
+                condition = compile_condition(when.source, AndExpr((*type_atoms, when.expr)), context, bound)
+            except ConditionSyntaxError as exc:  # the size bounds, with the forall's type atoms added
+                raise self.error(exc.message, when_src.locate(exc.offset) if when_src else item) from None
             lists = self.effect_lists(keys, context, inner, where,
                                       "its forall, its primitive's parameters or its precondition")
             found.append(ConditionalEffect(variables, types, when, condition, lists["add"], lists["delete"],

@@ -340,3 +340,16 @@ def test_a_domain_with_quantifiers_and_conditional_effects_is_written_back_uncha
     for name in taskfile.problems:
         assert [a.as_list() for a in plan(again.domain, again.problems[name], max_seconds=20).plan] == \
             [a.as_list() for a in plan(taskfile.domain, taskfile.problems[name], max_seconds=20).plan]
+
+
+def test_a_quantifier_copied_into_many_clauses_is_compiled_once():
+    disjunctions = " and ".join("(a() or b())" for _ in range(12))  # 4096 alternatives
+    condition = disjunctions
+    for _ in range(3):  # each level nests the previous one inside a forall: compiled per clause, 4096 ** 3
+        condition = f"{disjunctions} and (forall ?x - t: {condition})"
+    taskfile = load_task_text(f"domain:\n  types: [t]\n  predicates: {{a: [], b: []}}\n  primitives:\n    p:\n"
+                              f"      precondition: \"{condition}\"\n")
+    clauses = taskfile.domain.primitives["p"].precondition.clauses
+    assert len(clauses) == 4096
+    assert len({id(clause[-1]) for clause in clauses}) == 1 and clauses[0][-1][0] == QNEX
+    assert taskfile.domain.primitives["p"].precondition.holds(State([("a",)]))

@@ -325,6 +325,9 @@ class _Parser:
                 raise ConditionSyntaxError(f"expected a type name after '-', found {type_tok.describe()}",
                                            type_tok.offset)
             self.take()
+            if ":" in type_name and not (self.tok.kind == "op" and self.tok.text in (",", ":")):
+                raise ConditionSyntaxError(f"put a space after the ':' that ends the variables of {op_tok.text!r} "
+                                           f"({type_name!r} reads as one name)", type_tok.offset)
             if any(name == var.text[1:] for name, _, _ in variables):
                 raise ConditionSyntaxError(f"variable {var.text} is quantified twice", var.offset)
             variables.append((var.text[1:], type_name, var.offset))

@@ -119,6 +119,8 @@ def test_quantifiers_and_implies_parse_with_the_body_reaching_right():
     ("exists ?x - t p(?x)", "expected ',' or ':' after the variables of 'exists', found 'p'", 14),
     ("forall ?x - t:", "expected the condition of 'forall' after ':', found end of text", 14),
     ("forall ?x - t, ?x - t: p()", "variable ?x is quantified twice", 15),
+    ("forall ?x - t:p(?x)", "put a space after the ':' that ends the variables of 'forall' ('t:p' reads as one "
+     "name)", 12),
     ("a() implies", "expected an atom like pred(?x), 'not', '(', 'true' or a comparison, found end of text", 11),
 ])
 def test_malformed_quantifiers_name_the_offending_offset(text, message, offset):

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,6 +32,8 @@ from bt_meta.errors import UserInputError
 from bt_meta.htn.conditions import Var
 from bt_meta.htn.model import Domain, Primitive, Problem, types_hold
 from bt_meta.htn.state import Atom, State, atom_text
+
+MAX_FORALL_COMBINATIONS = 1_000_000  # forall bindings one conditional effect of one step may make the verifier try
 
 
 @dataclass
@@ -88,13 +91,20 @@ def _apply_step(domain: Domain, state: State, step: tuple[str, ...]) -> tuple[St
     satisfier = next(iter(prim.precondition.satisfiers(state, env)), None)
     if satisfier is None:
         return None, f"the precondition of {atom_text(step)} does not hold: {prim.precondition.source}"
-    add, delete = _step_effects(domain, prim, state, satisfier)
+    effects = _step_effects(domain, prim, state, satisfier)
+    if isinstance(effects, str):
+        return None, f"{atom_text(step)}: {effects}"
+    add, delete = effects
     return state.apply(add=add, delete=delete), None
 
 
-def _step_effects(domain: Domain, prim: Primitive, state: State, env: dict[str, str]) -> tuple[list[Atom], list[Atom]]:
+def _step_effects(domain: Domain, prim: Primitive, state: State, env: dict[str, str]
+                  ) -> tuple[list[Atom], list[Atom]] | str:
     """(add, delete) of a step: the plain effects, then each conditional effect for every binding of its
-    ``forall`` variables (objects of their types in ``state``) whose ``when`` holds in ``state`` (the pre-state)."""
+    ``forall`` variables (objects of their types in ``state``) whose ``when`` holds in ``state`` (the pre-state).
+
+    A message instead when a ``forall`` has more than :data:`MAX_FORALL_COMBINATIONS` bindings to try.
+    """
     add: list[Atom] = []
     delete: list[Atom] = []
     for templates, out in ((prim.add, add), (prim.delete, delete)):
@@ -105,6 +115,9 @@ def _step_effects(domain: Domain, prim: Primitive, state: State, env: dict[str, 
             out.append(atom)
     for effect in prim.conditional:
         pools = [sorted({atom[1] for atom in _extension(domain, type_name, state)}) for type_name in effect.types]
+        if math.prod(len(pool) for pool in pools) > MAX_FORALL_COMBINATIONS:
+            return (f"a conditional effect has {' x '.join(str(len(p)) for p in pools)} forall bindings, more than "
+                    f"the {MAX_FORALL_COMBINATIONS} the verifier enumerates")
         for values in itertools.product(*pools):
             local = dict(env)
             local.update(zip(effect.variables, values, strict=True))

@@ -190,6 +190,18 @@ def test_the_verifier_applies_conditional_effects_itself(taskfile):
     assert any("the goal does not hold at the end: flag()" in error for error in verdict.errors), verdict.errors
 
 
+def test_the_verifier_bounds_the_forall_bindings_it_enumerates(taskfile, monkeypatch):
+    import bt_meta.htn.verify as verify
+
+    problem = taskfile.problems["p"]
+    result = plan(taskfile.domain, problem, max_seconds=20)
+    monkeypatch.setattr(verify, "MAX_FORALL_COMBINATIONS", 2)  # paint_all's forall has 3 blocks to try
+    verdict = verify_plan(taskfile.domain, problem, [a.as_list() for a in result.plan], result.tree.to_dict())
+    assert not verdict.ok
+    assert any("paint_all(r1): a conditional effect has 3 forall bindings, more than the 2 the verifier "
+               "enumerates" in error for error in verdict.errors), verdict.errors
+
+
 def test_generated_code_and_the_reference_path_give_the_same_plans(taskfile):
     plans = []
     for codegen in (True, False):

@@ -367,3 +367,46 @@ def test_a_quantifier_copied_into_many_clauses_is_compiled_once():
     assert len(clauses) == 4096
     assert len({id(clause[-1]) for clause in clauses}) == 1 and clauses[0][-1][0] == QNEX
     assert taskfile.domain.primitives["p"].precondition.holds(State([("a",)]))
+
+
+def test_a_primitive_with_a_quantified_precondition_gets_a_generated_stepper():
+    from bt_meta.htn.compiled import compiled_domain
+
+    taskfile = load_task_text(textwrap.dedent("""\
+        domain:
+          types: [block]
+          predicates: {clear: [block], on: [block, block], done: [block]}
+          axioms:
+            - head: free(?b)
+              when: clear(?b)
+          primitives:
+            finish:
+              parameters: [?b]
+              precondition: "free(?b) and (forall ?c - block: not on(?c, ?b)) and not done(?b)"
+              add: [done(?b)]
+          tasks: {all: []}
+          methods:
+            - name: one
+              task: all()
+              precondition: free(?b) and not done(?b)
+              subtasks: [finish(?b), all()]
+            - name: none
+              task: all()
+              precondition: "forall ?b - block: done(?b) or not free(?b) or (exists ?c - block: on(?c, ?b))"
+        problems:
+          p:
+            objects: {block: [a, b, c]}
+            init: [clear(a), clear(b), on(a, c), clear(c)]
+            tasks: [all()]
+        """))
+    _, steppers = compiled_domain(taskfile.domain).variant(False)
+    assert "finish" in steppers
+    plans = []
+    for codegen in (True, False):
+        taskfile.domain.axiom_set.codegen = codegen
+        try:
+            plans.append([a.as_list() for a in _plan_and_verify(taskfile, "p").plan])
+        finally:
+            taskfile.domain.axiom_set.codegen = True
+    # c has a on it: finish(c) fails its forall, and the method 'none' accepts a covered block left undone
+    assert plans[0] == plans[1] == [["finish", "a"], ["finish", "b"]]

@@ -410,3 +410,18 @@ def test_a_primitive_with_a_quantified_precondition_gets_a_generated_stepper():
             taskfile.domain.axiom_set.codegen = True
     # c has a on it: finish(c) fails its forall, and the method 'none' accepts a covered block left undone
     assert plans[0] == plans[1] == [["finish", "a"], ["finish", "b"]]
+
+
+def test_ticking_the_compiled_tree_applies_conditional_effects_on_the_fake_world(tmp_path, capsys):
+    import json
+
+    from bt_meta.cli import main
+
+    path = tmp_path / "paint.yaml"
+    path.write_text(DOMAIN + PROBLEMS)
+    assert main(["tick", str(path), "--problem", "p", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["status"] == "SUCCESS"
+    state = {tuple(atom) for atom in out["state"]}
+    assert {("painted", "a"), ("painted", "b"), ("flag",)} <= state
+    assert ("clear", "a") not in state and ("painted", "c") not in state

@@ -12,8 +12,8 @@ Offers:
 * :class:`Condition` -- ``holds`` and ``satisfiers`` over a :class:`~bt_meta.htn.state.State`
 * :func:`match_clause` -- the iterative matcher, also used by the axiom evaluator
 * :class:`ExternalPredicateError` -- a condition needs an external predicate but no callable was given
-* :func:`uses_external`, :func:`has_quantifier` -- what a compiled condition's clauses contain, nested
-  quantifiers included
+* :func:`free_variables` -- the variables of a syntax tree that no quantifier inside it binds
+* :func:`uses_external` -- whether compiled clauses ask an external predicate, inside quantifiers too
 
 Grammar (lowest precedence first)::
 
@@ -545,10 +545,6 @@ def uses_external(clauses: Iterable[Iterable[Step]]) -> bool:
             if step[0] in (EXT, NEXT) or (step[0] in (QEX, QNEX) and uses_external(step[1].clauses)):
                 return True
     return False
-
-
-def has_quantifier(clauses: Iterable[Iterable[Step]]) -> bool:
-    return any(step[0] in (QEX, QNEX) for clause in clauses for step in clause)
 
 
 class Condition:

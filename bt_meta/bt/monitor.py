@@ -188,7 +188,7 @@ class Monitor(py_trees.decorators.Decorator):
                 env = next(iter(primitive.satisfiers(state, args, run._external)), None)
                 if env is not None:
                     if self._effects_need_state or not self._static:
-                        self._step_effects = primitive.effects(env)
+                        self._step_effects = primitive.effects(env, state, run._external)
                     return True
         except Exception as error:  # an external-predicate plugin, a missing argument, a wrong arity
             self._record(run, Failure(
@@ -389,6 +389,8 @@ def monitor_action(behaviour: py_trees.behaviour.Behaviour, instance: Any = None
 
 
 def _effects_use_only_parameters(primitive: Any) -> bool:
+    if getattr(primitive, "conditional", None):  # forall / when effects depend on the state
+        return False
     parameters = set(primitive.parameters)
     for template in (*primitive.add, *primitive.delete):
         for term in template[1:]:

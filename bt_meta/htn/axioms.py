@@ -16,6 +16,7 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from bt_meta.htn.codegen import Generated
 from bt_meta.htn.conditions import (
     DNEG,
     DPOS,
@@ -30,13 +31,14 @@ from bt_meta.htn.conditions import (
     match_clause,
     template_builder,
 )
+from bt_meta.htn.fastpath import IN_PROGRESS, Unsupported
 from bt_meta.htn.state import Atom, State
 
 SEEDED_MIN = 32  # fewer seeds than this: a planner clause is matched directly (keeping units costs more)
 MAX_DEPTH = 200  # nested top-down proofs before falling back to the bottom-up extension
 INHERIT_DEPTH = 16  # how far up the parent chain a state looks for a memo to inherit
 
-_IN_PROGRESS = object()
+_IN_PROGRESS = IN_PROGRESS
 _OWNED = object()  # memo key: the unit tables this memo may change in place (see AxiomSet._inherit)
 _EPOCH = object()  # memo key: the epoch whose reader indexes cover the memo's entries (see AxiomSet.begin)
 _NO_ENTRIES: dict[Any, Any] = {}
@@ -239,8 +241,6 @@ class AxiomSet:
         attr = "_generated_reference" if reference_proofs else "_generated"
         found = getattr(self, attr)
         if found is None:
-            from bt_meta.htn.codegen import Generated, Unsupported
-
             try:
                 found = Generated(self, MAX_DEPTH, reference_proofs)
             except Unsupported:

@@ -8,7 +8,10 @@ Offers:
   precondition clause, per compound task (:meth:`~Generated.task_expander`: its alternatives) and per primitive
   (:meth:`~Generated.primitive_stepper`: its effects when it applies), with a memo dict per state
 * :class:`Unsupported` -- a condition the generator does not handle (external atoms, a primitive binding
-  variables of its own): the caller keeps the reference matcher
+  variables of its own, a primitive with conditional effects): the caller keeps the reference matcher
+
+A quantifier literal (``forall`` / ``exists``) becomes a call of its sub-condition's reference matcher with the
+values of its free variables (``qh``): the loops around it are generated, the quantified part is interpreted.
 
 Why: the reference engine (:mod:`bt_meta.htn.conditions`, :mod:`bt_meta.htn.axioms`) interprets match plans and
 spends most of its time in the bookkeeping of that interpretation; straight-line loops over the same state
@@ -42,8 +45,9 @@ import threading
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from bt_meta.htn.axioms import _IN_PROGRESS as _REFERENCE_IN_PROGRESS
-from bt_meta.htn.conditions import DNEG, DPOS, EQ, EXT, NEG, NEQ, NEXT, POS, Term, Var
+from bt_meta.htn.conditions import DNEG, DPOS, EQ, EXT, NEG, NEQ, NEXT, POS, QEX, QNEX, Term, Var, uses_external
+from bt_meta.htn.fastpath import IN_PROGRESS as _REFERENCE_IN_PROGRESS
+from bt_meta.htn.fastpath import Unsupported
 from bt_meta.htn.state import Atom, atom_hash
 
 INLINE_CLAUSES = 3  # a non-recursive derived predicate with more rule clauses than this is called, not inlined
@@ -61,8 +65,7 @@ def _locked(generate: Callable[..., Any]) -> Callable[..., Any]:
     return wrapper
 
 
-class Unsupported(Exception):
-    """The generator does not handle this condition; the reference matcher is used instead."""
+__all__ = ["Generated", "Unsupported"]  # Unsupported lives in bt_meta.htn.fastpath; importable from here too
 
 
 def _name(ident: str) -> ast.Name:
@@ -159,6 +162,13 @@ def _reference_memo() -> ast.expr:
                                ctx=ast.Load()), _name("OMK"), _name("EMPTY"))
 
 
+def _quantifier_holds(sub: Any, state: Any, env: dict[str, str]) -> bool:
+    """Whether a quantifier's sub-condition has a satisfier (the reference matcher, as the loader compiled it)."""
+    for _ in sub.satisfiers(state, env):
+        return True
+    return False
+
+
 class _Fallback(Exception):
     pass
 
@@ -180,7 +190,7 @@ class Generated:
             "EMPTY": {}, "INP": _IN_PROGRESS, "Fallback": _Fallback, "MAXD": max_depth,
             "fb": self._fallback, "holds": axioms.holds,
             "OMK": axioms._memo_key, "OINP": _REFERENCE_IN_PROGRESS,
-            "exth": self._extension_heads, "ext": axioms.extension,
+            "exth": self._extension_heads, "ext": axioms.extension, "qh": _quantifier_holds,
         }
         self.ids: dict[str, int] = {pred: i for i, pred in enumerate(axioms.rules)}
         for pred, i in self.ids.items():
@@ -188,6 +198,7 @@ class Generated:
         self.queries: dict[tuple[str, tuple[int, ...]], str] = {}
         self._provers_built = False
         self._matchers = 0
+        self.quantified: list[Any] = []  # the sub-conditions of quantifier literals, named qs0, qs1, ...
         self._inline_level = 0
         self._lock = threading.RLock()
         for axiom in axioms.axioms:
@@ -539,6 +550,17 @@ class Generated:
             test = _cmp(self._value(step[1], varmap), ast.Eq() if kind == EQ else ast.NotEq(),
                         self._value(step[2], varmap))
             return [_if(test, self._clause(fn, rest, varmap, depth, outermost, on_match))]
+        if kind in (QEX, QNEX):
+            if uses_external(step[1].clauses):
+                raise Unsupported("external predicate inside a quantifier")
+            sub = f"qs{len(self.quantified)}"
+            self.quantified.append(step[1])
+            self.ns[sub] = step[1]
+            env = ast.Dict(keys=[_const(v.name) for v in step[2]], values=[_name(varmap[v.name]) for v in step[2]])
+            test = _call(_name("qh"), _name(sub), _name("st"), env)
+            if kind == QNEX:
+                test = ast.UnaryOp(op=ast.Not(), operand=test)
+            return [_if(test, self._clause(fn, rest, varmap, depth, outermost, on_match))]
         pred, args = step[1], step[2]
         free = [a for a in args if a.__class__ is Var and a.name not in varmap]
         depth_expr: ast.expr = _const(0) if depth == "0" else _name(depth)
@@ -763,6 +785,8 @@ class Generated:
         :class:`Unsupported` otherwise. The successor is :meth:`State._apply`'s, built by straight-line code
         (:meth:`_effects`).
         """
+        if primitive.conditional:
+            raise Unsupported(f"{primitive.name} has conditional effects")
         if not self.reference_proofs:
             self._build_provers()
         fn = _Fn()

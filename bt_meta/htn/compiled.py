@@ -82,7 +82,7 @@ class CompiledDomain:
         return found
 
     def _build(self, reference_proofs: bool) -> tuple[dict[str, Callable[..., Any]], dict[str, Callable[..., Any]]]:
-        from bt_meta.htn.codegen import Unsupported
+        from bt_meta.htn.fastpath import Unsupported
 
         expanders: dict[str, Callable[..., Any]] = {}
         steppers: dict[str, Callable[..., Any]] = {}

@@ -12,14 +12,24 @@ Offers:
 * :class:`Condition` -- ``holds`` and ``satisfiers`` over a :class:`~bt_meta.htn.state.State`
 * :func:`match_clause` -- the iterative matcher, also used by the axiom evaluator
 * :class:`ExternalPredicateError` -- a condition needs an external predicate but no callable was given
+* :func:`free_variables` -- the variables of a syntax tree that no quantifier inside it binds
+* :func:`uses_external` -- whether compiled clauses ask an external predicate, inside quantifiers too
 
 Grammar (lowest precedence first)::
 
+    cond    := expr ['implies' cond]                          (A implies B: not A or B)
     expr    := and ('or' and)*
     and     := unary ('and' unary)*
     unary   := 'not' unary | primary
-    primary := '(' expr ')' | 'true' | 'false' | term ('==' | '!=') term | NAME '(' [term (',' term)*] ')'
+    primary := '(' cond ')' | 'true' | 'false' | term ('==' | '!=') term | NAME '(' [term (',' term)*] ')'
+             | ('forall' | 'exists') typed (',' typed)* ':' cond   (the body reaches as far right as it can)
+    typed   := ?variable '-' TYPE                             (TYPE: a type or any unary predicate)
     term    := ?variable | NAME | NUMBER | 'quoted' | "quoted"
+
+``forall``, ``exists`` and ``implies`` are recognised only where nothing else can stand (``forall`` before a
+variable, ``implies`` after a complete condition), so predicates and constants with those names keep working.
+A quantifier is a test: its free variables must be bound where it is reached (like ``not``), and it binds
+nothing outside itself.
 """
 
 from __future__ import annotations
@@ -30,6 +40,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from bt_meta.errors import PlanningError
+from bt_meta.htn.fastpath import Unsupported
 from bt_meta.htn.state import Atom, State
 
 # From this many facts on, generated preconditions prove ground derived atoms with AxiomSet.holds, whose memo a
@@ -130,7 +141,18 @@ class BoolExpr:
     value: bool
 
 
-Expr = AtomExpr | CompareExpr | NotExpr | AndExpr | OrExpr | BoolExpr
+@dataclass(frozen=True)
+class QuantExpr:
+    """``forall`` / ``exists`` over ``variables`` (name, type predicate, offset of the variable)."""
+
+    op: str  # "forall" or "exists"
+    variables: tuple[tuple[str, str, int], ...]
+    body: Expr
+    offset: int
+
+
+Expr = AtomExpr | CompareExpr | NotExpr | AndExpr | OrExpr | BoolExpr | QuantExpr
+QUANTIFIERS = ("forall", "exists")
 
 
 # -- tokenizer --------------------------------------------------------------------------------------------------
@@ -139,8 +161,8 @@ _TOKEN_RE = re.compile(
     (?P<ws>\s+)
   | (?P<var>\?[A-Za-z_][A-Za-z0-9_\-]*)
   | (?P<str>"[^"\\\n]*(?:\\.[^"\\\n]*)*"|'[^'\n]*')
-  | (?P<op>==|!=|\(|\)|,)
-  | (?P<name>[A-Za-z0-9_.+\-][A-Za-z0-9_.+\-/:]*)
+  | (?P<op>==|!=|\(|\)|,|:)
+  | (?P<name>[A-Za-z0-9_.+\-](?:[A-Za-z0-9_.+\-/:]*[A-Za-z0-9_.+\-/])?)
     """,
     re.VERBOSE,
 )
@@ -214,6 +236,16 @@ class _Parser:
         if self.tok.kind != "eof":
             raise ConditionSyntaxError(f"expected end of {what}, found {self.tok.describe()}", self.tok.offset)
 
+    def cond(self) -> Expr:
+        left = self.expr()
+        if self.tok.kind == "name" and self.tok.text == "implies":
+            offset = self.take().offset
+            self.nest(offset)
+            right = self.cond()
+            self.depth -= 1
+            return OrExpr((NotExpr(left, offset), right))
+        return left
+
     def expr(self) -> Expr:
         children = [self.conj()]
         while self.tok.kind == "kw" and self.tok.text == "or":
@@ -242,7 +274,7 @@ class _Parser:
         if tok.kind == "op" and tok.text == "(":
             self.take()
             self.nest(tok.offset)
-            inner = self.expr()
+            inner = self.cond()
             self.expect_op(")", "')' to close the '(' opened before")
             self.depth -= 1
             return inner
@@ -251,6 +283,8 @@ class _Parser:
             return BoolExpr(tok.text == "true")
         if tok.kind == "name" and self.peek().kind == "op" and self.peek().text == "(":
             return self.atom()
+        if tok.kind == "name" and tok.text in QUANTIFIERS and self.peek().kind == "var":
+            return self.quantifier()
         if tok.kind in ("var", "name", "str"):
             nxt = self.peek()
             if nxt.kind == "op" and nxt.text in ("==", "!="):
@@ -267,6 +301,48 @@ class _Parser:
         raise ConditionSyntaxError(
             f"expected an atom like pred(?x), 'not', '(', 'true' or a comparison, found {tok.describe()}", tok.offset
         )
+
+    def quantifier(self) -> QuantExpr:
+        op_tok = self.take()
+        variables: list[tuple[str, str, int]] = []
+        while True:
+            var = self.tok
+            if var.kind != "var":
+                raise ConditionSyntaxError(f"expected a variable after {op_tok.text!r} or ',', found "
+                                           f"{var.describe()}", var.offset)
+            self.take()
+            type_tok = self.tok
+            if type_tok.kind == "name" and type_tok.text == "-":
+                self.take()
+                type_tok = self.tok
+                type_name = type_tok.text if type_tok.kind == "name" else ""
+            elif type_tok.kind == "name" and type_tok.text.startswith("-") and len(type_tok.text) > 1:
+                type_name = type_tok.text[1:]  # '?x -block'
+            else:
+                raise ConditionSyntaxError(f"expected '- type' after {var.text} (write {op_tok.text} {var.text} - "
+                                           "type: ...)", type_tok.offset)
+            if not type_name or not (type_name[0].isalpha() or type_name[0] == "_"):
+                raise ConditionSyntaxError(f"expected a type name after '-', found {type_tok.describe()}",
+                                           type_tok.offset)
+            self.take()
+            if ":" in type_name and not (self.tok.kind == "op" and self.tok.text in (",", ":")):
+                raise ConditionSyntaxError(f"put a space after the ':' that ends the variables of {op_tok.text!r} "
+                                           f"({type_name!r} reads as one name)", type_tok.offset)
+            if any(name == var.text[1:] for name, _, _ in variables):
+                raise ConditionSyntaxError(f"variable {var.text} is quantified twice", var.offset)
+            variables.append((var.text[1:], type_name, var.offset))
+            if self.tok.kind == "op" and self.tok.text == ",":
+                self.take()
+                continue
+            break
+        self.expect_op(":", f"',' or ':' after the variables of {op_tok.text!r}")
+        self.nest(op_tok.offset)
+        if self.tok.kind == "eof" or (self.tok.kind == "op" and self.tok.text == ")"):
+            raise ConditionSyntaxError(f"expected the condition of {op_tok.text!r} after ':', found "
+                                       f"{self.tok.describe()}", self.tok.offset)
+        body = self.cond()
+        self.depth -= 1
+        return QuantExpr(op_tok.text, tuple(variables), body, op_tok.offset)
 
     def term(self) -> Term:
         tok = self.tok
@@ -309,7 +385,7 @@ def parse_condition(text: str) -> Expr:
     parser = _Parser(text)
     if parser.tok.kind == "eof":
         raise ConditionSyntaxError("empty condition (write 'true' for no condition)", 0)
-    expr = parser.expr()
+    expr = parser.cond()
     parser.expect_end("condition")
     return expr
 
@@ -347,6 +423,9 @@ def parse_parameter(text: str) -> tuple[str, str | None]:
 # -- compiled form ----------------------------------------------------------------------------------------------
 # Literal kinds of a compiled clause.
 POS, NEG, DPOS, DNEG, EXT, NEXT, EQ, NEQ = range(8)
+# A quantifier: ``(QEX | QNEX, sub-condition, free variables, node)``; QEX holds when the sub-condition has a
+# satisfier under the free variables' values, QNEX when it has none (forall F is QNEX of 'types and not F').
+QEX, QNEX = 8, 9
 
 
 @dataclass
@@ -369,7 +448,7 @@ def dnf_size(expr: Expr, negate: bool = False) -> tuple[int, int]:
     that would distribute to astronomically many clauses costs no more than one walk of its syntax tree.
     """
     cap_clauses, cap_literals = MAX_ALTERNATIVES + 1, MAX_DNF_LITERALS + 1
-    if isinstance(expr, (AtomExpr, CompareExpr)):
+    if isinstance(expr, (AtomExpr, CompareExpr, QuantExpr)):
         return 1, 1
     if isinstance(expr, BoolExpr):
         return (1, 0) if expr.value != negate else (0, 0)
@@ -404,6 +483,8 @@ def _to_dnf(expr: Expr, negate: bool) -> list[list[tuple[str, Expr, bool]]]:
         return [[("atom", expr, negate)]]
     if isinstance(expr, CompareExpr):
         return [[("cmp", expr, negate)]]
+    if isinstance(expr, QuantExpr):
+        return [[("quant", expr, negate)]]
     if isinstance(expr, BoolExpr):
         return [[]] if expr.value != negate else []
     if isinstance(expr, NotExpr):
@@ -428,6 +509,44 @@ def _vars_of(terms: Iterable[Term]) -> list[Var]:
     return [t for t in terms if isinstance(t, Var)]
 
 
+def free_variables(expr: Expr) -> list[Var]:
+    """The variables of ``expr`` not quantified inside it, in order of first appearance."""
+    found: dict[str, Var] = {}
+
+    def walk(node: Expr, inner: frozenset[str]) -> None:
+        if isinstance(node, AtomExpr):
+            terms: Iterable[Term] = node.args
+        elif isinstance(node, CompareExpr):
+            terms = (node.left, node.right)
+        elif isinstance(node, NotExpr):
+            walk(node.child, inner)
+            return
+        elif isinstance(node, (AndExpr, OrExpr)):
+            for child in node.children:
+                walk(child, inner)
+            return
+        elif isinstance(node, QuantExpr):
+            walk(node.body, inner | {name for name, _, _ in node.variables})
+            return
+        else:
+            return
+        for var in _vars_of(terms):
+            if var.name not in inner:
+                found.setdefault(var.name, var)
+
+    walk(expr, frozenset())
+    return list(found.values())
+
+
+def uses_external(clauses: Iterable[Iterable[Step]]) -> bool:
+    """Whether a literal of ``clauses``, or of a quantifier inside them, asks an external predicate."""
+    for clause in clauses:
+        for step in clause:
+            if step[0] in (EXT, NEXT) or (step[0] in (QEX, QNEX) and uses_external(step[1].clauses)):
+                return True
+    return False
+
+
 class Condition:
     """A compiled condition: a disjunction of clauses, each a list of literals matched left to right.
 
@@ -445,8 +564,8 @@ class Condition:
         self.trivial = len(clauses) == 1 and not clauses[0]
         self.seeded = _seeded_spec(clauses)
         # generated matchers per tuple of bound variable names; only for conditions that test derived predicates
-        self.generatable = any(step[0] in (DPOS, DNEG) for clause in clauses for step in clause) and not any(
-            step[0] in (EXT, NEXT) for clause in clauses for step in clause)
+        self.generatable = any(step[0] in (DPOS, DNEG) for clause in clauses for step in clause) and not \
+            uses_external(clauses)
         self._matchers: dict[tuple[Any, ...], Any] = {}
 
     def __repr__(self) -> str:
@@ -488,8 +607,6 @@ class Condition:
 
     def _generate(self, bound: tuple[str, ...], reference_proofs: bool) -> list[Any]:
         """The generated matcher of each clause (:mod:`bt_meta.htn.codegen`), or [] to keep the reference one."""
-        from bt_meta.htn.codegen import Unsupported
-
         generated = self.context.axioms.generated(reference_proofs)
         if generated is None:
             return []
@@ -538,15 +655,21 @@ def _seeded_spec(clauses: list[list[Step]]) -> tuple | None:
     names: set[str] = set()
     for step in clause:
         kind = step[0]
-        if kind in (EXT, NEXT):
+        if kind in (EXT, NEXT, QEX, QNEX):  # a quantifier reads facts the per-seed memo would not watch
             return None
         terms = (step[1], step[2]) if kind in (EQ, NEQ) else step[2]
         names.update(term.name for term in terms if isinstance(term, Var))
     return (object(), clause[0], Clause(clause[1:]), tuple(sorted(names)), clause)
 
 
-def compile_condition(source: str, expr: Expr, context: DomainContext, bound: Iterable[str]) -> Condition:
-    """Check and compile; raises :class:`ConditionSyntaxError` at the offending offset."""
+def compile_condition(source: str, expr: Expr, context: DomainContext, bound: Iterable[str],
+                      _quantified: dict[tuple[int, bool], Step] | None = None) -> Condition:
+    """Check and compile; raises :class:`ConditionSyntaxError` at the offending offset.
+
+    ``_quantified`` (internal): each quantifier's compiled literal by node and polarity, shared with the
+    quantifiers inside, so a quantifier that distribution copies into many clauses is compiled once.
+    """
+    quantified: dict[tuple[int, bool], Step] = {} if _quantified is None else _quantified
     initially = frozenset(bound)
     clauses: list[list[Step]] = []
     bound_everywhere: set[str] | None = None
@@ -570,6 +693,14 @@ def compile_condition(source: str, expr: Expr, context: DomainContext, bound: It
                 else:
                     have.update(v.name for v in variables)
                     steps.append((DPOS if derived else POS, node.pred, node.args, node))
+            elif kind == "quant":
+                assert isinstance(node, QuantExpr)
+                _require_bound(free_variables(node), have, node, f"'{node.op}'")
+                key = (id(node), negated)
+                step = quantified.get(key)
+                if step is None:
+                    step = quantified[key] = _compile_quantifier(source, node, negated, context, quantified)
+                steps.append(step)
             else:
                 assert isinstance(node, CompareExpr)
                 _require_bound(_vars_of((node.left, node.right)), have, node, f"'{node.op}'")
@@ -580,7 +711,25 @@ def compile_condition(source: str, expr: Expr, context: DomainContext, bound: It
     return Condition(source, expr, clauses, context, frozenset(bound_everywhere or initially))
 
 
-def _require_bound(variables: list[Var], have: set[str], node: AtomExpr | CompareExpr, what: str) -> None:
+def _compile_quantifier(source: str, node: QuantExpr, negated: bool, context: DomainContext,
+                        quantified: dict[tuple[int, bool], Step]) -> Step:
+    """``exists V: F`` -> QEX of ``types(V) and F``; ``forall V: F`` -> QNEX of ``types(V) and not F``."""
+    free = free_variables(node)
+    type_atoms: list[Expr] = []
+    for name, type_name, offset in node.variables:
+        if context.arities.get(type_name) != 1 or type_name in context.external:
+            unary = sorted(p for p, n in context.arities.items() if n == 1 and p not in context.external)
+            raise ConditionSyntaxError(f"the type {type_name!r} of ?{name} is not a type or a unary predicate "
+                                       f"(known: {', '.join(unary) or 'none'})", offset)
+        type_atoms.append(AtomExpr(type_name, (Var(name),), offset, (offset,)))
+    body = node.body if node.op == "exists" else NotExpr(node.body, node.offset)
+    sub = compile_condition(source, AndExpr((*type_atoms, body)), context, [v.name for v in free], quantified)
+    kind = QEX if (node.op == "exists") != negated else QNEX
+    return (kind, sub, tuple(free), node)
+
+
+def _require_bound(variables: list[Var], have: set[str], node: AtomExpr | CompareExpr | QuantExpr,
+                   what: str) -> None:
     for var in variables:
         if var.name not in have:
             offset = node.offset
@@ -682,6 +831,14 @@ def _step_results(step: Step, state: State, env: dict[str, str], external: Exter
         return (env,) if _value(step[1], env) == _value(step[2], env) else ()
     if kind == NEQ:
         return (env,) if _value(step[1], env) != _value(step[2], env) else ()
+    if kind in (QEX, QNEX):
+        inner = {var.name: env[var.name] for var in step[2]}  # the quantifier sees its free variables only
+        found = False
+        for clause in step[1].clauses:
+            if next(iter(match_clause(clause, state, inner, external, axioms, derived_source)), None) is not None:
+                found = True
+                break
+        return (env,) if found == (kind == QEX) else ()
     if kind in (DPOS, DNEG):
         if derived_source is not None:  # inside a bottom-up fixpoint
             source = derived_source(step[1])

@@ -36,6 +36,9 @@ from bt_meta.htn.conditions import (
     EXT,
     KEYWORDS,
     NEXT,
+    QEX,
+    QNEX,
+    AndExpr,
     AtomExpr,
     Condition,
     ConditionSyntaxError,
@@ -47,7 +50,7 @@ from bt_meta.htn.conditions import (
     parse_condition,
     parse_parameter,
 )
-from bt_meta.htn.model import Domain, Method, Primitive, Problem, TaskDecl, TaskFile
+from bt_meta.htn.model import ConditionalEffect, Domain, Method, Primitive, Problem, TaskDecl, TaskFile
 from bt_meta.htn.state import Atom, State
 from bt_meta.safe_yaml import compose_yaml, construct_yaml
 from bt_meta.user_files import check_path_text, read_user_text
@@ -58,7 +61,7 @@ DOMAIN_ROOTS_ENV = "BT_META_DOMAIN_ROOTS"
 # How many domain files one task file may chain through (a problem file naming a file that names another ...).
 MAX_DOMAIN_FILE_CHAIN = 8
 
-_PREDICATE_NAME = re.compile(r"[A-Za-z0-9_.+\-][A-Za-z0-9_.+\-/:]*")
+_PREDICATE_NAME = re.compile(r"[A-Za-z0-9_.+\-](?:[A-Za-z0-9_.+\-/:]*[A-Za-z0-9_.+\-/])?")
 
 # -- flow lists of atoms ----------------------------------------------------------------------------------------
 
@@ -558,6 +561,13 @@ class _Loader:
                         raise self.error(f"axiom {head.pred} uses external predicate {step[1]}; axioms may use "
                                          "state and derived predicates only",
                                          src.locate(step[3].offset) if src else None)
+                    if step[0] in (QEX, QNEX):
+                        # the axiom memo (inherited by successor states) does not watch the facts a quantifier
+                        # reads, and stratification does not see through it
+                        raise self.error(f"axiom {head.pred} uses '{step[3].op}'; axiom conditions may not use "
+                                         "quantifiers (write the quantified part as an axiom of its own: "
+                                         "forall F is 'not' of an axiom for 'type and not F')",
+                                         src.locate(step[3].offset) if src else None)
             for arg, offset in zip(head.args, head.arg_offsets, strict=False):
                 if isinstance(arg, Var) and arg.name not in condition.variables_bound:
                     raise self.error(f"variable ?{arg.name} in the axiom head is not bound by its condition",
@@ -652,28 +662,18 @@ class _Loader:
         what = f"primitive {name}"
         if self.is_null(node):
             node = yaml.MappingNode("tag:yaml.org,2002:map", [], node.start_mark, node.end_mark)
-        keys = self.keys(node, what, {"parameters", "precondition", "add", "delete", "cost", "expectations"})
+        keys = self.keys(node, what, {"parameters", "precondition", "add", "delete", "effects", "cost",
+                                      "expectations"})
         params, ptypes = (self.parameters(keys["parameters"][1], f"the parameters of {what}", types)
                           if "parameters" in keys else ([], []))
         pre_src = self.condition_src(keys["precondition"][1], f"the precondition of {what}") \
             if "precondition" in keys else None
         precondition = self.compile(pre_src, context, set(params))
-        effects: dict[str, list[tuple]] = {"add": [], "delete": []}
-        for effect_key in ("add", "delete"):
-            if effect_key not in keys:
-                continue
-            for src in self.items(keys[effect_key][1], f"the {effect_key} effects of {what}"):
-                atom = self.parse_atom(src)
-                if atom.pred in context.derived:
-                    raise self.error(f"effect {atom.pred} is a derived predicate (an axiom head); effects may only "
-                                     "change declared predicates", src.locate(atom.offset))
-                if atom.pred in context.external:
-                    raise self.error(f"effect {atom.pred} is an external predicate; its truth comes from a plugin",
-                                     src.locate(atom.offset))
-                self.check_atom(atom, context, src)
-                self.check_bound(atom, precondition.variables_bound, src, f"effect of {what}",
-                                 "its parameters or its precondition")
-                effects[effect_key].append((atom.pred, *atom.args))
+        effects = self.effect_lists(keys, context, precondition.variables_bound, what,
+                                    "its parameters or its precondition")
+        conditional = []
+        if "effects" in keys and not self.is_null(keys["effects"][1]):
+            conditional = self.conditional_effects(keys["effects"][1], context, precondition.variables_bound, what)
         cost = 1.0
         if "cost" in keys:
             text = self.scalar(keys["cost"][1], f"the cost of {what}")
@@ -687,7 +687,78 @@ class _Loader:
             self.mapping(exp_node, f"the expectations of {what}")
             expectations = construct_yaml(exp_node, self.path, TaskFileError)
         return Primitive(name, params, ptypes, precondition, effects["add"], effects["delete"], cost, expectations,
-                         key_node.start_mark.line + 1, key_node.start_mark.column + 1)
+                         key_node.start_mark.line + 1, key_node.start_mark.column + 1, conditional)
+
+    def effect_lists(self, keys: dict[str, tuple[yaml.Node, yaml.Node]], context: DomainContext,
+                     bound: frozenset[str] | set[str], what: str, by: str) -> dict[str, list[tuple]]:
+        """The ``add:`` and ``delete:`` atoms of a primitive or of one of its conditional effects."""
+        effects: dict[str, list[tuple]] = {"add": [], "delete": []}
+        for effect_key in ("add", "delete"):
+            if effect_key not in keys:
+                continue
+            for src in self.items(keys[effect_key][1], f"the {effect_key} effects of {what}"):
+                atom = self.parse_atom(src)
+                if atom.pred in context.derived:
+                    raise self.error(f"effect {atom.pred} is a derived predicate (an axiom head); effects may only "
+                                     "change declared predicates", src.locate(atom.offset))
+                if atom.pred in context.external:
+                    raise self.error(f"effect {atom.pred} is an external predicate; its truth comes from a plugin",
+                                     src.locate(atom.offset))
+                self.check_atom(atom, context, src)
+                self.check_bound(atom, bound, src, f"effect of {what}", by)
+                effects[effect_key].append((atom.pred, *atom.args))
+        return effects
+
+    def conditional_effects(self, node: yaml.Node, context: DomainContext, bound: frozenset[str],
+                            what: str) -> list[ConditionalEffect]:
+        """``effects:``, a list of ``{forall: [?v - type, ...], when: condition, add: [...], delete: [...]}``."""
+        if not isinstance(node, yaml.SequenceNode):
+            raise self.error(f"the effects of {what} must be a list of {{forall: ..., when: ..., add: ..., "
+                             f"delete: ...}}, found {_node_kind(node, self.flow_starts)}", node)
+        found: list[ConditionalEffect] = []
+        for index, item in enumerate(node.value, start=1):
+            where = f"conditional effect {index} of {what}"
+            keys = self.keys(item, where, {"forall", "when", "add", "delete"})
+            if "add" not in keys and "delete" not in keys:
+                raise self.error(f"{where} has neither 'add:' nor 'delete:'", item)
+            variables: list[str] = []
+            types: list[str] = []
+            type_atoms: list[AtomExpr] = []
+            if "forall" in keys:
+                for src in self.items(keys["forall"][1], f"the forall variables of {where}"):
+                    try:
+                        name, type_name = parse_parameter(src.text)
+                    except ConditionSyntaxError as exc:
+                        raise self.error(f"bad variable {src.text!r} in the forall of {where}: {exc.message}",
+                                         src.locate(exc.offset)) from None
+                    if type_name is None:
+                        raise self.error(f"forall variable ?{name} of {where} needs a type: ?{name} - type",
+                                         src.locate(0))
+                    if name in variables or name in bound:
+                        raise self.error(f"forall variable ?{name} of {where} is already "
+                                         f"{'quantified' if name in variables else 'bound by the primitive'}; "
+                                         "give it another name", src.locate(0))
+                    if context.arities.get(type_name) != 1 or type_name in context.external:
+                        unary = sorted(p for p, n in context.arities.items() if n == 1 and p not in context.external)
+                        raise self.error(f"the type {type_name!r} of ?{name} is not a type or a unary predicate "
+                                         f"(known: {', '.join(unary) or 'none'})",
+                                         src.locate(src.text.index(type_name, src.text.index("-"))))
+                    variables.append(name)
+                    types.append(type_name)
+                    type_atoms.append(AtomExpr(type_name, (Var(name),), 0, (0,)))
+            inner = set(bound) | set(variables)
+            when_src = self.condition_src(keys["when"][1], f"the when condition of {where}") \
+                if "when" in keys else None
+            when = self.compile(when_src, context, inner)
+            try:
+                condition = compile_condition(when.source, AndExpr((*type_atoms, when.expr)), context, bound)
+            except ConditionSyntaxError as exc:  # the size bounds, with the forall's type atoms added
+                raise self.error(exc.message, when_src.locate(exc.offset) if when_src else item) from None
+            lists = self.effect_lists(keys, context, inner, where,
+                                      "its forall, its primitive's parameters or its precondition")
+            found.append(ConditionalEffect(variables, types, when, condition, lists["add"], lists["delete"],
+                                           item.start_mark.line + 1, item.start_mark.column + 1))
+        return found
 
     def check_atom(self, atom: AtomExpr, context: DomainContext, src: Src) -> None:
         try:

@@ -3,6 +3,7 @@
 Offers:
 
 * :class:`Primitive` (with :meth:`Primitive.ground` -> :class:`GroundPrimitive`) -- an action
+* :class:`ConditionalEffect` -- a primitive's ``forall`` / ``when`` effect, decided in the state the action starts in
 * :class:`TaskDecl` -- a compound task's name and parameters
 * :class:`Method` -- a recipe decomposing a compound task (ordered or unordered subtasks)
 * :class:`Domain` -- types, predicates, externals, axioms, primitives, tasks, methods (in file order)
@@ -56,6 +57,36 @@ def types_hold(types: Sequence[str | None], args: Sequence[str], state: State) -
 
 
 @dataclass
+class ConditionalEffect:
+    """``forall ?v - t, ...: when C: add / delete``: applies once per binding of ``variables`` under which C holds.
+
+    ``when`` is the condition alone (bound: the primitive's bound variables and ``variables``); ``condition`` is
+    the type atoms of ``variables`` followed by ``when``, which enumerates the bindings. Both are evaluated in the
+    state the action starts in, so every effect of a step sees the same state (PDDL's simultaneous effects).
+    """
+
+    variables: list[str]
+    types: list[str]
+    when: Condition
+    condition: Condition
+    add: list[Template]
+    delete: list[Template]
+    line: int | None = None
+    column: int | None = None
+
+    def __post_init__(self) -> None:
+        self._add = [template_builder(t[0], t[1:]) for t in self.add]
+        self._delete = [template_builder(t[0], t[1:]) for t in self.delete]
+
+    def collect(self, state: State, env: dict[str, str], external: ExternalFn | None, add: list[Atom],
+                delete: list[Atom]) -> None:
+        """Append this effect's ground atoms for every satisfying binding in ``state`` (the pre-state)."""
+        for found in self.condition.satisfiers(state, env, external):
+            add.extend(build(found) for build in self._add)
+            delete.extend(build(found) for build in self._delete)
+
+
+@dataclass
 class Primitive:
     name: str
     parameters: list[str]
@@ -67,6 +98,7 @@ class Primitive:
     expectations: dict[str, Any] = field(default_factory=dict)
     line: int | None = None
     column: int | None = None
+    conditional: list[ConditionalEffect] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         self._typed = any(t is not None for t in self.types)
@@ -91,8 +123,20 @@ class Primitive:
             return iter(())
         return self.precondition.satisfiers(state, env, external)
 
-    def effects(self, env: dict[str, str]) -> tuple[list[Atom], list[Atom]]:
-        return [build(env) for build in self._add], [build(env) for build in self._delete]
+    def effects(self, env: dict[str, str], state: State | None = None,
+                external: ExternalFn | None = None) -> tuple[list[Atom], list[Atom]]:
+        """(add, delete) under the precondition's binding ``env``; conditional effects need the pre-``state``."""
+        add = [build(env) for build in self._add]
+        delete = [build(env) for build in self._delete]
+        if self.conditional:
+            if state is None:
+                raise PlanningError(f"primitive {self.name} has conditional (forall / when) effects: its effects "
+                                    "depend on the state the step starts in, which was not given")
+            for effect in self.conditional:
+                effect.collect(state, env, external, add, delete)
+            add = list(dict.fromkeys(add))
+            delete = list(dict.fromkeys(delete))
+        return add, delete
 
     def signature(self) -> str:
         return template_text(self.name, [Var(p) for p in self.parameters])
@@ -118,7 +162,7 @@ class GroundPrimitive:
         env = next(iter(self.primitive.satisfiers(state, self.args, external)), None)
         if env is None:
             raise PlanningError(f"precondition of {self} does not hold: {self.primitive.precondition.source}")
-        return self.primitive.effects(env)
+        return self.primitive.effects(env, state, external)
 
     def apply(self, state: State, external: ExternalFn | None = None) -> State:
         add, delete = self.effects(state, external)

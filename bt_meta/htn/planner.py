@@ -340,7 +340,7 @@ class Search:
                 task = item[1]
                 if task[0] in primitives:
                     prim = primitives[task[0]]
-                    add, delete = prim.effects(alternative)
+                    add, delete = prim.effects(alternative, state, external)
                     trail.append((task, "primitive", None, alternative, item[2], state, step_offset + len(plan)))
                     plan.append(len(trail) - 1)
                     state = state._apply(add, delete)

@@ -13,12 +13,16 @@ every compound node names a method of its task whose head matches under the node
 precondition holds in the state the node starts in, and whose subtasks (in order, or in any order for
 ``unordered:``) are the node's children; the primitive leaves, left to right, are the plan. Nothing of the
 planner's search is used: states are rebuilt here step by step and conditions are evaluated by the reference
-matcher (generated code off), so a planner bug cannot vouch for itself.
+matcher (generated code off), so a planner bug cannot vouch for itself. Effects are applied here too
+(:func:`_step_effects`): conditional effects by enumerating every combination of the ``forall`` variables' type
+objects and testing each ``when`` in the step's pre-state, not by the planner's :meth:`Primitive.effects`.
 """
 
 from __future__ import annotations
 
+import itertools
 import json
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,8 +30,10 @@ from typing import Any
 
 from bt_meta.errors import UserInputError
 from bt_meta.htn.conditions import Var
-from bt_meta.htn.model import Domain, Problem, types_hold
+from bt_meta.htn.model import Domain, Primitive, Problem, types_hold
 from bt_meta.htn.state import Atom, State, atom_text
+
+MAX_FORALL_COMBINATIONS = 1_000_000  # forall bindings one conditional effect of one step may make the verifier try
 
 
 @dataclass
@@ -85,8 +91,53 @@ def _apply_step(domain: Domain, state: State, step: tuple[str, ...]) -> tuple[St
     satisfier = next(iter(prim.precondition.satisfiers(state, env)), None)
     if satisfier is None:
         return None, f"the precondition of {atom_text(step)} does not hold: {prim.precondition.source}"
-    add, delete = prim.effects(satisfier)
+    effects = _step_effects(domain, prim, state, satisfier)
+    if isinstance(effects, str):
+        return None, f"{atom_text(step)}: {effects}"
+    add, delete = effects
     return state.apply(add=add, delete=delete), None
+
+
+def _step_effects(domain: Domain, prim: Primitive, state: State, env: dict[str, str]
+                  ) -> tuple[list[Atom], list[Atom]] | str:
+    """(add, delete) of a step: the plain effects, then each conditional effect for every binding of its
+    ``forall`` variables (objects of their types in ``state``) whose ``when`` holds in ``state`` (the pre-state).
+
+    A message instead when a ``forall`` has more than :data:`MAX_FORALL_COMBINATIONS` bindings to try.
+    """
+    add: list[Atom] = []
+    delete: list[Atom] = []
+    for templates, out in ((prim.add, add), (prim.delete, delete)):
+        for template in templates:
+            atom = _ground(template, env)
+            if atom is None:
+                raise UserInputError(f"effect {template[0]} of {prim.name} has an unbound variable")
+            out.append(atom)
+    for effect in prim.conditional:
+        pools = [sorted({atom[1] for atom in _extension(domain, type_name, state)}) for type_name in effect.types]
+        if math.prod(len(pool) for pool in pools) > MAX_FORALL_COMBINATIONS:
+            return (f"a conditional effect has {' x '.join(str(len(p)) for p in pools)} forall bindings, more than "
+                    f"the {MAX_FORALL_COMBINATIONS} the verifier enumerates")
+        for values in itertools.product(*pools):
+            local = dict(env)
+            local.update(zip(effect.variables, values, strict=True))
+            if not effect.when.holds(state, local):
+                continue
+            for templates, out in ((effect.add, add), (effect.delete, delete)):
+                for template in templates:
+                    atom = _ground(template, local)
+                    if atom is None:
+                        raise UserInputError(f"a conditional effect {template[0]} of {prim.name} has an unbound "
+                                             "variable")
+                    out.append(atom)
+    return add, delete
+
+
+def _extension(domain: Domain, pred: str, state: State) -> list[Atom]:
+    """The atoms of ``pred`` (a fact or derived predicate) true in ``state``."""
+    if pred in domain.context.derived:
+        return list(domain.axiom_set.extension(state, pred).atoms_of(pred))
+    return [atom for atom in state.atoms_of(pred) if len(atom) == 2]
 
 
 def _holds(domain: Domain, atom: Atom, state: State) -> bool:

@@ -173,7 +173,7 @@ def _final_state(domain: Any, steps: Sequence[Sequence[str]], state: Any, extern
             env = next(iter(primitive.satisfiers(state, args, external)), None)
             if env is None:
                 env = primitive.ground(args).bindings
-            add, delete = primitive.effects(env)
+            add, delete = primitive.effects(env, state, external)
         except (BtMetaError, KeyError, TypeError, ValueError):
             continue
         state = state.apply(add=add, delete=delete)
@@ -458,6 +458,13 @@ def task_file_yaml(domain: Any, problems: Iterable[Any] = (), header: str | None
             entry["precondition"] = primitive.precondition.source
         entry["add"] = [template_text(t[0], t[1:]) for t in primitive.add]
         entry["delete"] = [template_text(t[0], t[1:]) for t in primitive.delete]
+        if primitive.conditional:  # forall / when effects (docs/task-files.md, "Conditional effects")
+            entry["effects"] = [{key: value for key, value in {
+                "forall": [f"?{v} - {t}" for v, t in zip(e.variables, e.types, strict=True)],
+                "when": None if e.when.trivial else e.when.source,
+                "add": [template_text(t[0], t[1:]) for t in e.add],
+                "delete": [template_text(t[0], t[1:]) for t in e.delete]}.items() if value}
+                for e in primitive.conditional]
         if primitive.cost != 1:
             entry["cost"] = primitive.cost
         if primitive.expectations:

@@ -81,4 +81,4 @@ def ground_effects(
     env = next(iter(primitive.satisfiers(state, tuple(args), external)), None)
     if env is None:
         return None
-    return primitive.effects(env)
+    return primitive.effects(env, state, external)

@@ -117,10 +117,18 @@ def test_partial_order_is_refused_with_the_method_position():
                           "ordered HDDL is supported")
 
 
-def test_conditional_effects_are_refused_with_their_position():
-    error = _domain_error("(define (domain d) (:predicates (p) (q))\n (:action a :effect (when (p) (q))))")
-    assert str(error) == ("d.hddl:2:21: action a: (when ...) effects are not supported yet (the task-file "
-                          "format has unconditional add/delete effects only)")
+def test_a_cost_inside_a_conditional_effect_is_refused_with_its_position():
+    error = _domain_error("(define (domain d) (:predicates (p) (q))\n"
+                          " (:action a :effect (when (p) (increase (total-cost) 2))))")
+    assert str(error) == ("d.hddl:2:31: action a: (increase (total-cost) ...) inside forall / when is not "
+                          "supported (a primitive has one cost)")
+
+
+def test_a_forall_effect_variable_that_reuses_a_parameter_is_refused():
+    error = _domain_error("(define (domain d) (:predicates (p ?x))\n"
+                          " (:action a :parameters (?x) :effect (forall (?x) (p ?x))))")
+    assert str(error) == ("d.hddl:2:47: action a: the forall variable ?x is already a variable here; give it "
+                          "another name")
 
 
 def test_arity_mismatch_and_unknown_task_are_located():

@@ -159,8 +159,8 @@ ERRORS = [
      "8:16: each item of the delete effects of primitive move must be a string, found a list"),
     ("unknown key", "      delete: [clear(?b)]\n",
      "      delete: [clear(?b)]\n      pre: x\n",
-     "9:7: unknown key 'pre' in primitive move (expected one of: add, cost, delete, expectations, parameters, "
-     "precondition)"),
+     "9:7: unknown key 'pre' in primitive move (expected one of: add, cost, delete, effects, expectations, "
+     "parameters, precondition)"),
     ("missing required key", "      task: stack(?a, ?b)\n", "",
      "11:7: a method is missing the required key 'task'"),
     ("both ordered and unordered subtasks", "      subtasks: [move(?a, ?b)]\n",

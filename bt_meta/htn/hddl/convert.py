@@ -12,16 +12,19 @@ How each HDDL feature is spelled in the task file (see docs/task-files.md, "HDDL
   predicate ``either_a_b`` with one axiom per member type
 * a typed parameter -> a type atom in the precondition: a test when the variable is bound (head, arguments),
   a generator for a method parameter that nothing else binds (HDDL's free method parameters)
-* ``forall`` / ``exists`` -> derived predicates (axioms) over the free variables, used positively or under
-  ``not``; ``imply`` and ``not`` are pushed inwards (negation normal form); ``=`` -> ``==`` / ``!=``
+* ``forall`` / ``exists`` -> the task file's own ``forall ?v - t: F`` / ``exists ?v - t: F`` (inside a goal
+  that becomes an axiom, where quantifiers are not allowed: derived predicates over the free variables);
+  ``imply`` and ``not`` are pushed inwards (negation normal form); ``=`` -> ``==`` / ``!=``
+* ``forall`` / ``when`` effects, nested in any way -> ``effects:`` entries ``{forall: [...], when: ..., add:
+  [...], delete: [...]}`` (nested ``forall``s concatenate their variables, nested ``when``s conjoin)
 * a goal that is not a conjunction of atoms -> a 0-ary derived predicate that the goal names
 * ``:htn`` with parameters or constraints -> a synthetic root task with one method
 * ``:ordering`` -> the total order it implies; no ordering at all -> ``unordered:``; a partial order is refused
   with the position of the method
 * ``(increase (total-cost) N)`` -> ``cost: N``
 
-Refused with a located error: conditional and universal effects (``when``, ``forall`` in effects), a type with
-several parents, partially ordered methods.
+Refused with a located error: a type with several parents, partially ordered methods, a ``forall`` effect
+variable that reuses a name in scope, a cost increase inside ``forall`` / ``when``.
 """
 
 from __future__ import annotations
@@ -35,7 +38,7 @@ from bt_meta.htn.hddl.sexpr import HddlError, SList, Sym
 from bt_meta.htn.hddl.syntax import Effect, Formula, HDomain, HMethod, HProblem, Subtask, TaskNetwork, Typed
 
 _KEYWORDS = {"and", "or", "not", "true", "false"}
-_NAME_OK = re.compile(r"[A-Za-z0-9_.+\-][A-Za-z0-9_.+\-/:]*\Z")
+_NAME_OK = re.compile(r"[A-Za-z0-9_.+\-](?:[A-Za-z0-9_.+\-/:]*[A-Za-z0-9_.+\-/])?\Z")
 _VAR_OK = re.compile(r"[A-Za-z_][A-Za-z0-9_\-]*\Z")
 _PLAIN_YAML = re.compile(r"[A-Za-z_][A-Za-z0-9_\-]*\Z")
 _YAML_SPECIAL = {"y", "n", "yes", "no", "on", "off", "true", "false", "null", "~"}
@@ -154,6 +157,7 @@ class _Converter:
         self.constants: list[tuple[str, list[str]]] = []
         self.need_object = False
         self.either: dict[tuple[str, ...], str] = {}
+        self.axiom_body = False  # converting a condition that becomes an axiom (no quantifiers there)
 
     def error(self, message: str, where: Sym | SList | None, path: str | None = None) -> HddlError:
         path = path or self.path
@@ -349,6 +353,26 @@ class _Converter:
         raise self.error(f"unsupported condition {op!r} in {where}", f.where)
 
     def quantifier(self, f: Formula, scope: _Scope, negate: bool, where: str) -> str:
+        """``(forall ?v - t: F)`` / ``(exists ...)``, negation pushed into the body; in an axiom, a derived atom."""
+        if self.axiom_body:
+            return self.quantifier_axiom(f, scope, negate, where)
+        inner = _Scope(scope)
+        for p in f.params:
+            inner.declare(p, self._var_name(p.name))
+        for sym in self.free_vars(f, scope):
+            if scope.lookup(sym) is None:
+                raise self.error(f"variable {sym.text} in {where} is not a parameter", sym)
+        variables = []
+        for p in f.params:
+            var = self._var_name(p.name)
+            atom = self.type_atom(p.types, f"?{var}", needed=True)
+            assert atom is not None
+            variables.append(f"?{var} - {atom[:atom.index('(')]}")
+        op = f.op if not negate else ("exists" if f.op == "forall" else "forall")
+        body = self.condition(f.children[0], inner, negate, where)
+        return f"({op} {', '.join(variables)}: {body})"
+
+    def quantifier_axiom(self, f: Formula, scope: _Scope, negate: bool, where: str) -> str:
         inner = _Scope(scope)
         for p in f.params:
             inner.declare(p, self._var_name(p.name))
@@ -500,20 +524,60 @@ class _Converter:
                                     action.params, set())
             add, delete, cost = [], [], 1.0
             cost_given = False
-            for effect in action.effects:
-                if effect.kind in ("forall", "when"):
-                    raise self.error(f"{what}: ({effect.kind} ...) effects are not supported yet (the task-file "
-                                     "format has unconditional add/delete effects only)", effect.where)
+            conditional: dict[tuple, dict] = {}  # (forall variables, when) -> entry, in first-seen order
+            for effect_params, conditions, effect_scope, effect in self.flat_effects(action.effects, scope, [], [],
+                                                                                     what):
                 if effect.kind == "cost":
                     cost = effect.amount if not cost_given else cost + effect.amount
                     cost_given = True
                     continue
-                text = self.effect_atom(effect, scope, what)
-                (add if effect.kind == "add" else delete).append(text)
+                text = self.effect_atom(effect, effect_scope, what)
+                if not effect_params and not conditions:
+                    (add if effect.kind == "add" else delete).append(text)
+                    continue
+                variables = []
+                for p in effect_params:
+                    var = self._var_name(p.name)
+                    atom = self.type_atom(p.types, f"?{var}", needed=True)
+                    assert atom is not None
+                    variables.append(f"?{var} - {atom[:atom.index('(')]}")
+                when = None
+                if conditions:
+                    where = conditions[0].where
+                    when = self.condition(Formula("and", where, list(conditions)), effect_scope, False,
+                                          f"a when condition of {what}")
+                    when = None if when == "true" else when
+                entry = conditional.setdefault((tuple(variables), when),
+                                               {"forall": variables, "when": when, "add": [], "delete": []})
+                entry["add" if effect.kind == "add" else "delete"].append(text)
             self.primitives[name] = {"parameters": params, "precondition": pre, "add": add, "delete": delete,
-                                     "cost": cost if cost_given else None}
+                                     "cost": cost if cost_given else None, "effects": list(conditional.values())}
         for method in self.domain.methods:
             self.methods.append(self.convert_method(method))
+
+    def flat_effects(self, effects: Sequence[Effect], scope: _Scope, params: list[Typed], conditions: list[Formula],
+                     what: str) -> list[tuple[list[Typed], list[Formula], _Scope, Effect]]:
+        """Every add / delete / cost effect with the ``forall`` variables and ``when`` conditions around it."""
+        found: list[tuple[list[Typed], list[Formula], _Scope, Effect]] = []
+        for effect in effects:
+            if effect.kind == "forall":
+                inner = _Scope(scope)
+                for p in effect.params:
+                    if scope.lookup(p.name) is not None or inner.lookup(p.name) is not None:
+                        raise self.error(f"{what}: the forall variable {p.name.text} is already a variable here; "
+                                         "give it another name", p.name)
+                    inner.declare(p, self._var_name(p.name))
+                found.extend(self.flat_effects(effect.effects, inner, [*params, *effect.params], conditions, what))
+            elif effect.kind == "when":
+                assert effect.condition is not None
+                found.extend(self.flat_effects(effect.effects, scope, params, [*conditions, effect.condition],
+                                               what))
+            elif effect.kind == "cost" and (params or conditions):
+                raise self.error(f"{what}: (increase (total-cost) ...) inside forall / when is not supported (a "
+                                 "primitive has one cost)", effect.where)
+            else:
+                found.append((params, conditions, scope, effect))
+        return found
 
     def effect_atom(self, effect: Effect, scope: _Scope, what: str) -> str:
         assert effect.pred is not None
@@ -851,7 +915,11 @@ class _Converter:
         if goal_parts and all(g.op == "atom" for g in goal_parts):
             goal = [self.condition(g, scope, False, "the goal") for g in goal_parts]
         elif goal_parts:
-            text = self.condition(Formula("and", problem.goal.where, goal_parts), scope, False, "the goal")
+            self.axiom_body = True
+            try:
+                text = self.condition(Formula("and", problem.goal.where, goal_parts), scope, False, "the goal")
+            finally:
+                self.axiom_body = False
             pred = self.names.make("pred", f"goal_{re.sub(r'[^A-Za-z0-9_]', '_', name)}",
                                    f"the goal of problem {name}")
             self.axioms.append((f"{pred}()", text))
@@ -897,6 +965,21 @@ class _Converter:
             self._list(out, "      precondition", body["precondition"])
             self._list(out, "      add", body["add"])
             self._list(out, "      delete", body["delete"])
+            if body["effects"]:
+                out.append("      effects:")
+                for entry in body["effects"]:
+                    lead = "        - "
+                    if entry["forall"]:
+                        out.append(f"{lead}forall: [{', '.join(entry['forall'])}]")
+                        lead = "          "
+                    if entry["when"] is not None:
+                        out.append(f"{lead}when: {_yaml_item(entry['when'])}")
+                        lead = "          "
+                    for key in ("add", "delete"):
+                        if entry[key]:
+                            out.append(f"{lead}{key}:")
+                            out.extend(f"            - {_yaml_item(atom)}" for atom in entry[key])
+                            lead = "          "
             if body["cost"] is not None:
                 out.append(f"      cost: {body['cost']:g}")
         out.append("  tasks:" if self.tasks else "  tasks: {}")

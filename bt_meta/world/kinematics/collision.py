@@ -23,12 +23,14 @@ from __future__ import annotations
 import xml.etree.ElementTree as ElementTree
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import coal
 import numpy as np
 import pinocchio as pin
 
 from bt_meta.errors import KinematicsError
+from bt_meta.model_cache import cached, file_signature
 from bt_meta.world.kinematics.forward import Kinematics, se3_from_matrix
 
 __all__ = ["CollisionChecker", "Contact", "SceneObject", "pose_from_xyz_rpy"]
@@ -94,12 +96,10 @@ class CollisionChecker:
         robot = kinematics.robot
         self._model = model
         self._data = model.createData()
-        self.geometry: pin.GeometryModel = pin.buildGeomFromUrdf(
-            model, str(robot.urdf_path), pin.GeometryType.COLLISION, package_dirs=[str(p) for p in robot.package_dirs]
-        )
+        robot_geometry, self._disabled_links = _robot_geometry(model, robot)
+        self.geometry: pin.GeometryModel = robot_geometry.copy()  # the scene's objects go into this copy
         self._robot_geometries = self.geometry.ngeoms
         self._link_of = [model.frames[g.parentFrame].name for g in self.geometry.geometryObjects]
-        self._disabled_links = _srdf_disabled_pairs(robot.srdf_path) if robot.srdf_path else set()
         self._objects: dict[str, SceneObject] = {}
         self._allowed: set[frozenset[str]] = set()
         self._geometry_data: pin.GeometryData | None = None
@@ -417,6 +417,22 @@ def _positive(values: Sequence[float], count: int, what: str) -> tuple[float, ..
     if len(out) != count or not all(np.isfinite(v) and v > 0 for v in out):
         raise KinematicsError(f"{what} must be {count} positive numbers, got {tuple(values)!r}")
     return out
+
+
+def _robot_geometry(model: pin.Model, robot: Any) -> tuple[pin.GeometryModel, frozenset[frozenset[str]]]:
+    """The robot's collision geometry parsed from its URDF (meshes included) and the SRDF's disabled pairs, once
+    per process (:mod:`bt_meta.model_cache`): callers copy the geometry model before adding to it; the
+    copies share the immutable coal shapes."""
+    key = ("collision geometry", file_signature(robot.urdf_path), file_signature(robot.srdf_path),
+           tuple(str(p) for p in robot.package_dirs), model.njoints, model.nframes)
+
+    def parse() -> tuple[pin.GeometryModel, frozenset[frozenset[str]]]:
+        geometry = pin.buildGeomFromUrdf(model, str(robot.urdf_path), pin.GeometryType.COLLISION,
+                                         package_dirs=[str(p) for p in robot.package_dirs])
+        disabled = _srdf_disabled_pairs(robot.srdf_path) if robot.srdf_path else set()
+        return geometry, frozenset(disabled)
+
+    return cached(key, parse)
 
 
 def _srdf_disabled_pairs(path) -> set[frozenset[str]]:

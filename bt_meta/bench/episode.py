@@ -38,7 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from bt_meta.commands._common import print_json
-from bt_meta.errors import UserInputError
+from bt_meta.errors import BtMetaError, UserInputError
 
 __all__ = ["child", "register", "run"]
 
@@ -96,11 +96,13 @@ def _timed_process(tasks: list[dict[str, Any]], task_file: Path) -> tuple[float,
     """Wall seconds of a child process serving ``tasks`` in a row, and what it reports per episode."""
     task_file.write_text(json.dumps(tasks), encoding="utf-8")
     started = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "bt_meta.bench.episode", str(task_file)],
+    # Run from the task's folder: ``-m`` puts the working directory first on sys.path, and a checkout of another
+    # bt-meta there (run from a different worktree) would be imported instead of this one.
+    done = subprocess.run([sys.executable, "-m", "bt_meta.bench.episode", str(task_file)], cwd=task_file.parent,
                           capture_output=True, text=True, check=False)
     wall = time.perf_counter() - started
     if done.returncode != 0:
-        raise UserInputError(f"the timed episode failed: {done.stderr.strip().splitlines()[-1:]}")
+        raise BtMetaError("the timed episode failed:\n" + "\n".join(done.stderr.strip().splitlines()[-12:]))
     return wall, json.loads(done.stdout.strip().splitlines()[-1])
 
 

@@ -144,6 +144,7 @@ def compose_yaml(text: str, path: str, error: type[UserInputError] = UserInputEr
 _MISSING: Any = object()
 _COMPOSED: OrderedDict[tuple[Any, ...], yaml.Node | None] = OrderedDict()
 _COMPOSED_KEPT = 32
+_COMPOSED_LARGEST = 256 * 1024  # characters: task files and scenes are a few KiB; a huge file is not kept
 
 
 def _remembered(key: tuple[Any, ...]) -> Any:
@@ -162,7 +163,7 @@ def _remembered(key: tuple[Any, ...]) -> Any:
 def _remember(key: tuple[Any, ...], text: str, root: yaml.Node | None) -> None:
     from bt_meta.model_cache import enabled
 
-    if not enabled() or "<<" in text or "merge" in text:
+    if not enabled() or len(text) > _COMPOSED_LARGEST or "<<" in text or "merge" in text:
         return
     _COMPOSED[key] = root
     while len(_COMPOSED) > _COMPOSED_KEPT:  # the least recently used go: a worker meets many variant scenes

@@ -95,6 +95,11 @@ def test_the_same_yaml_text_is_composed_once():
     assert compose_yaml(text, "y.yaml") is not compose_yaml(text, "x.yaml")  # errors name the file they came from
 
 
+def test_a_huge_yaml_text_is_not_kept():
+    text = "a: [" + ", ".join(["1"] * 100_000) + "]\n"
+    assert compose_yaml(text, "big.yaml") is not compose_yaml(text, "big.yaml")
+
+
 def test_yaml_with_merge_keys_is_never_reused():
     text = "base: &b {x: 1}\nother:\n  <<: *b\n  y: 2\n"
     assert compose_yaml(text, "m.yaml") is not compose_yaml(text, "m.yaml")

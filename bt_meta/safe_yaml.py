@@ -17,6 +17,7 @@ Offers:
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from typing import Any
 
 import yaml
@@ -128,7 +129,48 @@ def compose_yaml(text: str, path: str, error: type[UserInputError] = UserInputEr
     """The node tree of ``text`` (one document), every bound checked; ``None`` for an empty document.
 
     ``syntax`` starts the message of a syntax error (each file format keeps the wording its docs show).
+    The same text composed again in the same process is the tree composed the first time (see
+    :func:`_remembered`): a campaign worker reads the same task file and scene for episode after episode.
     """
+    key = (text, path, error, syntax)
+    root = _remembered(key)
+    if root is not _MISSING:
+        return root
+    root = _compose(text, path, error, syntax)
+    _remember(key, text, root)
+    return root
+
+
+_MISSING: Any = object()
+_COMPOSED: OrderedDict[tuple[Any, ...], yaml.Node | None] = OrderedDict()
+_COMPOSED_KEPT = 32
+_COMPOSED_LARGEST = 256 * 1024  # characters: task files and scenes are a few KiB; a huge file is not kept
+
+
+def _remembered(key: tuple[Any, ...]) -> Any:
+    """A tree composed before from the same text, path and wording, or ``_MISSING``. Callers only read the
+    trees; the one thing that mutates one is the constructor's merge-key flattening (``<<``), so texts that may
+    hold a merge key are never remembered. ``BT_META_MODEL_CACHE=0`` turns this off (:mod:`bt_meta.model_cache`).
+    """
+    from bt_meta.model_cache import enabled
+
+    if not enabled() or key not in _COMPOSED:
+        return _MISSING
+    _COMPOSED.move_to_end(key)
+    return _COMPOSED[key]
+
+
+def _remember(key: tuple[Any, ...], text: str, root: yaml.Node | None) -> None:
+    from bt_meta.model_cache import enabled
+
+    if not enabled() or len(text) > _COMPOSED_LARGEST or "<<" in text or "merge" in text:
+        return
+    _COMPOSED[key] = root
+    while len(_COMPOSED) > _COMPOSED_KEPT:  # the least recently used go: a worker meets many variant scenes
+        _COMPOSED.popitem(last=False)
+
+
+def _compose(text: str, path: str, error: type[UserInputError], syntax: str) -> yaml.Node | None:
     loader = None
     try:
         loader = _BoundedLoader(text)  # the reader checks for control characters here

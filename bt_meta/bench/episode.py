@@ -1,18 +1,27 @@
 """``bt-meta bench episode``: how fast a whole campaign episode runs against simulated time, next to raw pybullet.
 
-An episode here is what a campaign runs: a fresh Python process (pinned to one core) imports bt-meta, loads the
-robot model, builds the scene's world, plans, and runs the problem with monitors and the meta-reasoner under a
-configuration, on a copy of a demonstration memory recorded once beforehand (not timed). The figure of merit is
-``real_time_factor`` = simulated seconds / wall seconds of the whole process, process start and model loading
-included; ``inner_real_time_factor`` counts only the run itself. The baseline measured in the same run is
-pybullet's raw stepping rate with the same robot and scene (``pybullet_real_time_factor``: simulated seconds /
-wall seconds of ``stepSimulation`` alone). The child also reports where its wall time went (``phases``).
+An episode here is what a campaign runs: plan and run the problem with monitors and the meta-reasoner under a
+configuration, in a fresh world built from the scene, on a copy of a demonstration memory recorded once beforehand
+(not timed). Two ways of running it are timed in the same run, each named for what it counts:
+
+* **fresh process** (``real_time_factor``, the issue's figure): a new Python process pinned to one core imports
+  bt-meta, loads the robot models, builds the world, plans and runs one episode; simulated seconds / wall seconds
+  of the whole process, interpreter start and model loading included. ``inner_real_time_factor`` counts only the
+  run itself (plan + ticks).
+* **worker, steady state** (``worker_real_time_factor``): one process pinned to one core serves ``repeat + 1``
+  episodes in a row, as a campaign's pool worker or Ray worker does; the first (imports, first model loads) is
+  left out, the others are timed from the start of their world to the end of their run: what each further
+  episode costs a worker that reuses the immutable models (:mod:`bt_meta.model_cache`) with a fresh world.
+
+The baseline measured in the same run is pybullet's raw stepping rate with the same robot and scene
+(``pybullet_real_time_factor``: simulated seconds / wall seconds of ``stepSimulation`` alone). Each child also
+reports where its wall time went (``phases``).
 
 Offers:
 
 * :func:`register` -- ``bt-meta bench episode [--family F] [--configuration C] [--repeat N] [--json]``
 * :func:`run` -- the benchmark; returns the figures as a dict
-* :func:`child` -- the timed episode (``python -m bt_meta.bench.episode TASK.json``)
+* :func:`child` -- the timed episodes of one process (``python -m bt_meta.bench.episode TASKS.json``)
 """
 
 from __future__ import annotations
@@ -29,7 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from bt_meta.commands._common import print_json
-from bt_meta.errors import UserInputError
+from bt_meta.errors import BtMetaError, UserInputError
 
 __all__ = ["child", "register", "run"]
 
@@ -83,6 +92,20 @@ def _pybullet_rate(scene: str, steps: int = 2400) -> dict[str, float]:
         sim.close()
 
 
+def _timed_process(tasks: list[dict[str, Any]], task_file: Path) -> tuple[float, list[dict[str, Any]]]:
+    """Wall seconds of a child process serving ``tasks`` in a row, and what it reports per episode."""
+    task_file.write_text(json.dumps(tasks), encoding="utf-8")
+    started = time.perf_counter()
+    # Run from the task's folder: ``-m`` puts the working directory first on sys.path, and a checkout of another
+    # bt-meta there (run from a different worktree) would be imported instead of this one.
+    done = subprocess.run([sys.executable, "-m", "bt_meta.bench.episode", str(task_file)], cwd=task_file.parent,
+                          capture_output=True, text=True, check=False)
+    wall = time.perf_counter() - started
+    if done.returncode != 0:
+        raise BtMetaError("the timed episode failed:\n" + "\n".join(done.stderr.strip().splitlines()[-12:]))
+    return wall, json.loads(done.stdout.strip().splitlines()[-1])
+
+
 def run(family_name: str = "letters_A", configuration: str = "dual", *, repeat: int = 3) -> dict[str, Any]:
     from bt_meta.campaign.families import family
     from bt_meta.campaign.runner import ensure_memory
@@ -95,42 +118,53 @@ def run(family_name: str = "letters_A", configuration: str = "dual", *, repeat: 
     scene_path = str(load_scene(chosen.scene).path)
     with tempfile.TemporaryDirectory(prefix="bt_meta_bench_episode_") as folder:
         ensure_memory(Path(folder), {"family": family_name, "seed": 0}, echo=lambda text: None)
+
+        def task(seed: int) -> dict[str, Any]:
+            return {"folder": folder, "family": family_name, "task_file": chosen.task_file,
+                    "problem": chosen.problem, "variant": "nominal", "scene": scene_path, "scene_variant": None,
+                    "expected": "nominal_equivalent", "configuration": configuration, "seed": seed,
+                    "memory": str(Path(folder) / "memory.sqlite"), "perfect_sensing": True}
+
         runs = []
         for k in range(repeat):
-            task = {"folder": folder, "family": family_name, "task_file": chosen.task_file,
-                    "problem": chosen.problem, "variant": "nominal", "scene": scene_path, "scene_variant": None,
-                    "expected": "nominal_equivalent", "configuration": configuration, "seed": k,
-                    "memory": str(Path(folder) / "memory.sqlite"), "perfect_sensing": True}
-            task_file = Path(folder) / f"task{k}.json"
-            task_file.write_text(json.dumps(task), encoding="utf-8")
-            started = time.perf_counter()
-            done = subprocess.run([sys.executable, "-m", "bt_meta.bench.episode", str(task_file)],
-                                  capture_output=True, text=True, check=False)
-            wall = time.perf_counter() - started
-            if done.returncode != 0:
-                raise UserInputError(f"the timed episode failed: {done.stderr.strip().splitlines()[-1:]}")
-            inner = json.loads(done.stdout.strip().splitlines()[-1])
+            wall, (inner,) = _timed_process([task(k)], Path(folder) / f"task{k}.json")
             inner["process_wall_seconds"] = wall
             inner["real_time_factor"] = inner["simulated_seconds"] / wall
             runs.append(inner)
+        # The worker: a warm-up episode (seed 0), then the same seeds as the fresh processes.
+        worker_wall, served = _timed_process([task(0)] + [task(k) for k in range(repeat)],
+                                             Path(folder) / "worker.json")
     raw = _pybullet_rate(chosen.scene)
     factor = statistics.median(r["real_time_factor"] for r in runs)
     inner_factor = statistics.median(r["inner_real_time_factor"] for r in runs)
     phases = {name: statistics.median(r["phases"][name] for r in runs) for name in runs[0]["phases"]}
+    steady = served[1:]
+    worker_simulated = sum(r["simulated_seconds"] for r in steady)
+    worker_seconds = sum(r["phases"]["episode"] for r in steady)
+    worker_phases = {name: statistics.median(r["phases"][name] for r in steady)
+                     for name in ("episode", "world_and_plugins", "run")}
+    same = [(r["status"], r["attempts"], r["kinds"]) for r in runs] == [
+        (r["status"], r["attempts"], r["kinds"]) for r in steady]
     return {"family": family_name, "configuration": configuration, "repeat": repeat,
             "real_time_factor": factor, "inner_real_time_factor": inner_factor,
+            "worker_real_time_factor": worker_simulated / worker_seconds if worker_seconds > 0 else 0.0,
             "pybullet_real_time_factor": raw["real_time_factor"], "pybullet_steps_per_second": raw["steps_per_second"],
             "ratio_to_pybullet": factor / raw["real_time_factor"],
+            "worker_ratio_to_pybullet": (worker_simulated / worker_seconds / raw["real_time_factor"]
+                                         if worker_seconds > 0 else 0.0),
             "simulated_seconds": statistics.median(r["simulated_seconds"] for r in runs),
             "process_wall_seconds": statistics.median(r["process_wall_seconds"] for r in runs),
-            "phases": phases, "runs": runs}
+            "phases": phases, "worker": {"episodes": len(steady), "simulated_seconds": worker_simulated,
+                                         "episode_seconds": worker_seconds, "process_wall_seconds": worker_wall,
+                                         "phases": worker_phases, "same_outcomes_as_fresh": same,
+                                         "warm_up": served[0]},
+            "runs": runs, "worker_runs": steady}
 
 
-def child(task_path: str) -> dict[str, Any]:
-    """The timed episode, in its own process: phases (s) and the simulated time."""
+def child(task_path: str) -> list[dict[str, Any]]:
+    """The timed episodes of one process, in a row: phases (s), simulated time and outcome of each."""
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
-    phases: dict[str, float] = {}
     started = time.perf_counter()
     from bt_meta.world.simulation.sim_world import quiet_stdout
 
@@ -140,22 +174,27 @@ def child(task_path: str) -> dict[str, Any]:
         from bt_meta.campaign import episode  # noqa: F401
         from bt_meta.demo import configurations  # noqa: F401
         from bt_meta.meta import MetaExecutor  # noqa: F401
-    phases["import"] = time.perf_counter() - started
-    task = json.loads(Path(task_path).read_text(encoding="utf-8"))
+    imported = time.perf_counter() - started
+    tasks = json.loads(Path(task_path).read_text(encoding="utf-8"))
     from bt_meta.campaign.episode import run_episode
 
-    mark = time.perf_counter()
-    row = run_episode(task)
-    phases["episode"] = time.perf_counter() - mark
-    if row["status"] == "crashed":
-        raise SystemExit(f"episode crashed: {row['error']}")
-    report = row.get("report") or {}
-    simulated = float(row.get("simulated_seconds") or 0.0)
-    run_seconds = float(report.get("seconds") or phases["episode"])
-    phases["world_and_plugins"] = max(0.0, phases["episode"] - run_seconds)
-    phases["run"] = run_seconds
-    return {"status": row["status"], "simulated_seconds": simulated, "phases": phases,
-            "inner_real_time_factor": simulated / run_seconds if run_seconds > 0 else 0.0}
+    out = []
+    for task in tasks:
+        phases: dict[str, float] = {"import": imported} if not out else {}
+        mark = time.perf_counter()
+        row = run_episode(task)
+        phases["episode"] = time.perf_counter() - mark
+        if row["status"] == "crashed":
+            raise SystemExit(f"episode crashed: {row['error']}")
+        report = row.get("report") or {}
+        simulated = float(row.get("simulated_seconds") or 0.0)
+        run_seconds = float(report.get("seconds") or phases["episode"])
+        phases["world_and_plugins"] = max(0.0, phases["episode"] - run_seconds)
+        phases["run"] = run_seconds
+        out.append({"status": row["status"], "attempts": row["attempts"], "kinds": row["kinds"],
+                    "seed": row["seed"], "simulated_seconds": simulated, "phases": phases,
+                    "inner_real_time_factor": simulated / run_seconds if run_seconds > 0 else 0.0})
+    return out
 
 
 def _print(result: dict[str, Any]) -> None:
@@ -166,6 +205,12 @@ def _print(result: dict[str, Any]) -> None:
     print(f"pybullet raw stepping, same robot and scene: {result['pybullet_steps_per_second']:.0f} steps/s = "
           f"{result['pybullet_real_time_factor']:.1f}x real time; episode / raw = {result['ratio_to_pybullet']:.3f}")
     print("wall time per phase: " + ", ".join(f"{k} {v:.2f} s" for k, v in result["phases"].items()))
+    worker = result["worker"]
+    print(f"worker serving {worker['episodes']} further episode(s) after a warm-up: "
+          f"{worker['simulated_seconds']:.1f} s simulated in {worker['episode_seconds']:.2f} s"
+          f" -> worker_real_time_factor "
+          f"{result['worker_real_time_factor']:.2f}x; worker / raw = {result['worker_ratio_to_pybullet']:.3f}; "
+          f"same outcomes as the fresh processes: {'yes' if worker['same_outcomes_as_fresh'] else 'NO'}")
 
 
 if __name__ == "__main__":  # the timed child process

@@ -6,7 +6,9 @@ simply redone), then hands the episodes not yet in the database to a local proce
 ``--workers``, default the core count) or, with ``--ray``, to Ray tasks; results stream back as they finish and
 the driver -- the only writer -- inserts each one in its own transaction and writes its run report to
 ``DIR/episodes/``. Killed at any moment, the same command resumes: finished episodes are in the database and are
-not run again, the ones in flight are run again. A progress bar with ETA goes to stderr (tqdm).
+not run again, the ones in flight are run again. A progress bar with ETA goes to stderr (tqdm). Pool and Ray
+workers (and the driver with one worker) serve many episodes each, loading the immutable models once per process
+(:mod:`bt_meta.model_cache`); every episode's world is fresh.
 
 Offers:
 

@@ -23,12 +23,14 @@ from __future__ import annotations
 import xml.etree.ElementTree as ElementTree
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import coal
 import numpy as np
 import pinocchio as pin
 
 from bt_meta.errors import KinematicsError
+from bt_meta.model_cache import cached, file_signature
 from bt_meta.world.kinematics.forward import Kinematics, se3_from_matrix
 
 __all__ = ["CollisionChecker", "Contact", "SceneObject", "pose_from_xyz_rpy"]
@@ -94,12 +96,10 @@ class CollisionChecker:
         robot = kinematics.robot
         self._model = model
         self._data = model.createData()
-        self.geometry: pin.GeometryModel = pin.buildGeomFromUrdf(
-            model, str(robot.urdf_path), pin.GeometryType.COLLISION, package_dirs=[str(p) for p in robot.package_dirs]
-        )
+        robot_geometry, self._disabled_links = _robot_geometry(model, robot)
+        self.geometry: pin.GeometryModel = robot_geometry.copy()  # the scene's objects go into this copy
         self._robot_geometries = self.geometry.ngeoms
         self._link_of = [model.frames[g.parentFrame].name for g in self.geometry.geometryObjects]
-        self._disabled_links = _srdf_disabled_pairs(robot.srdf_path) if robot.srdf_path else set()
         self._objects: dict[str, SceneObject] = {}
         self._allowed: set[frozenset[str]] = set()
         self._geometry_data: pin.GeometryData | None = None
@@ -108,6 +108,7 @@ class CollisionChecker:
         self._masks: dict[tuple[bool, bool, str | None], np.ndarray] = {}
         self._active_key: tuple[bool, bool, str | None] | None = None
         self._self_pairs: list[tuple[int, int]] | None = None
+        self._pairs = np.zeros((0, 2), dtype=int)
         self._rebuild_pairs()
 
     # -- pairs -------------------------------------------------------------------------------------------------
@@ -129,30 +130,39 @@ class CollisionChecker:
                 if objects[i].parentJoint != objects[j].parentJoint
                 and frozenset((self._link_of[i], self._link_of[j])) not in self._disabled_links]
         # One boolean map handed over at once: adding ~1,600 pairs one by one cost ~15 ms per rebuild, and a
-        # grasp, a release or an allowed touch rebuilds.
+        # grasp, a release or an allowed touch rebuilds. The map is filled a row of robot geometries at a time
+        # (reading each geometry object through the bindings once), not pair by pair.
         active = np.zeros((geometry.ngeoms, geometry.ngeoms), dtype=bool)
         if self._self_pairs:
             rows, columns = zip(*self._self_pairs, strict=True)
             active[list(rows), list(columns)] = True
+        joints = np.array([g.parentJoint for g in objects], dtype=int)
+        names = [g.name for g in objects]
+        links = np.array(self._link_of, dtype=object)
+        allowed_with: dict[str, set[str]] = {}
+        for pair in self._allowed:
+            first, second = (*pair, *pair)[:2]  # a pair of one name stands for (name, name)
+            allowed_with.setdefault(first, set()).add(second)
+            allowed_with.setdefault(second, set()).add(first)
+        robot_joints = joints[:n_robot]
         for j in range(n_robot, geometry.ngeoms):
-            carried_by = objects[j].parentJoint
-            for i in range(n_robot):
-                if carried_by != 0 and objects[i].parentJoint == carried_by:
-                    continue
-                if frozenset((self._link_of[i], objects[j].name)) in self._allowed:
-                    continue
-                active[i, j] = True
+            carried_by = joints[j]
+            partners = allowed_with.get(names[j], set())
+            row = np.ones(n_robot, dtype=bool)
+            if carried_by != 0:  # not against what is rigidly joined to the carrying link
+                row &= robot_joints != carried_by
+            if partners:
+                row &= ~np.isin(links, list(partners))
+            active[:n_robot, j] = row
             # A carried object can hit the other objects; fixed objects never move relative to each other.
             for i in range(n_robot, j):
-                other = objects[i].parentJoint
-                if (carried_by == 0 and other == 0) or carried_by == other:
-                    continue
-                if frozenset((objects[i].name, objects[j].name)) in self._allowed:
+                other = joints[i]
+                if (carried_by == 0 and other == 0) or carried_by == other or names[i] in partners:
                     continue
                 active[i, j] = True
         geometry.setCollisionPairs(active, True)
-        kinds = ["self" if pair.second < n_robot else "scene" for pair in geometry.collisionPairs]
-        self._pair_kinds = kinds
+        self._pairs = np.argwhere(np.triu(active, 1))  # setCollisionPairs adds them in this (row-major) order
+        self._pair_kinds = ["self" if second < n_robot else "scene" for second in self._pairs[:, 1].tolist()]
         self._masks = {}
         self._geometry_data = None
         self._broadphase = None
@@ -257,6 +267,10 @@ class CollisionChecker:
 
         E.g. a block against the fingers that hold it, or a carried block against the block it is placed on.
         """
+        self._allow(name, others)
+        self._rebuild_pairs()
+
+    def _allow(self, name: str, others: Iterable[str]) -> None:
         self._index(name)
         for other in others:
             if other not in self._link_of and other not in self._objects:
@@ -265,7 +279,6 @@ class CollisionChecker:
                     f"objects: {', '.join(self._objects) or 'none'}"
                 )
             self._allowed.add(frozenset((name, other)))
-        self._rebuild_pairs()
 
     def disallow(self, name: str) -> None:
         """Check ``name`` against every robot link again."""
@@ -280,7 +293,7 @@ class CollisionChecker:
         the links or objects in ``allow`` (typically the gripper's fingers, which move on their own joints).
         """
         if allow:
-            self.allow(name, allow)
+            self._allow(name, allow)  # the pairs are rebuilt once, below
         index = self._index(name)
         fid = self.kinematics.frame_id(frame)
         world = self.pose(name, q)
@@ -358,11 +371,9 @@ class CollisionChecker:
                 mask |= kinds == "self"
             if arm is not None:
                 moved = self._joints_moved_by(arm)
-                objects = self.geometry.geometryObjects
-                for k, pair in enumerate(self.geometry.collisionPairs):
-                    if mask[k]:
-                        first, second = objects[pair.first].parentJoint, objects[pair.second].parentJoint
-                        mask[k] = first in moved or second in moved
+                joints = np.array([g.parentJoint for g in self.geometry.geometryObjects], dtype=int)
+                moved_geometry = np.isin(joints, list(moved))
+                mask &= moved_geometry[self._pairs[:, 0]] | moved_geometry[self._pairs[:, 1]]
             self._masks[key] = mask
         return mask
 
@@ -417,6 +428,22 @@ def _positive(values: Sequence[float], count: int, what: str) -> tuple[float, ..
     if len(out) != count or not all(np.isfinite(v) and v > 0 for v in out):
         raise KinematicsError(f"{what} must be {count} positive numbers, got {tuple(values)!r}")
     return out
+
+
+def _robot_geometry(model: pin.Model, robot: Any) -> tuple[pin.GeometryModel, frozenset[frozenset[str]]]:
+    """The robot's collision geometry parsed from its URDF (meshes included) and the SRDF's disabled pairs, once
+    per process (:mod:`bt_meta.model_cache`): callers copy the geometry model before adding to it; the
+    copies share the immutable coal shapes."""
+    key = ("collision geometry", file_signature(robot.urdf_path), file_signature(robot.srdf_path),
+           tuple(str(p) for p in robot.package_dirs), model.njoints, model.nframes)
+
+    def parse() -> tuple[pin.GeometryModel, frozenset[frozenset[str]]]:
+        geometry = pin.buildGeomFromUrdf(model, str(robot.urdf_path), pin.GeometryType.COLLISION,
+                                         package_dirs=[str(p) for p in robot.package_dirs])
+        disabled = _srdf_disabled_pairs(robot.srdf_path) if robot.srdf_path else set()
+        return geometry, frozenset(disabled)
+
+    return cached(key, parse)
 
 
 def _srdf_disabled_pairs(path) -> set[frozenset[str]]:

@@ -14,6 +14,7 @@ base and the arm (checked) -- and it makes each IK iteration cheaper (7 DoF inst
 
 from __future__ import annotations
 
+import copy
 import xml.etree.ElementTree as ElementTree
 from dataclasses import dataclass
 
@@ -21,6 +22,7 @@ import mujoco
 import numpy as np
 
 from bt_meta.errors import KinematicsError
+from bt_meta.model_cache import cached, file_signature
 from bt_meta.world.kinematics.forward import Kinematics
 
 __all__ = ["MujocoModel", "build_mujoco_model", "mujoco_urdf_text"]
@@ -81,7 +83,18 @@ def mujoco_urdf_text(kinematics: Kinematics, frozen: set[str] | None = None) -> 
 
 
 def build_mujoco_model(kinematics: Kinematics, arm: str | None = None) -> MujocoModel:
-    """The MuJoCo model of the whole robot, or of one arm with every other joint frozen at zero."""
+    """The MuJoCo model of the whole robot, or of one arm with every other joint frozen at zero.
+
+    Compiled once per process for the same URDF, arm and joint ranges (:mod:`bt_meta.model_cache`); each
+    caller gets its own copy of the ``MjModel``.
+    """
+    key = ("mujoco model", file_signature(kinematics.robot.urdf_path), arm, tuple(kinematics.joint_names),
+           kinematics.lower.tobytes(), kinematics.upper.tobytes())
+    compiled = cached(key, lambda: _compile(kinematics, arm))
+    return MujocoModel(copy.copy(compiled.model), compiled.joint_names, compiled.pin_indices.copy())
+
+
+def _compile(kinematics: Kinematics, arm: str | None) -> MujocoModel:
     frozen: set[str] = set()
     if arm is not None:
         arm_joints = set(kinematics.robot.arm(arm).joints)

@@ -23,6 +23,7 @@ from typing import Any
 import yaml
 
 from bt_meta.errors import ConfigError, KinematicsError
+from bt_meta.model_cache import cached, clear_entry, file_signature
 from bt_meta.resources import robots_dir
 from bt_meta.world._yaml_nodes import YamlNodeReader, shipped_yaml_path
 
@@ -152,7 +153,27 @@ def load_robot(name: str | Path = "baxter") -> RobotDescription:
     """Load a robot description by shipped name or by path to a YAML file."""
     path = shipped_yaml_path(name, robots_dir(), lambda shipped: f"no robot description {name!r}; available: {shipped}",
                              "robot description file not found")
-    return _RobotFile(path).load()
+    return _cached_description(path)
+
+
+def _cached_description(path: Path) -> RobotDescription:
+    """One parse per process while the YAML, URDF and SRDF stay as they are (a campaign worker loads the robot
+    once, not once per episode); the description is frozen and nothing mutates its tables."""
+    key = ("robot", file_signature(path))
+    description, files = cached(key, lambda: _parsed_with_files(path))
+    if files != _model_files(description):  # the URDF or SRDF changed under an unchanged YAML
+        clear_entry(key)
+        description, _ = cached(key, lambda: _parsed_with_files(path))
+    return description
+
+
+def _parsed_with_files(path: Path) -> tuple[RobotDescription, tuple[Any, ...]]:
+    description = _RobotFile(path).load()
+    return description, _model_files(description)
+
+
+def _model_files(description: RobotDescription) -> tuple[Any, ...]:
+    return (file_signature(description.urdf_path), file_signature(description.srdf_path))
 
 
 # --------------------------------------------------------------------------------------------------------------

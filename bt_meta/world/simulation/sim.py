@@ -33,6 +33,7 @@ import numpy as np
 import pybullet
 
 from bt_meta.errors import BtMetaError
+from bt_meta.model_cache import cached, clear_entry, file_signature
 from bt_meta.world.robot.description import RobotDescription, load_robot
 from bt_meta.world.simulation.objects import (
     COLOURS,
@@ -136,6 +137,30 @@ class _Grasp:
 def _tuple3(v: Iterable[float]) -> tuple[float, float, float]:
     a, b, c = (float(x) for x in v)
     return (a, b, c)
+
+
+_URDF_FOLDER: tempfile.TemporaryDirectory[str] | None = None
+
+
+def _robot_urdf_file(robot: RobotDescription, visuals: str) -> Path:
+    """The URDF pybullet loads, written once per process (:mod:`bt_meta.model_cache`) into a folder
+    removed when the process ends: a worker serving many episodes does not rewrite it for each world."""
+    global _URDF_FOLDER
+    if _URDF_FOLDER is None:
+        _URDF_FOLDER = tempfile.TemporaryDirectory(prefix="bt_meta_sim_")
+    folder = Path(_URDF_FOLDER.name)
+    key = ("pybullet urdf", visuals, file_signature(robot.urdf_path), tuple(str(p) for p in robot.package_dirs))
+    write = _light_urdf if visuals == "light" else _full_urdf
+
+    def written() -> Path:
+        folder.mkdir(parents=True, exist_ok=True)
+        return write(robot, Path(tempfile.mkdtemp(dir=folder)))
+
+    path = cached(key, written)
+    if not path.is_file():  # removed under us (a /tmp cleaner): write it again
+        clear_entry(key)
+        path = cached(key, written)
+    return path
 
 
 def _light_urdf(robot: RobotDescription, directory: Path) -> Path:
@@ -243,11 +268,10 @@ class Simulation:
             fixedTimeStep=self.time_step, deterministicOverlappingPairs=1, physicsClientId=c
         )
         pybullet.setGravity(0.0, 0.0, -9.81, physicsClientId=c)
-        with tempfile.TemporaryDirectory(prefix="bt_meta_sim_") as tmp:
-            urdf = _light_urdf(self.robot, Path(tmp)) if visuals == "light" else _full_urdf(self.robot, Path(tmp))
-            self.robot_id = pybullet.loadURDF(
-                str(urdf), [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0], useFixedBase=True, physicsClientId=c
-            )
+        urdf = _robot_urdf_file(self.robot, visuals)
+        self.robot_id = pybullet.loadURDF(
+            str(urdf), [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0], useFixedBase=True, physicsClientId=c
+        )
         self._joint_index: dict[str, int] = {}
         self._link_index: dict[str, int] = {pybullet.getBodyInfo(self.robot_id, physicsClientId=c)[0].decode(): -1}
         self._parent: dict[int, int] = {}

@@ -1,0 +1,70 @@
+"""The collision pairs the checker hands to Pinocchio, against the rules written out pair by pair."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bt_meta.world.kinematics.collision import CollisionChecker
+
+
+def _expected_pairs(checker: CollisionChecker) -> list[tuple[int, int]]:
+    """The rules of the module docstring, one pair at a time (the straightforward form of ``_rebuild_pairs``)."""
+    objects = checker.geometry.geometryObjects
+    n_robot = checker._robot_geometries
+    link = checker._link_of
+    out = []
+    for i in range(checker.geometry.ngeoms):
+        for j in range(i + 1, checker.geometry.ngeoms):
+            a, b = objects[i], objects[j]
+            if j < n_robot:
+                keep = (a.parentJoint != b.parentJoint
+                        and frozenset((link[i], link[j])) not in checker._disabled_links)
+            elif i < n_robot:
+                keep = (not (b.parentJoint != 0 and a.parentJoint == b.parentJoint)
+                        and frozenset((link[i], b.name)) not in checker._allowed)
+            else:
+                keep = (not (a.parentJoint == 0 and b.parentJoint == 0) and a.parentJoint != b.parentJoint
+                        and frozenset((a.name, b.name)) not in checker._allowed)
+            if keep:
+                out.append((i, j))
+    return out
+
+
+def _handed_over(checker: CollisionChecker) -> list[tuple[int, int]]:
+    return [(pair.first, pair.second) for pair in checker.geometry.collisionPairs]
+
+
+def test_pairs_follow_the_rules_through_adds_allows_attaches_and_detaches(kin):
+    checker = CollisionChecker(kin)
+    q = kin.home
+    steps = [
+        lambda: checker.add_box("table", (0.6, 1.1, 0.04), (0.75, -0.1, -0.22)),
+        lambda: checker.add_box("a", (0.05, 0.05, 0.05), (0.6, -0.2, -0.17)),
+        lambda: checker.add_cylinder("b", 0.03, 0.05, (0.65, -0.3, -0.17)),
+        lambda: checker.add_box("c", (0.05, 0.05, 0.05), (0.7, -0.2, -0.17)),
+        lambda: checker.allow("a", ["table", "right_gripper_base_link"]),
+        lambda: checker.attach("b", kin.end_effector("right"), q, allow=["r_gripper_l_finger", "a"]),
+        lambda: checker.allow("b", ["b"]),
+        lambda: checker.detach("b", q=q),
+        lambda: checker.disallow("a"),
+        lambda: checker.remove("c"),
+        lambda: checker.attach("a", kin.end_effector("left"), q),
+    ]
+    for step in steps:
+        step()
+        expected = _expected_pairs(checker)
+        assert _handed_over(checker) == expected
+        assert [tuple(p) for p in checker._pairs.tolist()] == expected
+        assert checker.n_self_pairs + checker.n_scene_pairs == len(expected)
+
+
+def test_arm_masks_keep_only_pairs_an_arm_moves(kin):
+    checker = CollisionChecker(kin)
+    checker.add_box("a", (0.05, 0.05, 0.05), (0.6, -0.2, -0.17))
+    mask = checker._mask((True, True, "right"))
+    objects = checker.geometry.geometryObjects
+    moved = checker._joints_moved_by("right")
+    expected = [objects[p.first].parentJoint in moved or objects[p.second].parentJoint in moved
+                for p in checker.geometry.collisionPairs]
+    assert mask.tolist() == expected
+    assert 0 < int(np.count_nonzero(mask)) < len(expected)

@@ -26,6 +26,7 @@ the same alternatives in the same order.
 from __future__ import annotations
 
 import gc
+import sys
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -128,8 +129,11 @@ class Search:
 
     def __init__(self, domain: Domain, *, external: ExternalFn | None = None, max_nodes: int | None = None,
                  max_seconds: float | None = None, id_offset: int = 0, step_offset: int = 0,
-                 goal: list[Atom] | None = None) -> None:
+                 goal: list[Atom] | None = None, goal_pruning: bool = True, deepening: bool = True) -> None:
         self.domain = domain
+        # the two search refinements (module docstring); off, the search is the plain one (tests compare them)
+        self.goal_pruning = goal_pruning
+        self.deepening = deepening
         self.external = external
         self.max_nodes = max_nodes
         self.max_seconds = max_seconds
@@ -230,7 +234,7 @@ class Search:
         for_size = compiled.for_size
         # the agenda is a linked list of cells (item, rest, goal mask); the mask (0 without goal pruning) is the
         # goal facts the cell's tasks could still add (see bt_meta.htn.achievers)
-        achievers = GoalAchievers(domain, self.goal) if self.goal else None
+        achievers = GoalAchievers(domain, self.goal) if self.goal and self.goal_pruning else None
         if not achievers:
             achievers = None
         of_task = achievers.of_task if achievers is not None else None
@@ -259,6 +263,7 @@ class Search:
         max_nodes = self.max_nodes
         deadline = self.started + self.max_seconds if self.max_seconds is not None else None
         expansions = self.expansions
+        first_bound = 1 if self.deepening else sys.maxsize  # the first depth bound of a chain
         advance = False
         while True:
             if advance:
@@ -341,7 +346,7 @@ class Search:
                         del chains[name]
                     undo.append((CHAIN_CLOSED, name, entry, position))
                     agenda = rest
-                    if entry[2] == 0 and entry[1][0] > 1:
+                    if entry[2] == 0 and entry[1][0] > first_bound:
                         # a root whose chains were deepened: a decomposition as shallow as an earlier iteration's
                         # is one that iteration tried, and the node after it failed then (the failure memo)
                         bucket = failed.get((state._hash, id(agenda))) if failed else None
@@ -428,7 +433,7 @@ class Search:
                                     continue
                                 link = (state, root, depth)
                             else:
-                                link = (state, [1, False], 0)
+                                link = (state, [first_bound, False], 0)
                         else:
                             link = None
                         if name in typed and not types_hold(tasks_decl[name].types, task[1:], state):

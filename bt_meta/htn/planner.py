@@ -16,7 +16,12 @@ remaining alternatives) on an explicit stack; a dead end resumes the most recent
 agenda, state, tree and plan to what they were there. No Python recursion is involved, so plans of any length
 fit. A compound task that reappears below itself in the same state (same ground task, equal state) is a loop
 and that branch fails. A search node (state and agenda) met again after its whole subtree failed fails at once.
-Goal facts, when the problem has some, must hold at the end, else the search backtracks.
+Goal facts, when the problem has some, must hold at the end, else the search backtracks; a node whose state lacks
+a goal fact that no task left on its agenda could add fails at once (:mod:`bt_meta.htn.achievers`; each agenda
+cell carries the goal facts its tasks could add). Nested expansions of a recursive task in the same state (left
+recursion) form a chain whose depth is bounded per outermost expansion and raised one level at a time when a cut
+happened below it (iterative deepening), so short chains come before long detours; without a cut the search
+order is the plain one. ``Search(goal_pruning=False, deepening=False)`` is the plain search.
 
 The alternatives of a task come from the domain's generated code (:mod:`bt_meta.htn.compiled`) where there is
 some, else from the reference path here (:meth:`Search._method_alternatives`, primitives' satisfiers); both give

@@ -221,12 +221,18 @@ class Search:
         if enabled:
             gc.disable()
         try:
-            return self._run(state, items)
+            # goal pruning costs an analysis of the tasks met, which a search that meets no complete plan failing
+            # its goal does not need: it starts without, and begins again with it at the first such failure (the
+            # first plan is the same either way: the pruning only cuts subtrees without a plan)
+            result = self._run(state, items, False)
+            if result is None:
+                result = self._run(state, items, True)
+            return result
         finally:
             if enabled:
                 gc.enable()
 
-    def _run(self, state: State, items: list[tuple]) -> PlanResult:
+    def _run(self, state: State, items: list[tuple], prune_goal: bool) -> PlanResult | None:
         domain = self.domain
         primitives = domain.primitives
         tasks_decl = domain.tasks
@@ -239,7 +245,7 @@ class Search:
         for_size = compiled.for_size
         # the agenda is a linked list of cells (item, rest, goal mask); the mask (0 without goal pruning) is the
         # goal facts the cell's tasks could still add (see bt_meta.htn.achievers)
-        achievers = GoalAchievers(domain, self.goal) if self.goal and self.goal_pruning else None
+        achievers = GoalAchievers(domain, self.goal) if prune_goal else None
         if not achievers:
             achievers = None
         of_task = achievers.of_task if achievers is not None else None
@@ -327,6 +333,9 @@ class Search:
             else:
                 if agenda is None:
                     if self.goal and not self._goal_holds(state):
+                        if achievers is None and self.goal_pruning and not prune_goal:
+                            self.expansions = expansions
+                            return None
                         absent = [atom_text(a) for a in self.goal if not self._holds(a, state)]
                         self._dead_end(len(plan) + 1, f"goal facts do not hold at the end: {', '.join(absent)}")
                         advance = True

@@ -180,7 +180,7 @@ class Search:
         name = task[0]
         if name in typed and not types_hold(self.domain.tasks[name].types, task[1:], state):
             return iter(())
-        expanders = compiled.for_size(state._len)[0] if state._len >= compiled.threshold else compiled.for_size(0)[0]
+        expanders = compiled.for_size(state._len if state._len >= compiled.threshold else 0)[0]
         expander = expanders.get(name) if item[3] is None else None
         if expander is not None:
             return expander(state, *task[1:])
@@ -263,7 +263,8 @@ class Search:
         trail: list[tuple] = []  # (task, kind, method, bindings, parent_key, state_before, step)
         plan: list[int] = []
         active: dict[tuple, list[State]] = {}
-        # open expansions of recursive tasks by task name: [(state, root, depth)], innermost last (see _deepen)
+        # open expansions of recursive tasks by task name: [(state, root, depth)], innermost last; root is
+        # [depth bound, cut below it in this iteration] of the outermost expansion of a same-state chain
         chains: dict[str, list[tuple]] = {}
         link: tuple | None = None  # the chain entry of the compound expansion being taken
         undo: list[tuple] = []  # (ACTIVE_PUSHED, key) (ACTIVE_CLOSED, key, state) (CHAIN_PUSHED, name)

@@ -221,3 +221,39 @@ def test_random_domains_are_solvable_exactly_when_the_plain_search_solves_them(s
         if result.ok and not result.stats["depth_cuts"]:
             # goal pruning only cuts branches that fail: without a depth cut the search order is the plain one
             assert steps(result) == steps(reference), (options, text)
+
+
+def test_achiever_masks_cover_recursion_and_unbound_method_variables():
+    from bt_meta.htn.achievers import GoalAchievers
+
+    text = """
+    domain:
+      predicates: {on: [x, y], done: [x], link: [x, y]}
+      primitives:
+        put: {parameters: [?x, ?y], add: [on(?x, ?y)]}
+        mark: {parameters: [?x], add: [done(?x)]}
+      tasks: {chain: [?x], anywhere: [?x]}
+      methods:
+        - name: step
+          task: chain(?x)
+          precondition: link(?x, ?y)
+          subtasks: [chain(?y), mark(?x)]
+        - name: stop
+          task: chain(?x)
+          subtasks: []
+        - name: somewhere
+          task: anywhere(?x)
+          precondition: link(?x, ?y)
+          subtasks: [put(?x, ?y)]
+    problems:
+      p: {tasks: [chain(a)], goal: [done(a), done(c), on(a, b), on(b, a)]}
+    """
+    taskfile = load_task_text(textwrap.dedent(text))
+    achievers = GoalAchievers(taskfile.domain, taskfile.problems["p"].goal)
+    bits = achievers.bits
+    # chain(a) recurses through chain(?y), any object: it can mark every block
+    assert achievers.of_task(("chain", "a")) == bits[("done", "a")] | bits[("done", "c")]
+    # ?y is bound by the precondition, not the head: any object, so on(a, b) but not on(b, a)
+    assert achievers.of_task(("anywhere", "a")) == bits[("on", "a", "b")]
+    assert achievers.of_task(("mark", "b")) == 0
+    assert achievers.first(bits[("done", "c")] | bits[("on", "b", "a")]) == ("done", "c")

@@ -16,7 +16,12 @@ remaining alternatives) on an explicit stack; a dead end resumes the most recent
 agenda, state, tree and plan to what they were there. No Python recursion is involved, so plans of any length
 fit. A compound task that reappears below itself in the same state (same ground task, equal state) is a loop
 and that branch fails. A search node (state and agenda) met again after its whole subtree failed fails at once.
-Goal facts, when the problem has some, must hold at the end, else the search backtracks.
+Goal facts, when the problem has some, must hold at the end, else the search backtracks; a node whose state lacks
+a goal fact that no task left on its agenda could add fails at once (:mod:`bt_meta.htn.achievers`; each agenda
+cell carries the goal facts its tasks could add). Nested expansions of a recursive task in the same state (left
+recursion) form a chain whose depth is bounded per outermost expansion and raised one level at a time when a cut
+happened below it (iterative deepening), so short chains come before long detours; without a cut the search
+order is the plain one. ``Search(goal_pruning=False, deepening=False)`` is the plain search.
 
 The alternatives of a task come from the domain's generated code (:mod:`bt_meta.htn.compiled`) where there is
 some, else from the reference path here (:meth:`Search._method_alternatives`, primitives' satisfiers); both give
@@ -26,11 +31,13 @@ the same alternatives in the same order.
 from __future__ import annotations
 
 import gc
+import sys
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
+from bt_meta.htn.achievers import GoalAchievers
 from bt_meta.htn.compiled import compiled_domain
 from bt_meta.htn.conditions import ExternalFn, Var
 from bt_meta.htn.model import Domain, Method, Problem, types_hold
@@ -39,6 +46,8 @@ from bt_meta.htn.tree import DecompositionNode, DecompositionTree
 
 # agenda item kinds
 TASK, CLOSE, UNORDERED = 0, 1, 2
+# undo entries of the search's loop-check and chain bookkeeping
+ACTIVE_PUSHED, ACTIVE_CLOSED, CHAIN_PUSHED, CHAIN_CLOSED = 0, 1, 2, 3
 # failed search nodes remembered per search at most (each keeps its state and agenda alive); past it the search
 # goes on without remembering more, which only costs the skips it would have made
 MEMO_LIMIT = 200_000
@@ -87,6 +96,22 @@ def _node_ids(offset: int, count: int) -> list[str]:
     return ids
 
 
+def _mask(agenda: tuple | None) -> int:
+    return 0 if agenda is None else agenda[2]
+
+
+def _item_mask(item: tuple, of_task: Any) -> int:
+    """The goal mask of a TASK or UNORDERED agenda item (CLOSE items add nothing)."""
+    kind = item[0]
+    if kind == TASK:
+        return of_task(item[1])
+    mask = 0
+    if kind == UNORDERED:
+        for sub in item[1]:
+            mask |= of_task(sub)
+    return mask
+
+
 def _unify_head(method: Method, task: tuple[str, ...]) -> dict[str, str] | None:
     args = method.task_args
     if len(args) != len(task) - 1:
@@ -109,8 +134,11 @@ class Search:
 
     def __init__(self, domain: Domain, *, external: ExternalFn | None = None, max_nodes: int | None = None,
                  max_seconds: float | None = None, id_offset: int = 0, step_offset: int = 0,
-                 goal: list[Atom] | None = None) -> None:
+                 goal: list[Atom] | None = None, goal_pruning: bool = True, deepening: bool = True) -> None:
         self.domain = domain
+        # the two search refinements (module docstring); off, the search is the plain one (tests compare them)
+        self.goal_pruning = goal_pruning
+        self.deepening = deepening
         self.external = external
         self.max_nodes = max_nodes
         self.max_seconds = max_seconds
@@ -121,6 +149,9 @@ class Search:
         self.backtracks = 0
         self.loops = 0
         self.memo_pruned = 0
+        self.goal_pruned = 0
+        self.depth_cuts = 0
+        self.deepenings = 0
         self.deepest: tuple[int, str] | None = None  # (plan length, description) of the deepest dead end
         self.started = time.perf_counter()
 
@@ -142,6 +173,18 @@ class Search:
                 if exclude is not None and (method.name, frozenset(satisfier.items())) == exclude:
                     continue
                 yield method, satisfier, tuple(build(satisfier) for build in builders)
+
+    def _alternatives_again(self, item: tuple, state: State, compiled: Any, typed: Any) -> Iterator[tuple]:
+        """The alternatives of a compound task item from the start, as its expansion made them."""
+        task = item[1]
+        name = task[0]
+        if name in typed and not types_hold(self.domain.tasks[name].types, task[1:], state):
+            return iter(())
+        expanders = compiled.for_size(state._len if state._len >= compiled.threshold else 0)[0]
+        expander = expanders.get(name) if item[3] is None else None
+        if expander is not None:
+            return expander(state, *task[1:])
+        return self._method_alternatives(task, state, item[3])
 
     def _dead_end(self, plan_len: int, description: str) -> None:
         if self.deepest is None or plan_len >= self.deepest[0]:
@@ -178,12 +221,18 @@ class Search:
         if enabled:
             gc.disable()
         try:
-            return self._run(state, items)
+            # goal pruning costs an analysis of the tasks met, which a search that meets no complete plan failing
+            # its goal does not need: it starts without, and begins again with it at the first such failure (the
+            # first plan is the same either way: the pruning only cuts subtrees without a plan)
+            result = self._run(state, items, False)
+            if result is None:
+                result = self._run(state, items, True)
+            return result
         finally:
             if enabled:
                 gc.enable()
 
-    def _run(self, state: State, items: list[tuple]) -> PlanResult:
+    def _run(self, state: State, items: list[tuple], prune_goal: bool) -> PlanResult | None:
         domain = self.domain
         primitives = domain.primitives
         tasks_decl = domain.tasks
@@ -194,9 +243,17 @@ class Search:
         threshold = compiled.threshold
         small = compiled.for_size(0)  # the variant for large states is made when one is first met
         for_size = compiled.for_size
+        # the agenda is a linked list of cells (item, rest, goal mask); the mask (0 without goal pruning) is the
+        # goal facts the cell's tasks could still add (see bt_meta.htn.achievers)
+        achievers = GoalAchievers(domain, self.goal) if prune_goal else None
+        if not achievers:
+            achievers = None
+        of_task = achievers.of_task if achievers is not None else None
+        missing = achievers.missing(state) if achievers is not None else 0
+        missing_for = state  # the state ``missing`` is of
         agenda: tuple | None = None
         for item in reversed(items):
-            agenda = (item, agenda)
+            agenda = (item, agenda, 0 if of_task is None else _item_mask(item, of_task) | _mask(agenda))
         # search nodes whose whole subtree failed: (state hash, id of the agenda) -> [(state, agenda)]. The agenda
         # is compared by identity: the same agenda object holds the same tasks and loop-check entries (CLOSE
         # items) whatever path led to it, and the subtree below a node depends only on its state and agenda
@@ -206,12 +263,19 @@ class Search:
         trail: list[tuple] = []  # (task, kind, method, bindings, parent_key, state_before, step)
         plan: list[int] = []
         active: dict[tuple, list[State]] = {}
-        undo: list[tuple] = []
-        stack: list[list] = []  # [alternatives, item, rest, state, trail_len, plan_len, undo_len]
+        # open expansions of recursive tasks by task name: [(state, root, depth)], innermost last; root is
+        # [depth bound, cut below it in this iteration] of the outermost expansion of a same-state chain
+        chains: dict[str, list[tuple]] = {}
+        link: tuple | None = None  # the chain entry of the compound expansion being taken
+        undo: list[tuple] = []  # (ACTIVE_PUSHED, key) (ACTIVE_CLOSED, key, state) (CHAIN_PUSHED, name)
+        # (CHAIN_CLOSED, name, entry, index): what to undo on backtracking, newest last
+        # [alternatives, item, rest, state, trail_len, plan_len, undo_len, missing, chain entry or None]
+        stack: list[list] = []
         step_offset = self.step_offset
         max_nodes = self.max_nodes
         deadline = self.started + self.max_seconds if self.max_seconds is not None else None
         expansions = self.expansions
+        first_bound = 1 if self.deepening else sys.maxsize  # the first depth bound of a chain
         advance = False
         while True:
             if advance:
@@ -219,19 +283,37 @@ class Search:
                 advance = False
                 while stack:
                     cp = stack[-1]
-                    state = cp[3]
+                    state = missing_for = cp[3]
+                    missing = cp[7]
                     del trail[cp[4]:]
                     del plan[cp[5]:]
                     while len(undo) > cp[6]:
                         entry = undo.pop()
-                        if entry[0]:
+                        tag = entry[0]
+                        if tag == ACTIVE_PUSHED:
                             states = active[entry[1]]
                             states.pop()
                             if not states:
                                 del active[entry[1]]
-                        else:
+                        elif tag == ACTIVE_CLOSED:
                             active.setdefault(entry[1], []).append(entry[2])
+                        elif tag == CHAIN_PUSHED:
+                            entries = chains[entry[1]]
+                            entries.pop()
+                            if not entries:
+                                del chains[entry[1]]
+                        else:
+                            chains.setdefault(entry[1], []).insert(entry[3], entry[2])
                     alternative = next(cp[0], None)
+                    link = cp[8]
+                    if alternative is None and link is not None and link[2] == 0 and link[1][1]:
+                        # a chain below this root was cut at its depth bound: its next, deeper iteration
+                        root = link[1]
+                        root[0] += 1
+                        root[1] = False
+                        self.deepenings += 1
+                        cp[0] = self._alternatives_again(cp[1], state, compiled, typed)
+                        alternative = next(cp[0], None)
                     if alternative is not None:
                         # every search node reached after this choice point was made has failed as a whole
                         height = len(stack) - 1
@@ -252,22 +334,53 @@ class Search:
             else:
                 if agenda is None:
                     if self.goal and not self._goal_holds(state):
-                        missing = [atom_text(a) for a in self.goal if not self._holds(a, state)]
-                        self._dead_end(len(plan) + 1, f"goal facts do not hold at the end: {', '.join(missing)}")
+                        if achievers is None and self.goal_pruning and not prune_goal:
+                            self.expansions = expansions
+                            return None
+                        absent = [atom_text(a) for a in self.goal if not self._holds(a, state)]
+                        self._dead_end(len(plan) + 1, f"goal facts do not hold at the end: {', '.join(absent)}")
                         advance = True
                         continue
                     self.expansions = expansions
                     return self._success(trail, plan, state)
-                item, rest = agenda
+                item, rest, _ = agenda
                 kind = item[0]
                 if kind == CLOSE:
                     states = active[item[1]]
                     states.remove(item[2]) if states[-1] is not item[2] else states.pop()
                     if not states:
                         del active[item[1]]
-                    undo.append((False, item[1], item[2]))
+                    undo.append((ACTIVE_CLOSED, item[1], item[2]))
+                    name = item[1][0][0]
+                    entries = chains[name]
+                    position = len(entries) - 1
+                    while entries[position][0] is not item[2]:
+                        position -= 1
+                    entry = entries.pop(position)
+                    if not entries:
+                        del chains[name]
+                    undo.append((CHAIN_CLOSED, name, entry, position))
                     agenda = rest
+                    if entry[2] == 0 and entry[1][0] > first_bound:
+                        # a root whose chains were deepened: a decomposition as shallow as an earlier iteration's
+                        # is one that iteration tried, and the node after it failed then (the failure memo)
+                        bucket = failed.get((state._hash, id(agenda))) if failed else None
+                        if bucket is not None and any(a is agenda and s == state for s, a in bucket):
+                            self.memo_pruned += 1
+                            advance = True
+                        elif stack:
+                            reached.append((state, agenda, len(stack)))
                     continue
+                if achievers is not None:
+                    if state is not missing_for:
+                        missing = achievers.missing_after(missing, missing_for, state)
+                        missing_for = state
+                    if missing & ~agenda[2]:
+                        self.goal_pruned += 1
+                        self._dead_end(len(plan), f"goal fact {atom_text(achievers.first(missing & ~agenda[2]))} "
+                                                  "is false and no task left can add it")
+                        advance = True
+                        continue
                 expansions += 1
                 if max_nodes is not None and expansions > max_nodes:
                     self.expansions = expansions
@@ -276,6 +389,7 @@ class Search:
                     self.expansions = expansions
                     return self._failure("budget_exhausted", trail, f"time budget of {self.max_seconds} s exhausted")
                 if kind == UNORDERED:
+                    link = None
                     alternatives: Iterator[Any] | None = iter(range(len(item[1])))
                 else:
                     task = item[1]
@@ -295,6 +409,7 @@ class Search:
                         agenda = rest
                         continue
                     if name in primitives:
+                        link = None
                         found = primitives[name].fast_satisfiers(state, task[1:], external)
                         # at most one way to apply it: no choice point (a dead end resumes the previous one)
                         alternatives = iter(found) if found.__class__ is not tuple or len(found) > 1 else None
@@ -318,6 +433,24 @@ class Search:
                                                           "in the same state)")
                                 advance = True
                                 continue
+                            entries = chains.get(name)
+                            parent = entries[-1] if entries is not None else None
+                            if parent is not None and parent[0] is state:
+                                # the task recurs in the same state: one level deeper in its root's chain
+                                root = parent[1]
+                                depth = parent[2] + 1
+                                if depth > root[0]:
+                                    root[1] = True
+                                    self.depth_cuts += 1
+                                    self._dead_end(len(plan), f"{atom_text(task)}: deeper than {root[0]} nested "
+                                                              "expansions of the same task in the same state (for now)")
+                                    advance = True
+                                    continue
+                                link = (state, root, depth)
+                            else:
+                                link = (state, [first_bound, False], 0)
+                        else:
+                            link = None
                         if name in typed and not types_hold(tasks_decl[name].types, task[1:], state):
                             alternatives = iter(())
                         else:
@@ -333,7 +466,7 @@ class Search:
                     advance = True
                     continue
                 if alternatives is not None:
-                    stack.append([alternatives, item, rest, state, len(trail), len(plan), len(undo)])
+                    stack.append([alternatives, item, rest, state, len(trail), len(plan), len(undo), missing, link])
             # take ``alternative`` for ``item``
             kind = item[0]
             if kind == TASK:
@@ -352,22 +485,28 @@ class Search:
                     if task[0] in recursive:
                         key = (task, state._hash)
                         active.setdefault(key, []).append(state)
-                        undo.append((True, key))
-                        agenda = ((CLOSE, key, state), rest)
+                        undo.append((ACTIVE_PUSHED, key))
+                        chains.setdefault(task[0], []).append(link)
+                        undo.append((CHAIN_PUSHED, task[0]))
+                        agenda = ((CLOSE, key, state), rest, _mask(rest))
                     else:
                         agenda = rest
                     if method.ordered:
                         for sub in reversed(subtasks):
-                            agenda = ((TASK, sub, index, None), agenda)
+                            agenda = ((TASK, sub, index, None), agenda,
+                                      0 if of_task is None else of_task(sub) | _mask(agenda))
                     elif subtasks:
-                        agenda = ((UNORDERED, subtasks, index), agenda)
+                        agenda = ((UNORDERED, subtasks, index), agenda,
+                                  0 if of_task is None else _item_mask((UNORDERED, subtasks), of_task) | _mask(agenda))
             else:  # UNORDERED: the alternative is the index of the subtask to do first
                 subs = item[1]
                 remaining = subs[:alternative] + subs[alternative + 1:]
                 agenda = rest
                 if remaining:
-                    agenda = ((UNORDERED, remaining, item[2]), agenda)
-                agenda = ((TASK, subs[alternative], item[2], None), agenda)
+                    agenda = ((UNORDERED, remaining, item[2]), agenda,
+                              0 if of_task is None else _item_mask((UNORDERED, remaining), of_task) | _mask(agenda))
+                agenda = ((TASK, subs[alternative], item[2], None), agenda,
+                          0 if of_task is None else of_task(subs[alternative]) | _mask(agenda))
 
     def _holds(self, atom: Atom, state: State) -> bool:
         if atom[0] in self.domain.context.derived:
@@ -383,6 +522,9 @@ class Search:
             "backtracks": self.backtracks,
             "loops_pruned": self.loops,
             "memo_pruned": self.memo_pruned,
+            "goal_pruned": self.goal_pruned,
+            "depth_cuts": self.depth_cuts,
+            "deepenings": self.deepenings,
             "seconds": round(time.perf_counter() - self.started, 6),
         }
         data.update(more)

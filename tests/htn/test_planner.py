@@ -310,20 +310,23 @@ def test_node_budget_ends_with_budget_exhausted():
 
 
 def test_time_budget_ends_with_budget_exhausted():
-    # every ordering of 9 unordered steps is tried before failing: far more than a millisecond of work
+    # every ordering of 9 unordered steps is tried before failing: far more than a millisecond of work. The goal
+    # is one a task could add (finish), so the goal-directed pruning, which ignores preconditions, does not see
+    # that it cannot hold
     subtasks = ", ".join(f"mark(m{i})" for i in range(9))
     text = f"""
     domain:
       predicates: {{marked: [x], never: []}}
       primitives:
         mark: {{parameters: [?x], add: [marked(?x)]}}
+        finish: {{precondition: never(), add: [never()]}}
       tasks: {{all: []}}
       methods:
         - name: any_order
           task: all()
           unordered: [{subtasks}]
     problems:
-      p: {{tasks: [all()], goal: [never()]}}
+      p: {{tasks: [all(), finish()], goal: [never()]}}
     """
     started = time.perf_counter()
     result = plan_of(text, max_seconds=0.05)

@@ -130,7 +130,22 @@ class _Body:
 class _Grasp:
     arm: str
     object_name: str
-    constraint_id: int
+    constraint_id: int | None
+    """The fixed constraint holding the object, ``None`` when the fingers hold it by friction."""
+    lost: int = 0
+    """Friction grasps: consecutive checks the fingers did not both touch the object."""
+
+
+_FINGER_FRICTION = 1.0
+"""Lateral friction of the finger links of a friction gripper (rubber pads)."""
+_PRESHAPE_MARGIN = 0.006
+"""Each side (m): how much wider than the part the fingers open before closing on it."""
+_FIT_MARGIN = 0.002
+"""Each side (m): a part fits the fingers when it is this much narrower than their opening."""
+_CLOSE_STEPS = 120
+"""Physics steps (0.5 s) a friction grasp lets the fingers close before judging whether they hold the part."""
+_LOST_AFTER = 2
+"""A friction grasp is lost after this many consecutive step() calls without both fingers touching the part."""
 
 
 def _tuple3(v: Iterable[float]) -> tuple[float, float, float]:
@@ -268,11 +283,24 @@ class Simulation:
         self._grasps: dict[str, _Grasp] = {}
         self._joins: dict[frozenset[str], int] = {}
         self._pending_collision: list[tuple[str, str]] = []
+        self._finger_links: dict[str, tuple[int, ...]] = {}
+        self._forces: dict[str, float] = {}
+        """Motor force (N) of joints that do not use the default 500 (a friction gripper's fingers)."""
         self.set_joint_positions(self.robot.home)
         self.table_id = self._make_table()
         self._hand_links: dict[str, tuple[int, ...]] = {
             arm: self._descendants(self.link_index(self._hand_root(arm))) for arm in self.robot.arms
         }
+        for arm, description in self.robot.arms.items():
+            gripper = description.gripper
+            if gripper is None or gripper.grasp != "friction":
+                continue
+            self._finger_links[arm] = tuple(self._joint_index[j] for j in gripper.joints)
+            for joint in gripper.joints:
+                self._forces[joint] = gripper.force
+            for link in self._finger_links[arm]:
+                pybullet.changeDynamics(self.robot_id, link, lateralFriction=_FINGER_FRICTION,
+                                        physicsClientId=self.client)
 
     def _hand_root(self, arm: str) -> str:
         """The wrist-side link of the hand: everything below it may touch a held object."""
@@ -395,7 +423,7 @@ class Simulation:
             idx,
             pybullet.POSITION_CONTROL,
             targetPositions=[self._targets[n] for n in names],
-            forces=[500.0] * len(idx),
+            forces=[self._forces.get(n, 500.0) for n in names],
             physicsClientId=self.client,
         )
         if max_velocity is not None:
@@ -405,7 +433,7 @@ class Simulation:
                     self._joint_index[name],
                     pybullet.POSITION_CONTROL,
                     targetPosition=float(value),
-                    force=500.0,
+                    force=self._forces.get(name, 500.0),
                     maxVelocity=max_velocity,
                     physicsClientId=self.client,
                 )
@@ -460,6 +488,8 @@ class Simulation:
                     self.try_attach(active, reference)
         if self._pending_collision:
             self._restore_collisions()
+        if self._finger_links:
+            self._check_friction_grasps()
 
     def settle(self, steps: int = 240) -> None:
         """Let objects come to rest (one second of simulated time by default)."""
@@ -675,12 +705,17 @@ class Simulation:
     # -- grasp -----------------------------------------------------------------------------------------------
 
     def grasp(self, name: str, arm: str = "right", *, max_distance: float = 0.03) -> bool:
-        """Hold ``name`` in the arm's gripper by a fixed constraint at the current relative pose.
+        """Hold ``name`` in the arm's gripper: by friction when the gripper's description says ``grasp: friction``
+        and the part fits between its fingers (:meth:`fits`), else by a fixed constraint at the current relative
+        pose.
 
-        The gripper cannot open wide enough for a Mega Blok (4.62 cm < 6.1 cm), so a grasp is this constraint,
-        with collisions between the hand and the object off. Returns False (and holds nothing) when the
-        gripper frame is farther than ``max_distance`` from the object's surface or the arm already holds
-        something -- a physical failure the skill reports.
+        The Baxter's gripper cannot open wide enough for a Mega Blok (4.62 cm < 6.1 cm), so its grasp is this
+        constraint, with collisions between the hand and the object off. A friction grasp closes the fingers
+        (physics steps, up to 0.5 s) and holds the part only if both fingers then touch it; afterwards the
+        part stays held only as long as they do (checked at every :meth:`step`): a part too heavy or too
+        slippery for the fingers' force slips out, and :meth:`held` says so. Returns False (and holds nothing)
+        when the gripper frame is farther than ``max_distance`` from the object's surface, the arm already holds
+        something, or the fingers closed without holding it -- a physical failure the skill reports.
         """
         body = self._body(name)
         if arm in self._grasps:
@@ -690,6 +725,8 @@ class Simulation:
         end = self.link_index(self.robot.arm(arm).end_effector)
         if self._distance_to_gripper(body.body_id, end) > max_distance:
             return False
+        if self.grasps_by_friction(name, arm):
+            return self._close_on(name, arm)
         c = self.client
         link_state = pybullet.getLinkState(self.robot_id, end, computeForwardKinematics=True, physicsClientId=c)
         parent = _transform(link_state[0], link_state[1])  # constraint frames are relative to the link's COM frame
@@ -702,12 +739,97 @@ class Simulation:
         self._grasps[arm] = _Grasp(arm, name, cid)
         return True
 
+    def grasps_by_friction(self, name: str, arm: str = "right") -> bool:
+        """Whether a grasp of ``name`` by ``arm`` would be by the fingers' friction (the gripper is described
+        ``grasp: friction`` and the part, as it is turned now, fits between the open fingers)."""
+        return arm in self._finger_links and self.fits(name, arm)
+
+    def closing_axis(self, arm: str = "right") -> np.ndarray:
+        """Unit vector (base frame) along which the arm's first finger moves when the gripper opens."""
+        gripper = self.robot.arm(arm).gripper
+        if gripper is None:
+            raise SimulationError(f"arm {arm!r} has no gripper")
+        joint = self._joint_index[gripper.joints[0]]
+        axis = np.array(pybullet.getJointInfo(self.robot_id, joint, physicsClientId=self.client)[13], dtype=float)
+        state = pybullet.getLinkState(self.robot_id, joint, computeForwardKinematics=True,
+                                      physicsClientId=self.client)
+        world = _transform(state[4], state[5])[:3, :3] @ axis
+        return world / max(float(np.linalg.norm(world)), 1e-12)
+
+    def width_across(self, name: str, arm: str = "right") -> float:
+        """The part's extent (m) along the arm's finger closing axis, as it is turned now."""
+        t = self.object_transform(name)
+        points = self._body(name).model.points() @ t[:3, :3].T
+        along = points @ self.closing_axis(arm)
+        return float(along.max() - along.min())
+
+    def fits(self, name: str, arm: str = "right") -> bool:
+        """Whether the part fits between the arm's open fingers."""
+        gripper = self.robot.arm(arm).gripper
+        return gripper is not None and self.width_across(name, arm) <= gripper.opening - 2.0 * _FIT_MARGIN
+
+    def preshape(self, arm: str, name: str) -> None:
+        """Open the fingers of a friction gripper just wider than ``name`` (a few millimetres each side), so
+        they go down around it without touching what stands next to it. Nothing for other grippers."""
+        if not self.grasps_by_friction(name, arm):
+            return
+        self._open_to(arm, self.width_across(name, arm) + 2.0 * _PRESHAPE_MARGIN)
+
+    def _open_to(self, arm: str, width: float) -> None:
+        gripper = self.robot.arm(arm).gripper
+        assert gripper is not None
+        fraction = min(1.0, max(0.0, width / gripper.opening))
+        values = [c + fraction * (o - c) for o, c in zip(gripper.open, gripper.closed, strict=True)]
+        self.set_joint_targets(dict(zip(gripper.joints, values, strict=True)))
+
+    def touching_fingers(self, name: str, arm: str = "right") -> int:
+        """How many of the arm's fingers touch ``name`` (friction grippers; 0 for others)."""
+        body = self._body(name).body_id
+        return sum(
+            1
+            for link in self._finger_links.get(arm, ())
+            if pybullet.getContactPoints(self.robot_id, body, linkIndexA=link, physicsClientId=self.client)
+        )
+
+    def _close_on(self, name: str, arm: str) -> bool:
+        gripper = self.robot.arm(arm).gripper
+        assert gripper is not None
+        self.set_joint_targets(dict(zip(gripper.joints, gripper.closed, strict=True)))
+        fingers = len(self._finger_links[arm])
+        for _ in range(_CLOSE_STEPS // 8):
+            self.step(8)
+            if self.touching_fingers(name, arm) == fingers:
+                moving = pybullet.getJointStates(self.robot_id, list(self._finger_links[arm]),
+                                                 physicsClientId=self.client)
+                if all(abs(state[1]) < 1e-3 for state in moving):
+                    break
+        if self.touching_fingers(name, arm) < fingers:
+            self.preshape(arm, name)
+            return False
+        self._grasps[arm] = _Grasp(arm, name, None)
+        return True
+
+    def _check_friction_grasps(self) -> None:
+        for arm, grasp in list(self._grasps.items()):
+            if grasp.constraint_id is not None:
+                continue
+            if self.touching_fingers(grasp.object_name, arm) == len(self._finger_links[arm]):
+                grasp.lost = 0
+                continue
+            grasp.lost += 1
+            if grasp.lost >= _LOST_AFTER:  # slipped out: the fingers hold nothing
+                del self._grasps[arm]
+
     def release(self, arm: str = "right") -> str | None:
         """Let go of what the arm holds (its name, or ``None``). Hand-object collisions come back once they no
-        longer overlap, so the object does not get kicked out of the fingers."""
+        longer overlap, so the object does not get kicked out of the fingers; a friction gripper opens its
+        fingers a few millimetres wider than the part."""
         grasp = self._grasps.pop(arm, None)
         if grasp is None:
             return None
+        if grasp.constraint_id is None:
+            self._open_to(arm, self.width_across(grasp.object_name, arm) + 2.0 * _PRESHAPE_MARGIN)
+            return grasp.object_name
         pybullet.removeConstraint(grasp.constraint_id, physicsClientId=self.client)
         self._pending_collision.append((arm, grasp.object_name))
         self._restore_collisions()

@@ -477,12 +477,27 @@ class SimWorld:
         return name
 
     def allow_hand(self, name: str, arm: str, allowed: bool = True) -> None:
-        """Let the hand touch ``name`` in collision checks (approaching it to grasp), or stop letting it."""
+        """Let the hand touch ``name`` in collision checks (approaching it to grasp), or stop letting it. Allowing
+        it also opens a friction gripper's fingers just wider than ``name``, for the way down around it."""
+        if allowed and self.sim.held(arm) is None:
+            self.sim.preshape(arm, name)
         for part in self._geometry.get(name, []):
             if allowed:
                 self.collision.allow(part, self._hand_links[arm])
             else:
                 self.collision.disallow(part)
+
+    def grasp_height(self, name: str, arm: str, clearance: float) -> float:
+        """Where the end-effector frame goes for a grasp of ``name``, above the top of it (negative: below).
+
+        A fixed-constraint grasp stops ``clearance`` above the top; a friction grasp (:meth:`Simulation.fits
+        <bt_meta.world.simulation.sim.Simulation.fits>`) goes the gripper's ``depth`` below it so the finger pads
+        overlap the part, but never so deep that the fingertips reach within 4 mm of the part's bottom."""
+        if not self.sim.grasps_by_friction(name, arm):
+            return clearance
+        gripper = self.sim.robot.arm(arm).gripper
+        height = self.object_top(name) - self.object_lowest(name)
+        return -max(0.0, min(gripper.depth, height - gripper.fingertip - 0.004))
 
     def allow_objects(self, name: str, others: Iterable[str]) -> None:
         """Let object ``name`` touch the ``others`` in collision checks (a part going into a hole)."""
@@ -579,7 +594,7 @@ class SimWorld:
     def ground_pose(self, symbol: str, arm: str | None = None) -> np.ndarray:
         """The gripper pose (4x4, base frame) a pose symbol of the task file stands for, now.
 
-        Kinds of entries (``rpy`` in degrees, default pointing down with yaw 180):
+        Kinds of entries (``rpy`` in degrees, default pointing down with the arm's ``top_down_yaw``):
 
         * ``pose: [x, y, z, roll, pitch, yaw]`` -- absolute (an instructor's pose; metres, degrees);
         * ``above: OBJECT, height: h`` -- top-down over the object's centroid, ``h`` above the top of it and of
@@ -590,7 +605,8 @@ class SimWorld:
         """
         arm = arm or self.default_arm
         spec = self.pose_spec(symbol)
-        down = spec.get("rpy", [180.0, 0.0, 180.0])
+        # default: pointing down, the hand turned as the arm's description says top-down means (Baxter 180, Panda 0)
+        down = spec.get("rpy", [180.0, 0.0, math.degrees(self.sim.robot.arm(arm).top_down_yaw)])
         out = np.eye(4)
         out[:3, :3] = rpy_to_matrix(*(math.radians(float(v)) for v in down))
         height = float(spec.get("height", 0.0))
@@ -602,6 +618,8 @@ class SimWorld:
             return pose_to_matrix((x, y, z, math.radians(roll), math.radians(pitch), math.radians(yaw)))
         if "above" in spec:
             name = self.object_name(str(spec["above"]))
+            if spec.get("touch"):  # a grasp pose: as deep as this gripper grasps
+                height = self.grasp_height(name, arm, height)
             centre = self.sim.object_transform(name)[:3, 3]
             out[:3, 3] = (centre[0], centre[1], self.stack_top(name) + height)
             return out

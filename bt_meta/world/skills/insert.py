@@ -101,7 +101,8 @@ class Insert(PhasedSkill):
 
     def _descend(self) -> MoveTo:
         self.world.allow_hand(self.part, self.arm)
-        return self._move(self._over_part(0.002), "grasp " + self.part)
+        return self._move(self._over_part(self.world.grasp_height(self.part, self.arm, 0.002)),
+                          "grasp " + self.part)
 
     def _shifted(self, dx: float, dy: float, dz: float) -> np.ndarray:
         pose = self.world.sim.link_transform(self.world.end_effector(self.arm)).copy()

@@ -60,7 +60,7 @@ def test_the_grasp_kind_is_per_robot_data(tmp_path: Path):
 def test_an_unknown_grasp_kind_is_a_located_error(tmp_path: Path):
     path = tmp_path / "panda_glue.yaml"
     path.write_text(PANDA_TEXT.replace("grasp: fixed", "grasp: glue"))
-    line = next(n for n, text in enumerate(path.read_text().splitlines(), 1) if "grasp: glue" in text)
+    line = next(n for n, text in enumerate(path.read_text().splitlines(), 1) if text.strip() == "grasp: glue")
     with pytest.raises(ConfigError) as info:
         load_robot(path)
     assert str(info.value).startswith(f"{path}:{line}:14: arms.arm.gripper.grasp must be 'fixed' or 'friction'")

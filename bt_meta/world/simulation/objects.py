@@ -14,7 +14,8 @@ Offers:
 * :func:`make_model` / :data:`OBJECT_TYPES` / :data:`COLOURS` -- build a model from a type name and a colour name
 * :class:`AttachmentRelation` / :func:`attachment_relation` -- the magnetic attach rule (points coincide, normals
   oppose) and the paper's R_p, R_n keypoint relations
-* :func:`pose_to_matrix`, :func:`matrix_to_pose`, :func:`rpy_to_matrix` -- (x, y, z, roll, pitch, yaw) poses
+* :func:`pose_to_matrix`, :func:`matrix_to_pose`, :func:`rpy_to_matrix` -- (x, y, z, roll, pitch, yaw) poses,
+  from :mod:`bt_meta.world.poses` (kept here for the modules that import them from here)
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bt_meta.errors import BtMetaError
+from bt_meta.world.poses import Pose6, matrix_to_pose, pose_to_matrix, rpy_to_matrix
 
 __all__ = [
     "COLOURS",
@@ -37,6 +39,7 @@ __all__ = [
     "Cylinder",
     "ObjectModel",
     "ObjectModelError",
+    "Pose6",
     "attachment_relation",
     "housing",
     "magnetic_part",
@@ -53,7 +56,6 @@ LB = 0.061
 """One Mega Bloks unit (m): a 1x1 block is LB x LB in plan (paper, section 6.1)."""
 
 Vec3 = tuple[float, float, float]
-Pose6 = tuple[float, float, float, float, float, float]
 
 COLOURS: dict[str, tuple[float, float, float, float]] = {
     "red": (0.85, 0.08, 0.08, 1.0),
@@ -71,48 +73,6 @@ COLOURS: dict[str, tuple[float, float, float, float]] = {
 
 class ObjectModelError(BtMetaError):
     """An object type or colour that does not exist, or a model built with impossible dimensions."""
-
-
-# --------------------------------------------------------------------------------------------------------------
-# Poses
-
-
-def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """Rotation for fixed-axis X-Y-Z angles (R = Rz(yaw) Ry(pitch) Rx(roll)), pybullet's and ROS's convention."""
-    cr, sr = math.cos(roll), math.sin(roll)
-    cp, sp = math.cos(pitch), math.sin(pitch)
-    cy, sy = math.cos(yaw), math.sin(yaw)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
-
-
-def pose_to_matrix(pose: Sequence[float]) -> np.ndarray:
-    """4x4 homogeneous transform of a (x, y, z, roll, pitch, yaw) pose."""
-    if len(pose) != 6:
-        raise ObjectModelError(f"a pose has 6 numbers (x, y, z, roll, pitch, yaw), got {len(pose)}")
-    out = np.eye(4)
-    out[:3, :3] = rpy_to_matrix(pose[3], pose[4], pose[5])
-    out[:3, 3] = pose[:3]
-    return out
-
-
-def matrix_to_pose(matrix: np.ndarray) -> Pose6:
-    """(x, y, z, roll, pitch, yaw) of a 4x4 transform; at pitch = +-90 degrees roll is reported as 0."""
-    r = matrix[:3, :3]
-    pitch = math.asin(max(-1.0, min(1.0, -r[2, 0])))
-    if abs(r[2, 0]) < 1.0 - 1e-9:
-        roll = math.atan2(r[2, 1], r[2, 2])
-        yaw = math.atan2(r[1, 0], r[0, 0])
-    else:  # gimbal lock: fold roll into yaw
-        roll = 0.0
-        yaw = math.atan2(-r[0, 1], r[1, 1])
-    x, y, z = (float(v) for v in matrix[:3, 3])
-    return (x, y, z, roll, pitch, yaw)
 
 
 # --------------------------------------------------------------------------------------------------------------

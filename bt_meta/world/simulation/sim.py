@@ -839,6 +839,11 @@ class Simulation:
         grasp = self._grasps.get(arm)
         return grasp.object_name if grasp else None
 
+    def holds_by_friction(self, arm: str = "right") -> bool:
+        """Whether the arm holds something by its fingers' friction (it may turn or slide in them)."""
+        grasp = self._grasps.get(arm)
+        return grasp is not None and grasp.constraint_id is None
+
     def grasp_transform(self, arm: str = "right") -> np.ndarray | None:
         """4x4 pose of the held object in the end-effector frame (``None`` if nothing is held): the kinematic
         relation that turns a wanted object pose into a gripper pose (object = gripper @ this)."""

@@ -727,6 +727,17 @@ class SimWorld:
             elif name not in held:
                 for part, (_, _, local) in zip(self._geometry[name], shapes, strict=True):
                     checker.move(part, transform @ local)
+        q = None
+        for arm in sim.robot.arms:  # a part held by friction may have turned in the fingers: carry it as it is now
+            name = sim.held(arm)
+            if name is None or not sim.holds_by_friction(arm) or name not in self._geometry:
+                continue
+            q = self.current_q() if q is None else q
+            transform = sim.object_transform(name)
+            shapes = _collision_shapes(sim.object_model(name))
+            for part, (_, _, local) in zip(self._geometry[name], shapes, strict=True):
+                checker.detach(part, pose=transform @ local)
+                checker.attach(part, self.end_effector(arm), q, allow=self._hand_links[arm])
         for a, b in sim.attachments():  # magnetically joined parts touch by construction: not a collision
             for part in self._geometry.get(a, []):
                 checker.allow(part, self._geometry.get(b, []))

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from bt_meta.bt.failures import FailureKind
-from bt_meta.world.simulation.objects import matrix_to_pose, pose_to_matrix
+from bt_meta.world.poses import matrix_to_pose, pose_to_matrix
 from bt_meta.world.skills.base import PhasedSkill, SkillAbort, rounded
 from bt_meta.world.skills.grasp import Grasp
 from bt_meta.world.skills.move_to import MoveTo

@@ -301,6 +301,16 @@ class Simulation:
             for link in self._finger_links[arm]:
                 pybullet.changeDynamics(self.robot_id, link, lateralFriction=_FINGER_FRICTION,
                                         physicsClientId=self.client)
+            if len(gripper.joints) == 2:
+                # The fingers move together, as the hand's mechanism couples them: two independent motors that
+                # both push at full force give a held part no lateral stiffness, it slides with the fingers.
+                first, second = self._finger_links[arm]
+                ratio = -1.0 if gripper.open[0] * gripper.open[1] > 0 else 1.0
+                gear = pybullet.createConstraint(self.robot_id, first, self.robot_id, second, pybullet.JOINT_GEAR,
+                                                 [1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0],
+                                                 physicsClientId=self.client)
+                pybullet.changeConstraint(gear, gearRatio=ratio, erp=0.1, maxForce=10.0 * gripper.force,
+                                          physicsClientId=self.client)
 
     def _hand_root(self, arm: str) -> str:
         """The wrist-side link of the hand: everything below it may touch a held object."""

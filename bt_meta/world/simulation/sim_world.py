@@ -491,13 +491,28 @@ class SimWorld:
         """Where the end-effector frame goes for a grasp of ``name``, above the top of it (negative: below).
 
         A fixed-constraint grasp stops ``clearance`` above the top; a friction grasp (:meth:`Simulation.fits
-        <bt_meta.world.simulation.sim.Simulation.fits>`) goes the gripper's ``depth`` below it so the finger pads
-        overlap the part, but never so deep that the fingertips reach within 4 mm of the part's bottom."""
-        if not self.sim.grasps_by_friction(name, arm):
+        <bt_meta.world.simulation.sim.Simulation.fits>`) centres the finger pads on the highest of the part's
+        widest pieces across the fingers (a block's body below its studs, the housing's flange), at most the
+        gripper's ``depth`` below the top, and never so deep that the fingertips reach within 4 mm of the part's
+        bottom."""
+        sim = self.sim
+        if not sim.grasps_by_friction(name, arm):
             return clearance
-        gripper = self.sim.robot.arm(arm).gripper
-        height = self.object_top(name) - self.object_lowest(name)
-        return -max(0.0, min(gripper.depth, height - gripper.fingertip - 0.004))
+        gripper = sim.robot.arm(arm).gripper
+        t = sim.object_transform(name)
+        axis = sim.closing_axis(arm)
+        parts = [part.corners() @ t[:3, :3].T + t[:3, 3] for part in sim.object_model(name).parts]
+        spans = [(float(p[:, 2].min()), float(p[:, 2].max())) for p in parts]
+        pieces = []  # (width across the fingers, lowest z, highest z) of each height band the parts make
+        for low, high in sorted(set(spans)):
+            middle = 0.5 * (low + high)
+            along = np.concatenate([p for p, (a, b) in zip(parts, spans, strict=True) if a <= middle <= b]) @ axis
+            pieces.append((float(along.max() - along.min()), low, high))
+        widest = max(width for width, _, _ in pieces)
+        _, low, high = max((p for p in pieces if p[0] >= widest - 0.002), key=lambda p: p[2])
+        top, bottom = self.object_top(name), self.object_lowest(name)
+        depth = min(top - 0.5 * (low + high), gripper.depth, top - bottom - gripper.fingertip - 0.004)
+        return -max(0.0, depth)
 
     def allow_objects(self, name: str, others: Iterable[str]) -> None:
         """Let object ``name`` touch the ``others`` in collision checks (a part going into a hole)."""

@@ -146,6 +146,31 @@ def test_magnetic_attach_nominal_on_the_panda(capsys):
 
 
 @pytest.mark.slow
+def test_letter_h_on_the_panda(capsys):
+    """The lift next to a wrist joint limit and the fingers beside placed blocks: IK keeps off the limits
+    (joint_limit_margin), Place turns the fingers to a free side."""
+    code, result = run_json(capsys, str(trees_dir() / "letters.yaml"), "--problem", "H", "--robot", "panda")
+    assert code == 0 and result["status"] == "SUCCESS", result["failures"]
+    assert len(result["plan"]) == 8
+    for line in result["plan"]:
+        _, block, x, y = line.split()
+        assert ["at", block, x, y] in result["symbolic_state"]
+        assert result["objects"][block]["held_by"] is None and result["objects"][block]["pose"][2] < 0.05
+
+
+@pytest.mark.slow
+def test_housing_insertion_nominal_on_the_panda(capsys):
+    """The pose symbols point the hand down with the Panda's own top-down yaw (0, not the Baxter's 180)."""
+    code, result = run_json(capsys, str(trees_dir() / "housing_insertion.yaml"), "--problem", "nominal",
+                            "--robot", "panda")
+    assert code == 0 and result["status"] == "SUCCESS", result["failures"]
+    housing, board = result["objects"]["housing"], result["objects"]["board"]
+    assert housing["held_by"] is None
+    assert housing["an"][2] == pytest.approx(-1.0, abs=0.02)  # upright: its insertable end faces down
+    assert np.linalg.norm(np.array(housing["pose"][:2]) - np.array(board["pose"][:2])) < 0.01  # in the board
+
+
+@pytest.mark.slow
 def test_a_robot_placed_too_far_from_the_objects_reports_reachability(tmp_path, capsys):
     far = tmp_path / "far_panda.yaml"
     far.write_text(PANDA_TEXT.replace("scene_offset: [-0.22, 0.20, 0.20]", "scene_offset: [0.45, 0.20, 0.20]"))

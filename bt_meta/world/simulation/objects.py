@@ -7,7 +7,7 @@ from models; perception and the meta-reasoner read the same features back in the
 Offers:
 
 * :data:`LB` -- the Mega Bloks unit, 6.1 cm
-* :class:`Box`, :class:`Cylinder` -- the primitive parts of a model
+* :class:`Box`, :class:`Cylinder`, :class:`Mesh` -- the primitive parts of a model
 * :class:`AttachmentFeature` -- a named attachment point and normal in the object frame
 * :class:`ObjectModel` -- one kind of object (type, colour, parts, mass, features, primary feature, role)
 * :func:`megablok`, :func:`magnetic_part`, :func:`task_board`, :func:`housing`, :func:`shaft` -- the paper's objects
@@ -37,6 +37,7 @@ __all__ = [
     "AttachmentRelation",
     "Box",
     "Cylinder",
+    "Mesh",
     "ObjectModel",
     "ObjectModelError",
     "Pose6",
@@ -112,7 +113,22 @@ class Cylinder:
         return pts @ rpy_to_matrix(*self.rpy).T + np.array(self.position)
 
 
-Part = Box | Cylinder
+@dataclass(frozen=True)
+class Mesh:
+    """A mesh part: the OBJ/STL ``file`` (absolute) scaled by ``scale``, at ``position`` turned by ``rpy``.
+    ``vertices`` are the file's, scaled (mesh frame): the outline everything else computes from."""
+
+    file: str
+    scale: Vec3
+    vertices: tuple[Vec3, ...] = field(repr=False)
+    position: Vec3 = (0.0, 0.0, 0.0)
+    rpy: Vec3 = (0.0, 0.0, 0.0)
+
+    def corners(self) -> np.ndarray:
+        return np.array(self.vertices, dtype=float) @ rpy_to_matrix(*self.rpy).T + np.array(self.position)
+
+
+Part = Box | Cylinder | Mesh
 
 
 @dataclass(frozen=True)
@@ -188,6 +204,15 @@ class ObjectModel:
         """How far below the origin the geometry reaches when turned by (roll, pitch): resting height on a plane."""
         rotated = self.points() @ rpy_to_matrix(roll, pitch, 0.0).T
         return float(-rotated[:, 2].min())
+
+    def grasp_point(self) -> Vec3 | None:
+        """The position (object frame) of the model's first grasp frame (catalogue types give them), or ``None``:
+        where a top-down grasp holds it instead of over its centroid (a wedge by its thick end)."""
+        names = [key[len("grasp_"):-len("_x")] for key in self.info if key.startswith("grasp_") and key.endswith("_x")]
+        if not names:
+            return None
+        first = names[0]
+        return (self.info[f"grasp_{first}_x"], self.info[f"grasp_{first}_y"], self.info[f"grasp_{first}_z"])
 
     def extent(self) -> tuple[np.ndarray, np.ndarray]:
         """Axis-aligned bounds (min, max) of the geometry in the object frame."""

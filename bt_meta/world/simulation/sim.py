@@ -7,8 +7,9 @@ Offers:
 
 * :class:`Simulation` -- own physics client (``gui=True`` for a person at a screen), context manager; robot
   joints (teleport or drive targets and step), objects by name (spawn, move, remove, pose), grasp by fixed
-  constraint and release, the magnetic attach rule (checked at every step, joins by fixed constraint),
-  :meth:`Simulation.object_states` with AP/AN in the base frame, static obstacles (:meth:`Simulation.add_obstacle`)
+  constraint or by the fingers' friction (per robot: ``gripper: grasp:``) and release, the magnetic attach rule
+  (checked at every step, joins by fixed constraint), :meth:`Simulation.object_states` with AP/AN in the base
+  frame, static obstacles (:meth:`Simulation.add_obstacle`); object parts are boxes, cylinders and meshes
 * :class:`SimObjectState` -- ground truth of one object: pose, AP/AN (base and object frame), all features
 * :class:`Table` -- where the table is (defaults: top 0.2 m below the base frame, front edge 0.45 m ahead)
 * :class:`SimulationError` -- unknown object or link names, duplicate names, impossible requests
@@ -39,6 +40,7 @@ from bt_meta.world.simulation.objects import (
     AttachmentRelation,
     Box,
     Cylinder,
+    Mesh,
     ObjectModel,
     Pose6,
     attachment_relation,
@@ -130,8 +132,12 @@ class _Body:
 class _Grasp:
     arm: str
     object_name: str
-    constraint_id: int | None
-    """The fixed constraint holding the object, ``None`` when the fingers hold it by friction."""
+    constraint_id: int
+    """The constraint holding the object (for a friction grasp, one no stronger than the fingers' friction)."""
+    friction: bool = False
+    """Held by the fingers' friction: released when they stop touching it or it slides in them."""
+    relative: np.ndarray | None = None
+    """Friction grasps: the object's pose in the end-effector frame when the fingers closed."""
     lost: int = 0
     """Friction grasps: consecutive checks the fingers did not both touch the object."""
 
@@ -547,7 +553,11 @@ class Simulation:
     def _create_body(self, model: ObjectModel, pose: Sequence[float]) -> int:
         c = self.client
         kinds, halves, radii, lengths, positions, orientations = [], [], [], [], [], []
+        files: list[str] = []
+        scales: list[list[float]] = []
         for part in model.parts:
+            files.append(part.file if isinstance(part, Mesh) else "")
+            scales.append(list(part.scale) if isinstance(part, Mesh) else [1.0, 1.0, 1.0])
             positions.append(list(part.position))
             orientations.append(list(pybullet.getQuaternionFromEuler(part.rpy)))
             if isinstance(part, Box):
@@ -560,6 +570,11 @@ class Simulation:
                 halves.append([0.0, 0.0, 0.0])
                 radii.append(part.radius)
                 lengths.append(part.length)
+            elif isinstance(part, Mesh):
+                kinds.append(pybullet.GEOM_MESH)
+                halves.append([0.0, 0.0, 0.0])
+                radii.append(0.0)
+                lengths.append(0.0)
             else:  # pragma: no cover - ObjectModel only holds these
                 raise SimulationError(f"unknown part {part!r}")
         col = pybullet.createCollisionShapeArray(
@@ -567,6 +582,8 @@ class Simulation:
             radii=radii,
             halfExtents=halves,
             lengths=lengths,
+            fileNames=files,
+            meshScales=scales,
             collisionFramePositions=positions,
             collisionFrameOrientations=orientations,
             physicsClientId=c,
@@ -576,6 +593,8 @@ class Simulation:
             radii=radii,
             halfExtents=halves,
             lengths=lengths,
+            fileNames=files,
+            meshScales=scales,
             visualFramePositions=positions,
             visualFrameOrientations=orientations,
             physicsClientId=c,
@@ -721,9 +740,11 @@ class Simulation:
 
         The Baxter's gripper cannot open wide enough for a Mega Blok (4.62 cm < 6.1 cm), so its grasp is this
         constraint, with collisions between the hand and the object off. A friction grasp closes the fingers
-        (physics steps, up to 0.5 s) and holds the part only if both fingers then touch it; afterwards the
-        part stays held only as long as they do (checked at every :meth:`step`): a part too heavy or too
-        slippery for the fingers' force slips out, and :meth:`held` says so. Returns False (and holds nothing)
+        (physics steps, up to 0.5 s) and holds the part only if both fingers then touch it, by a constraint no
+        stronger than their friction (pads x part friction x the fingers' squeeze); afterwards the part stays
+        held only while both fingers touch it and it has not slid 5 mm in them (checked at every
+        :meth:`step`): a part too heavy or too slippery for the fingers slips out, and :meth:`held` says so.
+        Returns False (and holds nothing)
         when the gripper frame is farther than ``max_distance`` from the object's surface, the arm already holds
         something, or the fingers closed without holding it -- a physical failure the skill reports.
         """
@@ -816,18 +837,34 @@ class Simulation:
         if self.touching_fingers(name, arm) < fingers:
             self.preshape(arm, name)
             return False
-        self._grasps[arm] = _Grasp(arm, name, None)
+        # What the fingers can hold: Coulomb friction at both pads, mu (pads x part, Bullet's product) times the
+        # squeeze. A constraint at the relative pose, limited to that force, holds the part without the creep
+        # and pivoting of Bullet's soft contacts under a sustained squeeze; a part whose weight and inertia need
+        # more is dragged out of it, and :meth:`_check_friction_grasps` lets it go.
+        end = self.link_index(self.robot.arm(arm).end_effector)
+        link_state = pybullet.getLinkState(self.robot_id, end, computeForwardKinematics=True,
+                                           physicsClientId=self.client)
+        relative = np.linalg.inv(_transform(link_state[0], link_state[1])) @ self.object_transform(name)
+        cid = _fix(self.robot_id, end, self._body(name).body_id, relative, self.client)
+        capacity = _FINGER_FRICTION * self._body(name).model.lateral_friction * fingers * gripper.force
+        pybullet.changeConstraint(cid, maxForce=capacity, physicsClientId=self.client)
+        self._grasps[arm] = _Grasp(arm, name, cid, friction=True, relative=relative)
         return True
 
-    def _check_friction_grasps(self) -> None:
+    def _check_friction_grasps(self, slide: float = 0.005) -> None:
         for arm, grasp in list(self._grasps.items()):
-            if grasp.constraint_id is not None:
+            if not grasp.friction:
                 continue
-            if self.touching_fingers(grasp.object_name, arm) == len(self._finger_links[arm]):
-                grasp.lost = 0
-                continue
-            grasp.lost += 1
-            if grasp.lost >= _LOST_AFTER:  # slipped out: the fingers hold nothing
+            assert grasp.relative is not None
+            end = self.link_index(self.robot.arm(arm).end_effector)
+            state = pybullet.getLinkState(self.robot_id, end, computeForwardKinematics=True,
+                                          physicsClientId=self.client)
+            now = np.linalg.inv(_transform(state[0], state[1])) @ self.object_transform(grasp.object_name)
+            slid = float(np.linalg.norm(now[:3, 3] - grasp.relative[:3, 3])) > slide
+            touching = self.touching_fingers(grasp.object_name, arm) == len(self._finger_links[arm])
+            grasp.lost = 0 if touching else grasp.lost + 1
+            if slid or grasp.lost >= _LOST_AFTER:  # slipped out: the fingers hold nothing
+                pybullet.removeConstraint(grasp.constraint_id, physicsClientId=self.client)
                 del self._grasps[arm]
 
     def release(self, arm: str = "right") -> str | None:
@@ -837,7 +874,8 @@ class Simulation:
         grasp = self._grasps.pop(arm, None)
         if grasp is None:
             return None
-        if grasp.constraint_id is None:
+        if grasp.friction:
+            pybullet.removeConstraint(grasp.constraint_id, physicsClientId=self.client)
             self._open_to(arm, self.width_across(grasp.object_name, arm) + 2.0 * _PRESHAPE_MARGIN)
             return grasp.object_name
         pybullet.removeConstraint(grasp.constraint_id, physicsClientId=self.client)
@@ -852,7 +890,7 @@ class Simulation:
     def holds_by_friction(self, arm: str = "right") -> bool:
         """Whether the arm holds something by its fingers' friction (it may turn or slide in them)."""
         grasp = self._grasps.get(arm)
-        return grasp is not None and grasp.constraint_id is None
+        return grasp is not None and grasp.friction
 
     def grasp_transform(self, arm: str = "right") -> np.ndarray | None:
         """4x4 pose of the held object in the end-effector frame (``None`` if nothing is held): the kinematic

@@ -43,7 +43,7 @@ from bt_meta.hookspecs import hookimpl
 from bt_meta.htn.state import State
 from bt_meta.resources import trees_dir
 from bt_meta.world.base import FAILURE, SUCCESS, Atom, SkillFailure, ground_effects
-from bt_meta.world.simulation.objects import Box, Cylinder, ObjectModel, pose_to_matrix, rpy_to_matrix
+from bt_meta.world.simulation.objects import Box, Cylinder, Mesh, ObjectModel, pose_to_matrix, rpy_to_matrix
 from bt_meta.world.skills import SKILLS
 from bt_meta.world.skills.base import SimSkill, SkillAbort
 
@@ -370,10 +370,7 @@ class SimWorld:
         for name, (model, transform) in sim.obstacles().items():  # static: added once, never moved
             for k, (kind, dims, local) in enumerate(_collision_shapes(model)):
                 part = name if k == 0 else f"{name}{_PART}{k}"
-                if kind == "box":
-                    self.collision.add_box(part, dims, transform @ local)
-                else:
-                    self.collision.add_cylinder(part, dims[0], dims[1], transform @ local)
+                self._add_shape(part, kind, dims, transform @ local)
         self.sync_collision()
         self._state = initial_state(problem)
         self.executed: list[dict[str, Any]] = []
@@ -487,13 +484,21 @@ class SimWorld:
             else:
                 self.collision.disallow(part)
 
+    def grasp_xy(self, name: str) -> tuple[float, float]:
+        """Where (base frame x, y) a top-down grasp of ``name`` goes: over its catalogue grasp frame when its type
+        has one, else over its centroid."""
+        t = self.sim.object_transform(name)
+        local = self.sim.object_model(name).grasp_point()
+        point = t[:3, 3] if local is None else t[:3, :3] @ np.asarray(local) + t[:3, 3]
+        return float(point[0]), float(point[1])
+
     def grasp_height(self, name: str, arm: str, clearance: float) -> float:
         """Where the end-effector frame goes for a grasp of ``name``, above the top of it (negative: below).
 
         A fixed-constraint grasp stops ``clearance`` above the top; a friction grasp (:meth:`Simulation.fits
         <bt_meta.world.simulation.sim.Simulation.fits>`) centres the finger pads on the highest of the part's
         widest pieces across the fingers (a block's body below its studs, the housing's flange), at most the
-        gripper's ``depth`` below the top, and never so deep that the fingertips reach within 4 mm of the part's
+        gripper's ``depth`` below the top, with the fingertips on that piece and never within 4 mm of the part's
         bottom."""
         sim = self.sim
         if not sim.grasps_by_friction(name, arm):
@@ -511,7 +516,9 @@ class SimWorld:
         widest = max(width for width, _, _ in pieces)
         _, low, high = max((p for p in pieces if p[0] >= widest - 0.002), key=lambda p: p[2])
         top, bottom = self.object_top(name), self.object_lowest(name)
-        depth = min(top - 0.5 * (low + high), gripper.depth, top - bottom - gripper.fingertip - 0.004)
+        # the fingertips stay on the band (below it they would close past a flange onto the narrower body)
+        depth = min(top - 0.5 * (low + high), gripper.depth, top - low - gripper.fingertip - 0.001,
+                    top - bottom - gripper.fingertip - 0.004)
         return -max(0.0, depth)
 
     def allow_objects(self, name: str, others: Iterable[str]) -> None:
@@ -612,8 +619,9 @@ class SimWorld:
         Kinds of entries (``rpy`` in degrees, default pointing down with the arm's ``top_down_yaw``):
 
         * ``pose: [x, y, z, roll, pitch, yaw]`` -- absolute (an instructor's pose; metres, degrees);
-        * ``above: OBJECT, height: h`` -- top-down over the object's centroid, ``h`` above the top of it and of
-          whatever rests on it (grasp poses: a few millimetres);
+        * ``above: OBJECT, height: h`` -- top-down over the object's grasp point (its catalogue grasp frame, else
+          its centroid), ``h`` above the top of it and of whatever rests on it (grasp poses: a few millimetres;
+          ``touch: true`` marks a grasp pose: a friction grasp goes as deep as :meth:`grasp_height` says);
         * ``above_feature: FEATURE, height: h`` -- the held object's lowest point ``h`` above the feature's point,
           its centroid over it (the gripper itself when nothing is held);
         * ``anchor: NAME, offset: [dx, dy, dz]`` -- a scene anchor plus an offset.
@@ -635,8 +643,8 @@ class SimWorld:
             name = self.object_name(str(spec["above"]))
             if spec.get("touch"):  # a grasp pose: as deep as this gripper grasps
                 height = self.grasp_height(name, arm, height)
-            centre = self.sim.object_transform(name)[:3, 3]
-            out[:3, 3] = (centre[0], centre[1], self.stack_top(name) + height)
+            x, y = self.grasp_xy(name)
+            out[:3, 3] = (x, y, self.stack_top(name) + height)
             return out
         if "above_feature" in spec:
             obj, feature = self.feature_of(str(spec["above_feature"]))
@@ -717,6 +725,14 @@ class SimWorld:
                  if last in model.supports[obj.parentJoint]}
         return sorted(links)
 
+    def _add_shape(self, name: str, kind: str, dims: tuple[float, ...], pose: np.ndarray) -> None:
+        if kind == "box":
+            self.collision.add_box(name, dims, pose)
+        elif kind == "cylinder":
+            self.collision.add_cylinder(name, dims[0], dims[1], pose)
+        else:
+            self.collision.add_convex(name, np.asarray(dims, dtype=float).reshape(-1, 3), pose)
+
     def sync_collision(self) -> None:
         """Mirror the simulator's objects into the collision scene (held objects ride with the gripper)."""
         sim, checker = self.sim, self.collision
@@ -732,11 +748,7 @@ class SimWorld:
                 parts = []
                 for k, (kind, dims, local) in enumerate(shapes):
                     part = name if k == 0 else f"{name}{_PART}{k}"
-                    pose = transform @ local
-                    if kind == "box":
-                        checker.add_box(part, dims, pose)
-                    else:
-                        checker.add_cylinder(part, dims[0], dims[1], pose)
+                    self._add_shape(part, kind, dims, transform @ local)
                     parts.append(part)
                 self._geometry[name] = parts
             elif name not in held:
@@ -783,6 +795,8 @@ def _collision_shapes(model: ObjectModel) -> list[tuple[str, tuple[float, ...], 
         elif isinstance(part, Cylinder):
             radius, length = shrunk(2.0 * part.radius, part.length)
             out.append(("cylinder", (radius / 2.0, length), local))
+        elif isinstance(part, Mesh):  # its convex hull, as pybullet collides a moving mesh
+            out.append(("convex", tuple(float(v) for row in part.vertices for v in row), local))
     return out
 
 

@@ -95,8 +95,8 @@ class Insert(PhasedSkill):
         return MoveTo(self.world, self.arm, **options).begin(pose, label)
 
     def _over_part(self, height: float) -> np.ndarray:
-        centre = self.world.sim.object_transform(self.part)[:3, 3]
-        return top_down(centre[0], centre[1], self.world.object_top(self.part) + height,
+        x, y = self.world.grasp_xy(self.part)  # its catalogue grasp frame, else its centroid
+        return top_down(x, y, self.world.object_top(self.part) + height,
                         self.world.sim.robot.arm(self.arm).top_down_yaw)
 
     def _descend(self) -> MoveTo:

@@ -3,7 +3,8 @@
 Built from MoveTo and Grasp as a small state machine (paper, section 6.1: "grasps and then moves the block to
 (x, y)"): approach above the block, descend, grasp, lift, move above the target, descend, release, retreat. The
 grasp is top-down at the block's centroid; the block is turned on the way so its axes line up with the target
-frame's (a 1x2 block lies along the letter's x axis). The symbols x and y are grounded by the world through the
+frame's (a 1x2 block lies along the letter's x axis); a catalogue type with grasp frames is held over its first
+one instead of its centroid. The symbols x and y are grounded by the world through the
 grounding file's frame (letters: lb = 6.1 cm from the scene's ``letter_origin`` anchor).
 
 After the release the block must rest within ``tolerance`` of the target, else kind ``physical``.
@@ -172,9 +173,9 @@ class Place(PhasedSkill):
         return 0
 
     def _over_block(self, height: float) -> np.ndarray:
-        centre = self.world.sim.object_transform(self.block)[:3, 3]
+        x, y = self.world.grasp_xy(self.block)  # its catalogue grasp frame, else its centroid
         top = self.world.object_top(self.block)
-        return top_down(centre[0], centre[1], top + height, self._grasp_yaw())
+        return top_down(x, y, top + height, self._grasp_yaw())
 
     def _descend(self) -> MoveTo:
         self.world.allow_hand(self.block, self.arm)

@@ -112,3 +112,23 @@ def test_the_wedge_in_pybullet_and_in_the_collision_checker():
     away = pin.SE3(np.eye(3), np.array([2.0, 0.0, 0.0]))  # far in front of the robot
     checker.add_convex("wedge", np.array(wedge.parts[0].vertices), away)
     assert checker.check(kin.home) is None
+
+
+def test_a_model_of_more_than_16_parts_keeps_them_all_in_pybullet():
+    """pybullet keeps at most 16 shapes per compound: the housing's 24 tube segments are a base and a link."""
+    from bt_meta.world.simulation.objects import housing
+    from bt_meta.world.simulation.sim import Simulation
+
+    model = housing()
+    assert len(model.parts) == 24
+    with Simulation() as sim:
+        sim.spawn("housing", model, (0.7, -0.1, 0.2, 0.0, 0.0, 0.0))
+        centre = sim.object_transform("housing")[:3, 3]
+        flange = centre + np.array([0.0, 0.0, 0.025])
+        for degrees in range(0, 360, 30):  # the flange all round, 3.5 cm from the axis
+            a = np.radians(degrees)
+            start = flange + 0.06 * np.array([np.cos(a), np.sin(a), 0.0])
+            hit = pybullet.rayTest(list(start), list(flange), physicsClientId=sim.client)[0]
+            assert hit[0] == sim.body_id("housing"), degrees
+            assert 0.06 * (1.0 - hit[2]) == pytest.approx(0.035, abs=0.002), degrees
+        assert sim.object_pose("housing")[:3] == pytest.approx(tuple(centre))

@@ -146,6 +146,10 @@ _FINGER_FRICTION = 1.0
 """Lateral friction of the finger links of a friction gripper (rubber pads)."""
 _PRESHAPE_MARGIN = 0.006
 """Each side (m): how much wider than the part the fingers open before closing on it."""
+_MAX_COMPOUND = 16
+"""pybullet's MAX_COMPOUND_COLLISION_SHAPES: shapes one createCollisionShapeArray keeps."""
+_CLOSE_SPEED = 0.1
+"""m/s: how fast a friction gripper's fingers close (the Franka hand's limit is 0.2 in its URDF)."""
 _FIT_MARGIN = 0.002
 """Each side (m): a part fits the fingers when it is this much narrower than their opening."""
 _CLOSE_STEPS = 120
@@ -551,18 +555,54 @@ class Simulation:
         return next((name for name, body in self._obstacles.items() if body.body_id == body_id), None)
 
     def _create_body(self, model: ObjectModel, pose: Sequence[float]) -> int:
+        """A pybullet body of the model's parts. pybullet takes at most 16 shapes per compound
+        (MAX_COMPOUND_COLLISION_SHAPES) and silently drops the rest: a model with more parts (the housing's 24
+        tube segments) is a base of 16 and links of up to 16 more each, fixed to it at the object frame."""
+        c = self.client
+        chunks = [model.parts[k : k + _MAX_COMPOUND] for k in range(0, len(model.parts), _MAX_COMPOUND)]
+        shapes = [self._shape_arrays(chunk) for chunk in chunks]
+        masses = [model.mass * len(chunk) / len(model.parts) for chunk in chunks]
+        extra = len(chunks) - 1
+        body = pybullet.createMultiBody(
+            masses[0],
+            shapes[0][0],
+            shapes[0][1],
+            list(pose[:3]),
+            list(pybullet.getQuaternionFromEuler(pose[3:])),
+            linkMasses=masses[1:],
+            linkCollisionShapeIndices=[col for col, _ in shapes[1:]],
+            linkVisualShapeIndices=[vis for _, vis in shapes[1:]],
+            linkPositions=[[0.0, 0.0, 0.0]] * extra,
+            linkOrientations=[[0.0, 0.0, 0.0, 1.0]] * extra,
+            linkInertialFramePositions=[[0.0, 0.0, 0.0]] * extra,
+            linkInertialFrameOrientations=[[0.0, 0.0, 0.0, 1.0]] * extra,
+            linkParentIndices=[0] * extra,
+            linkJointTypes=[pybullet.JOINT_FIXED] * extra,
+            linkJointAxis=[[0.0, 0.0, 1.0]] * extra,
+            physicsClientId=c,
+        )
+        for link in range(-1, extra):
+            # createVisualShapeArray has no per-shape colour (and crashes when given one): colour the whole body.
+            pybullet.changeVisualShape(body, link, rgbaColor=list(COLOURS[model.colour]), physicsClientId=c)
+            pybullet.changeDynamics(
+                body, link, lateralFriction=model.lateral_friction, spinningFriction=0.001, physicsClientId=c
+            )
+        return body
+
+    def _shape_arrays(self, parts: Sequence[Any]) -> tuple[int, int]:
+        """(collision, visual) shape arrays of up to 16 parts."""
         c = self.client
         kinds, halves, radii, lengths, positions, orientations = [], [], [], [], [], []
         files: list[str] = []
         scales: list[list[float]] = []
-        for part in model.parts:
+        for part in parts:
             files.append(part.file if isinstance(part, Mesh) else "")
             scales.append(list(part.scale) if isinstance(part, Mesh) else [1.0, 1.0, 1.0])
             positions.append(list(part.position))
             orientations.append(list(pybullet.getQuaternionFromEuler(part.rpy)))
             if isinstance(part, Box):
                 kinds.append(pybullet.GEOM_BOX)
-                halves.append([s / 2.0 for s in part.size])
+                halves.append([v / 2.0 for v in part.size])
                 radii.append(0.0)
                 lengths.append(0.0)
             elif isinstance(part, Cylinder):
@@ -577,42 +617,14 @@ class Simulation:
                 lengths.append(0.0)
             else:  # pragma: no cover - ObjectModel only holds these
                 raise SimulationError(f"unknown part {part!r}")
-        col = pybullet.createCollisionShapeArray(
-            kinds,
-            radii=radii,
-            halfExtents=halves,
-            lengths=lengths,
-            fileNames=files,
-            meshScales=scales,
-            collisionFramePositions=positions,
-            collisionFrameOrientations=orientations,
-            physicsClientId=c,
-        )
-        vis = pybullet.createVisualShapeArray(
-            kinds,
-            radii=radii,
-            halfExtents=halves,
-            lengths=lengths,
-            fileNames=files,
-            meshScales=scales,
-            visualFramePositions=positions,
-            visualFrameOrientations=orientations,
-            physicsClientId=c,
-        )
-        body = pybullet.createMultiBody(
-            model.mass,
-            col,
-            vis,
-            list(pose[:3]),
-            list(pybullet.getQuaternionFromEuler(pose[3:])),
-            physicsClientId=c,
-        )
-        # createVisualShapeArray has no per-shape colour (and crashes when given one): colour the whole body.
-        pybullet.changeVisualShape(body, -1, rgbaColor=list(COLOURS[model.colour]), physicsClientId=c)
-        pybullet.changeDynamics(
-            body, -1, lateralFriction=model.lateral_friction, spinningFriction=0.001, physicsClientId=c
-        )
-        return body
+        arrays = {"radii": radii, "halfExtents": halves, "lengths": lengths, "fileNames": files,
+                  "meshScales": scales}
+        col = pybullet.createCollisionShapeArray(kinds, collisionFramePositions=positions,
+                                                 collisionFrameOrientations=orientations, physicsClientId=c,
+                                                 **arrays)
+        vis = pybullet.createVisualShapeArray(kinds, visualFramePositions=positions,
+                                              visualFrameOrientations=orientations, physicsClientId=c, **arrays)
+        return col, vis
 
     def resting_pose(self, model: ObjectModel, pose: Sequence[float]) -> Pose6:
         """``pose`` with z set so the model, turned by its roll and pitch, rests on the table top."""
@@ -633,10 +645,7 @@ class Simulation:
         # or the next object with this id would pass through the hand.
         for arm, links in self._hand_links.items():
             if (arm, name) in self._pending_collision:
-                for link in links:
-                    pybullet.setCollisionFilterPair(
-                        self.robot_id, body.body_id, link, -1, 1, physicsClientId=self.client
-                    )
+                self._hand_collisions(body.body_id, links, True)
         self._pending_collision = [p for p in self._pending_collision if p[1] != name]
         pybullet.removeBody(body.body_id, physicsClientId=self.client)
         del self._bodies[name]
@@ -763,8 +772,7 @@ class Simulation:
         parent = _transform(link_state[0], link_state[1])  # constraint frames are relative to the link's COM frame
         child = self.object_transform(name)
         rel = np.linalg.inv(parent) @ child
-        for link in self._hand_links[arm]:
-            pybullet.setCollisionFilterPair(self.robot_id, body.body_id, link, -1, 0, physicsClientId=c)
+        self._hand_collisions(body.body_id, self._hand_links[arm], False)
         self._pending_collision = [p for p in self._pending_collision if p[1] != name]
         cid = _fix(self.robot_id, end, body.body_id, rel, c)
         self._grasps[arm] = _Grasp(arm, name, cid)
@@ -825,7 +833,9 @@ class Simulation:
     def _close_on(self, name: str, arm: str) -> bool:
         gripper = self.robot.arm(arm).gripper
         assert gripper is not None
-        self.set_joint_targets(dict(zip(gripper.joints, gripper.closed, strict=True)))
+        # at the hand's speed: a 15 g finger driven by its full force alone crosses a 2.6 cm wall in one physics
+        # step (the housing's flange), closing inside it
+        self.set_joint_targets(dict(zip(gripper.joints, gripper.closed, strict=True)), max_velocity=_CLOSE_SPEED)
         fingers = len(self._finger_links[arm])
         for _ in range(_CLOSE_STEPS // 8):
             self.step(8)
@@ -943,9 +953,15 @@ class Simulation:
             if overlapping:
                 still.append((arm, name))
                 continue
-            for link in links:
-                pybullet.setCollisionFilterPair(self.robot_id, body, link, -1, 1, physicsClientId=self.client)
+            self._hand_collisions(body, links, True)
         self._pending_collision = still
+
+    def _hand_collisions(self, body: int, hand: Sequence[int], enabled: bool) -> None:
+        """Switch collisions between the hand's links and every link of an object's body on or off."""
+        for part in range(-1, pybullet.getNumJoints(body, physicsClientId=self.client)):
+            for link in hand:
+                pybullet.setCollisionFilterPair(self.robot_id, body, link, part, int(enabled),
+                                                physicsClientId=self.client)
 
     # -- magnetic attach -------------------------------------------------------------------------------------
 
@@ -973,7 +989,7 @@ class Simulation:
         ta, tr = self.object_transform(active), self.object_transform(reference)
         rel = np.linalg.inv(tr) @ ta
         c = self.client
-        pybullet.setCollisionFilterPair(a.body_id, r.body_id, -1, -1, 0, physicsClientId=c)
+        self._object_collisions(a.body_id, r.body_id, False)
         cid = _fix(r.body_id, -1, a.body_id, rel, c)
         self._joins[pair] = cid
         return True
@@ -984,10 +1000,15 @@ class Simulation:
         if cid is None:
             return False
         pybullet.removeConstraint(cid, physicsClientId=self.client)
-        pybullet.setCollisionFilterPair(
-            self._body(a).body_id, self._body(b).body_id, -1, -1, 1, physicsClientId=self.client
-        )
+        self._object_collisions(self._body(a).body_id, self._body(b).body_id, True)
         return True
+
+    def _object_collisions(self, first: int, second: int, enabled: bool) -> None:
+        """Switch collisions between every link of two objects' bodies on or off."""
+        c = self.client
+        for a in range(-1, pybullet.getNumJoints(first, physicsClientId=c)):
+            for b in range(-1, pybullet.getNumJoints(second, physicsClientId=c)):
+                pybullet.setCollisionFilterPair(first, second, a, b, int(enabled), physicsClientId=c)
 
     def attachments(self) -> list[tuple[str, str]]:
         """Joined pairs, each sorted by name."""

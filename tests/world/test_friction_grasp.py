@@ -1,6 +1,7 @@
-"""Grasp by finger contact and friction (a robot description's ``gripper: grasp: friction``, here the Panda's): a
-part that fits the fingers is held only while both fingers touch it, so a part too heavy or too slippery for them
-slips out in the simulator and the skill reports ``physical``; the Baxter keeps the fixed-constraint grasp."""
+"""Grasp by finger contact and friction (a robot description's ``gripper: grasp: friction``, the Panda's): a part
+that fits the fingers is held only while both fingers touch it and by no more than their friction, so a part too
+heavy or too slippery for them slips out in the simulator and the skill reports ``physical``; ``grasp: fixed`` (the
+Baxter's, and an option for the Panda) holds the same part by constraint."""
 
 from __future__ import annotations
 
@@ -42,24 +43,25 @@ types:
 """
 
 
-def _friction_panda(tmp_path: Path) -> Path:
-    path = tmp_path / "panda_friction.yaml"
-    path.write_text(PANDA_TEXT.replace("grasp: fixed", "grasp: friction"))
+def _fixed_panda(tmp_path: Path) -> Path:
+    assert "      grasp: friction\n" in PANDA_TEXT
+    path = tmp_path / "panda_fixed.yaml"
+    path.write_text(PANDA_TEXT.replace("      grasp: friction\n", "      grasp: fixed\n"))
     return path
 
 
 def test_the_grasp_kind_is_per_robot_data(tmp_path: Path):
     panda, baxter = load_robot("panda").arm("arm").gripper, load_robot("baxter").arm("right").gripper
     assert panda is not None and baxter is not None
-    assert panda.grasp == "fixed" and panda.force > 0 and panda.depth > 0
+    assert panda.grasp == "friction" and panda.force > 0 and panda.depth > 0
     assert baxter.grasp == "fixed"  # its fingers open 4.62 cm, less than a block
-    friction = load_robot(_friction_panda(tmp_path)).arm("arm").gripper
-    assert friction is not None and friction.grasp == "friction"
+    fixed = load_robot(_fixed_panda(tmp_path)).arm("arm").gripper
+    assert fixed is not None and fixed.grasp == "fixed"
 
 
 def test_an_unknown_grasp_kind_is_a_located_error(tmp_path: Path):
     path = tmp_path / "panda_glue.yaml"
-    path.write_text(PANDA_TEXT.replace("grasp: fixed", "grasp: glue"))
+    path.write_text(PANDA_TEXT.replace("      grasp: friction\n", "      grasp: glue\n"))
     line = next(n for n, text in enumerate(path.read_text().splitlines(), 1) if text.strip() == "grasp: glue")
     with pytest.raises(ConfigError) as info:
         load_robot(path)
@@ -97,19 +99,20 @@ def _place(world, block: str) -> Any:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("brick", ["brick", "heavy_slippery_brick"])
-def test_a_heavy_slippery_part_slips_out_of_the_panda_fingers(tmp_path: Path, brick: str):
+@pytest.mark.parametrize(("grasp", "brick"), [("friction", "brick"), ("friction", "heavy_slippery_brick"),
+                                              ("fixed", "heavy_slippery_brick")])
+def test_a_heavy_slippery_part_slips_out_of_the_panda_fingers(tmp_path: Path, grasp: str, brick: str):
     from bt_meta.world.simulation.sim_world import SimWorld
 
-    world = SimWorld.from_task_file(trees_dir() / "letters.yaml", "A", robot=_friction_panda(tmp_path),
-                                    scene=_scene(tmp_path, brick))
+    robot = "panda" if grasp == "friction" else _fixed_panda(tmp_path)
+    world = SimWorld.from_task_file(trees_dir() / "letters.yaml", "A", robot=robot, scene=_scene(tmp_path, brick))
     try:
-        assert world.sim.grasps_by_friction("b0", "arm")
+        assert world.sim.grasps_by_friction("b0", "arm") == (grasp == "friction")
         skill = _place(world, "b0").inner
         record = skill.record()
         phases = {p["phase"]: p for p in record["phases"]}
         assert phases["grasp"]["outcome"] == SUCCESS  # the fingers closed on it: both touched it
-        if brick == "brick":
+        if brick == "brick" or grasp == "fixed":  # a constraint holds even the heavy, slippery one
             assert skill.outcome == SUCCESS, record.get("failure")
             assert world.sim.held("arm") is None and world.sim.object_pose("b0")[2] < 0.05
         else:

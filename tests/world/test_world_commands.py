@@ -40,3 +40,10 @@ def test_keypoints_refuses_a_scene_without_its_two_parts(capsys):
     err = capsys.readouterr().err
     assert code == 2 and "Traceback" not in err
     assert f"{scene}" in err and "has no object 'active' or 'reference'" in err
+
+
+def test_substitution_refuses_a_scene_naming_why(capsys):
+    code = main(["experiment", "substitution", "--scene", str(trees_dir() / "scenes" / "letters_H.yaml")])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err
+    assert "--scene: the substitution experiment runs letters A's own scene" in err

@@ -32,7 +32,8 @@ def test_the_shipped_wedge_is_a_mesh_with_a_grasp_frame_off_its_centroid():
     low, high = wedge.extent()
     assert low == pytest.approx([-0.04, -0.025, -0.02]) and high == pytest.approx([0.04, 0.025, 0.02])
     assert wedge.lowest_z(0.0, 0.0) == pytest.approx(0.02)
-    assert wedge.grasp_point() == pytest.approx((-0.02, 0.0, 0.024))  # over its thick end, not the slope
+    (frame,) = wedge.grasp_frames()
+    assert frame[:3] == pytest.approx((-0.02, 0.0, 0.024))  # over its thick end, not the slope
 
 
 def test_a_mesh_from_an_installed_package_scaled(tmp_path: Path):
@@ -132,3 +133,27 @@ def test_a_model_of_more_than_16_parts_keeps_them_all_in_pybullet():
             assert hit[0] == sim.body_id("housing"), degrees
             assert 0.06 * (1.0 - hit[2]) == pytest.approx(0.035, abs=0.002), degrees
         assert sim.object_pose("housing")[:3] == pytest.approx(tuple(centre))
+
+
+def test_top_down_grasps_go_over_a_grasp_frame_that_points_down(tmp_path: Path):
+    """The wedge is held over its thick end; object 2 standing on its magnet face (its `top` frame now points
+    sideways) is held over its centroid."""
+    from bt_meta.resources import trees_dir
+    from bt_meta.world.simulation.sim_world import SimWorld
+
+    scene = (trees_dir() / "scenes" / "letters_A.yaml").read_text(encoding="utf-8")
+    extra = ("  - {name: wedge, type: wedge, pose: [0.70, -0.20, table, 0, 0, 90]}\n"
+             "  - {name: side, type: magnet_active_side, pose: [0.80, -0.20, table, 0, -90, 0]}\n")
+    scene = scene.replace("variants:", extra + "variants:", 1)
+    path = tmp_path / "scene.yaml"
+    path.write_text(scene)
+    world = SimWorld.from_task_file(trees_dir() / "letters.yaml", "A", scene=path)
+    try:
+        wedge = world.sim.object_transform("wedge")
+        expected = wedge[:3, :3] @ np.array([-0.02, 0.0, 0.024]) + wedge[:3, 3]  # yaw 90: the thick end at -y
+        assert world.grasp_xy("wedge") == pytest.approx((expected[0], expected[1]), abs=1e-6)
+        assert expected[1] == pytest.approx(wedge[1, 3] - 0.02, abs=1e-3)
+        side = world.sim.object_transform("side")
+        assert world.grasp_xy("side") == pytest.approx((side[0, 3], side[1, 3]), abs=1e-9)
+    finally:
+        world.close()

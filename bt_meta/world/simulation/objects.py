@@ -205,14 +205,11 @@ class ObjectModel:
         rotated = self.points() @ rpy_to_matrix(roll, pitch, 0.0).T
         return float(-rotated[:, 2].min())
 
-    def grasp_point(self) -> Vec3 | None:
-        """The position (object frame) of the model's first grasp frame (catalogue types give them), or ``None``:
-        where a top-down grasp holds it instead of over its centroid (a wedge by its thick end)."""
+    def grasp_frames(self) -> list[Pose6]:
+        """The model's grasp frames (catalogue types give them): gripper poses in the object frame, radians."""
         names = [key[len("grasp_"):-len("_x")] for key in self.info if key.startswith("grasp_") and key.endswith("_x")]
-        if not names:
-            return None
-        first = names[0]
-        return (self.info[f"grasp_{first}_x"], self.info[f"grasp_{first}_y"], self.info[f"grasp_{first}_z"])
+        return [tuple(self.info[f"grasp_{name}_{axis}"] for axis in ("x", "y", "z", "roll", "pitch", "yaw"))
+                for name in names]  # type: ignore[misc]
 
     def extent(self) -> tuple[np.ndarray, np.ndarray]:
         """Axis-aligned bounds (min, max) of the geometry in the object frame."""

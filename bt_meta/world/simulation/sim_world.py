@@ -485,12 +485,16 @@ class SimWorld:
                 self.collision.disallow(part)
 
     def grasp_xy(self, name: str) -> tuple[float, float]:
-        """Where (base frame x, y) a top-down grasp of ``name`` goes: over its catalogue grasp frame when its type
-        has one, else over its centroid."""
+        """Where (base frame x, y) a top-down grasp of ``name`` goes: over the first of its type's catalogue grasp
+        frames that points down as the object is turned now (within 30 degrees), else over its centroid (a part
+        lying on another face than its frames were written for, a built-in type)."""
         t = self.sim.object_transform(name)
-        local = self.sim.object_model(name).grasp_point()
-        point = t[:3, 3] if local is None else t[:3, :3] @ np.asarray(local) + t[:3, 3]
-        return float(point[0]), float(point[1])
+        for frame in self.sim.object_model(name).grasp_frames():
+            approach = t[:3, :3] @ rpy_to_matrix(*frame[3:])[:, 2]
+            if float(approach[2]) <= -math.cos(math.radians(30.0)):
+                point = t[:3, :3] @ np.asarray(frame[:3]) + t[:3, 3]
+                return float(point[0]), float(point[1])
+        return float(t[0, 3]), float(t[1, 3])
 
     def grasp_height(self, name: str, arm: str, clearance: float) -> float:
         """Where the end-effector frame goes for a grasp of ``name``, above the top of it (negative: below).

@@ -2,7 +2,7 @@
 
 The MagneticAttach plan (``trees/magnetic_attach.yaml``, problem ``attach_only``: pick the active part from
 above, carry it onto the reference part, release) is run tick by tick with its real skills (IK, joint
-trajectories, grasp by constraint, the simulator's magnetic attach rule) on
+trajectories, the robot's grasp, the simulator's magnetic attach rule) on
 :class:`~bt_meta.world.simulation.sim_world.SimWorld`.
 The keypoint relations of the two parts are read from the simulator's object states (AP and AN in the robot base
 frame) at two moments: before any motion (``start``) and after the attach motion (``end``):

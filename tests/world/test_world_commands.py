@@ -47,3 +47,17 @@ def test_substitution_refuses_a_scene_naming_why(capsys):
     err = capsys.readouterr().err
     assert code == 2 and "Traceback" not in err
     assert "--scene: the substitution experiment runs letters A's own scene" in err
+
+
+def test_a_scene_whose_catalogue_mesh_is_missing_is_exit_2(tmp_path: Path, capsys):
+    (tmp_path / "mine.yaml").write_text(
+        "types:\n  knob:\n    shape: mesh\n    mesh: knob.stl\n    mass: 0.1\n"
+        "    features: {bottom: {point: [0, 0, 0], normal: [0, 0, -1]}}\n"
+        "    grasp_frames: {top: [0, 0, 0.02, 180, 0, 180]}\n")
+    scene = tmp_path / "scene.yaml"
+    scene.write_text("scene: knobs\ncatalogue: [mine.yaml]\nobjects:\n"
+                     "  - {name: k, type: knob, pose: [0.6, -0.3, table, 0, 0, 0]}\n")
+    code = main(["run", str(trees_dir() / "letters.yaml"), "--problem", "A", "--scene", str(scene)])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err
+    assert f"{tmp_path / 'mine.yaml'}:4:11: type 'knob': mesh file {tmp_path / 'knob.stl'} does not exist" in err

@@ -3,8 +3,10 @@
 Offers:
 
 * :func:`load_robot` -- a :class:`RobotDescription` from a shipped name (``"baxter"``) or a YAML path
-* :class:`RobotDescription` -- model files, arms, cameras, home pose, joint limits, IK settings
-* :class:`ArmDescription`, :class:`GripperDescription`, :class:`IKSettings` -- its parts
+* :class:`RobotDescription` -- model files, arms, cameras, home pose, joint limits (``joint_limit_margin`` keeps IK
+  off the URDF limits), IK settings, the workcell offset
+* :class:`ArmDescription`, :class:`GripperDescription` (how the simulator grasps: ``fixed`` or ``friction``),
+  :class:`IKSettings` -- its parts
 * :class:`UrdfSummary` / :func:`read_urdf_summary` -- joint and link names, types and limits of a URDF
 
 A wrong robot file raises :class:`~bt_meta.errors.ConfigError` located at the offending YAML node

@@ -1,8 +1,7 @@
 """SimWorld: the :class:`~bt_meta.world.base.World` of a task file's problem in the pybullet simulator.
 
 A SimWorld owns a :class:`~bt_meta.world.simulation.sim.Simulation` with the problem's scene (and variant) built in
-it, the
-Baxter's kinematics, a collision checker whose scene mirrors the simulator's objects, and mink IK. HTN primitives
+it, the robot's kinematics, a collision checker whose scene mirrors the simulator's objects, and mink IK. HTN primitives
 map onto skills (:mod:`bt_meta.world.skills`) through a **grounding file** -- data, not code: ``poses/<domain>.yaml``
 next to the task file or in the shipped ``trees/poses/``. It says, per problem, which scene and variant to build;
 per primitive, which skill runs it; how the task file's symbols become numbers (letter cells in lb from a scene
@@ -13,7 +12,10 @@ succeeded (the world does not re-derive facts from poses; perception plugins com
 
 Offers:
 
-* :class:`SimWorld` -- the world; :meth:`SimWorld.from_task_file` builds it from a file, a problem, a variant, a seed
+* :class:`SimWorld` -- the world; :meth:`SimWorld.from_task_file` builds it from a file, a problem, a variant, a seed;
+  what skills ask of it includes where a top-down grasp goes (:meth:`SimWorld.grasp_xy`: a catalogue grasp frame
+  pointing down, else the centroid) and how deep (:meth:`SimWorld.grasp_height`: a friction grasp's pads on the
+  part's widest band)
 * :class:`Grounding` / :func:`load_grounding` -- the grounding file
 * :class:`PrimitiveSkill` -- a skill run for a primitive: applies the primitive's effects on success
 * :func:`quiet_stdout` -- silences what pybullet prints on the C level (keeps ``--json`` output clean)

@@ -157,3 +157,34 @@ def test_top_down_grasps_go_over_a_grasp_frame_that_points_down(tmp_path: Path):
         assert world.grasp_xy("side") == pytest.approx((side[0, 3], side[1, 3]), abs=1e-9)
     finally:
         world.close()
+
+
+@pytest.mark.slow
+def test_the_panda_places_the_wedge_holding_it_by_its_grasp_frame(tmp_path: Path):
+    """A mesh object picked and placed by the Place skill, in the simulator: the hand goes down over the wedge's
+    grasp frame (its thick end), not over its centroid."""
+    from bt_meta.resources import trees_dir
+    from bt_meta.world.base import RUNNING, SUCCESS
+    from bt_meta.world.simulation.sim_world import SimWorld
+
+    scene = (trees_dir() / "scenes" / "letters_A.yaml").read_text(encoding="utf-8")
+    scene = scene.replace("{name: b0, type: megablok_1x1, colour: blue,", "{name: b0, type: wedge,")
+    path = tmp_path / "scene.yaml"
+    path.write_text(scene)
+    world = SimWorld.from_task_file(trees_dir() / "letters.yaml", "A", robot="panda", scene=path)
+    try:
+        grasp_x, grasp_y = world.grasp_xy("b0")
+        centre = world.sim.object_transform("b0")[:3, 3]
+        assert np.hypot(grasp_x - centre[0], grasp_y - centre[1]) == pytest.approx(0.02, abs=1e-3)
+        skill = world.skill("place")
+        skill.start(["b0", "0", "0"])
+        for _ in range(400):
+            if skill.tick() != RUNNING:
+                break
+        record = skill.inner.record()
+        assert skill.inner.outcome == SUCCESS, record.get("failure")
+        descend = next(p for p in record["phases"] if p["phase"] == "descend")
+        assert descend["target"][:2] == pytest.approx([grasp_x, grasp_y], abs=1e-3)
+        assert record["placement_error"] < 0.01 and world.sim.held("arm") is None
+    finally:
+        world.close()

@@ -150,6 +150,8 @@ class DemoResult:
     seed: int
     quick: bool
     fresh_memory: bool
+    robot: str = "baxter"
+    """The robot the demonstrations were recorded and the variants run on."""
     records: list[RecordOutcome] = field(default_factory=list)
     runs: list[VariantOutcome] = field(default_factory=list)
     refinements: list[dict[str, Any]] = field(default_factory=list)
@@ -171,7 +173,8 @@ class DemoResult:
         second = [r for r in self.runs if r.pass_number == 2]
         return {
             "out": str(self.out), "memory": str(self.memory_path), "seed": self.seed, "quick": self.quick,
-            "fresh_memory": self.fresh_memory, "completed": self.completed, "seconds": round(self.seconds, 3),
+            "fresh_memory": self.fresh_memory, "robot": self.robot, "completed": self.completed,
+            "seconds": round(self.seconds, 3),
             "repair_plugins": self.repair_plugins,
             "configuration": {"name": DEMO_CONFIGURATION, "plugins": CONFIGURATIONS[DEMO_CONFIGURATION]},
             "demonstrations": [r.to_dict() for r in self.records],
@@ -201,7 +204,8 @@ JITTER_POSITION = 0.003
 JITTER_YAW = math.radians(2.0)
 
 
-def _world(task_path: Path, problem: str, variant: str | None, seed: int) -> tuple[Any, Any, Any]:
+def _world(task_path: Path, problem: str, variant: str | None, seed: int, robot: Any = None
+           ) -> tuple[Any, Any, Any]:
     from bt_meta.htn import load_task_file
     from bt_meta.world.simulation.sim_world import SimWorld, load_grounding, quiet_stdout
 
@@ -209,7 +213,7 @@ def _world(task_path: Path, problem: str, variant: str | None, seed: int) -> tup
     chosen = task_file.problem(problem)
     with quiet_stdout():
         world = SimWorld(task_file.domain, chosen, load_grounding(task_file.domain.name, task_path),
-                         variant=variant, seed=seed)
+                         variant=variant, seed=seed, robot=robot)
     try:
         jitter(world, seed)
     except BaseException:
@@ -242,8 +246,8 @@ def _already_recorded(memory: Any, demo: Demonstration, task: str) -> int | None
     return None
 
 
-def record_demonstration(demo: Demonstration, memory: Any, progress: Progress, *, max_ticks: int = 6000
-                         ) -> RecordOutcome:
+def record_demonstration(demo: Demonstration, memory: Any, progress: Progress, *, max_ticks: int = 6000,
+                         robot: Any = None) -> RecordOutcome:
     """Run ``demo``'s nominal problem tick by tick (monitored, no repairs) with the trace recorder; a success is
     written to ``memory`` as one trace."""
     from py_trees.common import Status
@@ -255,7 +259,7 @@ def record_demonstration(demo: Demonstration, memory: Any, progress: Progress, *
 
     started = time.perf_counter()
     task_path = trees_dir() / demo.task_file
-    _, problem, world = _world(task_path, demo.problem, None, demo.seed)
+    _, problem, world = _world(task_path, demo.problem, None, demo.seed, robot)
     try:
         existing = _already_recorded(memory, demo, root_task_name(problem))
         if existing is not None:
@@ -309,6 +313,7 @@ def run_variant(
     max_seconds: float = 90.0,
     save_refinements: bool = True,
     pictures: bool = True,
+    robot: Any = None,
 ) -> VariantOutcome:
     """One variant run with monitors and the meta-reasoner; collects what the report shows."""
     from bt_meta.meta import Limits
@@ -317,7 +322,7 @@ def run_variant(
     outcome = VariantOutcome(run, pass_number)
     started = time.perf_counter()
     task_path = trees_dir() / run.task_file
-    task_file, problem, world = _world(task_path, run.problem, run.variant, run.seed)
+    task_file, problem, world = _world(task_path, run.problem, run.variant, run.seed, robot)
     try:
         capture = RunCapture(progress, world, label=run.label, echo=not progress.quiet)
         outcome.capture = capture
@@ -474,8 +479,10 @@ def run_demo(
     quick: bool = False,
     progress: Progress | None = None,
     write_report: bool = True,
+    robot: Any = None,
 ) -> DemoResult:
-    """The whole scenario into ``out`` (see the module docstring); writes ``summary.json`` and ``report.html``."""
+    """The whole scenario into ``out`` (see the module docstring); writes ``summary.json`` and ``report.html``.
+    ``robot``: a robot description (or name) to run on instead of each grounding file's."""
     from bt_meta.memory import EpisodicMemory
     from bt_meta.meta import RefinementStore
     from bt_meta.world.simulation.sim_world import quiet_stdout
@@ -488,7 +495,8 @@ def run_demo(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     memory_path = out / MEMORY_FILE
-    result = DemoResult(out, seed, quick, fresh_memory=not memory_path.exists())
+    result = DemoResult(out, seed, quick, fresh_memory=not memory_path.exists(),
+                        robot=getattr(robot, "name", robot) or "baxter")
     result.repair_plugins = ["retry_repair", *available_repairs()]
     progress.line(f"bt-meta demo: memory {memory_path} ({'new' if result.fresh_memory else 'reused'}), seed {seed}"
                   f"{', quick' if quick else ''}; repair plugins: {', '.join(result.repair_plugins)}")
@@ -498,7 +506,7 @@ def run_demo(
         progress.line(f"\n[1/3] recording {len(demos)} demonstrations")
         for number, demo in enumerate(demos, 1):
             try:
-                record = record_demonstration(demo, memory, progress)
+                record = record_demonstration(demo, memory, progress, robot=robot)
             except Exception as error:
                 record = RecordOutcome(demo, "failed", message=f"{type(error).__name__}: {error}")
                 result.crashed.append(f"record {demo.label}: {record.message}")
@@ -515,7 +523,7 @@ def run_demo(
                 progress.line(f"\n  ({number}/{len(runs)}) {FAMILIES[run.family].task_file} problem {run.problem}, "
                               f"variant {run.variant}, seed {run.seed}")
                 outcome = run_variant(run, memory, refinements, progress, pass_number=pass_number,
-                                      configuration=DEMO_CONFIGURATION)
+                                      configuration=DEMO_CONFIGURATION, robot=robot)
                 if outcome.error:
                     result.crashed.append(f"{run.label} pass {pass_number}: {outcome.error.splitlines()[0]}")
                 result.runs.append(outcome)

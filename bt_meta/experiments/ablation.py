@@ -38,6 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from bt_meta.commands._common import print_json
+from bt_meta.commands._world_args import add_world_arguments, world_options
 from bt_meta.errors import UserInputError
 
 __all__ = ["bootstrap_mean", "register", "run", "wilson"]
@@ -97,6 +98,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--ray", metavar="ADDRESS", help="with --generated: run the episodes on Ray")
     parser.add_argument("--perfect-sensing", action="store_true",
                         help="with --generated: compare with the bookkept state instead of the perceived one")
+    add_world_arguments(parser)
     parser.add_argument("--json", action="store_true", help="print JSON")
     parser.set_defaults(func=_main)
 
@@ -116,7 +118,16 @@ def _main(args: argparse.Namespace) -> int:
 
     if not 1 <= args.seeds <= 50:
         raise AblationInputError("--seeds must be between 1 and 50", path="<command line>")
+    options = world_options(args)
+    if options["scene"] is not None:
+        raise AblationInputError("--scene: the ablation runs its families' own scenes and variants (letters, "
+                                 "magnetic attach, housing); run a scene of one's own with "
+                                 "`bt-meta run TASK --scene FILE`", path="<command line>")
     if args.generated is not None:
+        if options["robot"] is not None:
+            raise AblationInputError("--robot with --generated: the campaign's generated episodes build their "
+                                     "worlds from its spec (on the Baxter); run the ablation without "
+                                     "--generated on another robot", path="<command line>")
         return _generated(args)
     families = _choices(args.families, list(FAMILIES), "--families")
     configurations = _choices(args.configurations, list(CONFIGURATIONS), "--configurations")
@@ -124,7 +135,7 @@ def _main(args: argparse.Namespace) -> int:
     if args.variants:
         only = _choices(args.variants, [v.variant for v in variants(0, families=families)], "--variants")
     result = run(seeds=args.seeds, seed=args.seed, families=families, configurations=configurations, only=only,
-                 echo=not args.json)
+                 echo=not args.json, robot=options["robot"])
     if args.json:
         print_json(result)
     else:
@@ -162,9 +173,9 @@ def _generated(args: argparse.Namespace) -> int:
 
 def run(*, seeds: int = 3, seed: int = 0, families: Sequence[str] = ("letters", "magnetic", "housing"),
         configurations: Sequence[str] = ("dual", "symbolic", "low_level", "retry"),
-        only: Sequence[str] | None = None, echo: bool = False) -> dict[str, Any]:
+        only: Sequence[str] | None = None, echo: bool = False, robot: Any = None) -> dict[str, Any]:
     """Record the demonstrations, run every variant (or the ``only`` ones) under every configuration for ``seeds``
-    seeds; the table."""
+    seeds, on ``robot`` (a description; default each grounding's); the table."""
     from bt_meta.demo.capture import Progress
     from bt_meta.demo.configurations import CONFIGURATIONS, available_repairs
     from bt_meta.demo.runner import memory_environment, record_demonstration, run_variant
@@ -183,7 +194,7 @@ def run(*, seeds: int = 3, seed: int = 0, families: Sequence[str] = ("letters", 
         with memory_environment(path), EpisodicMemory.open(path) as memory:
             demos = [d for d in demonstrations(seed) if d.family in families]
             for demo in demos:
-                record = record_demonstration(demo, memory, quiet)
+                record = record_demonstration(demo, memory, quiet, robot=robot)
                 if record.status == "failed":
                     crashed.append(f"record {demo.label}: {record.message}")
             if echo:
@@ -197,7 +208,7 @@ def run(*, seeds: int = 3, seed: int = 0, families: Sequence[str] = ("letters", 
                     for configuration in configurations:
                         variant = VariantRun(base.family, base.task_file, base.problem, base.variant, seed + k)
                         outcome = run_variant(variant, memory, None, quiet, configuration=configuration,
-                                              save_refinements=False, pictures=False)
+                                              save_refinements=False, pictures=False, robot=robot)
                         entry = {"configuration": configuration, "family": variant.family,
                                  "variant": variant.variant, "seed": variant.seed, "status": outcome.status,
                                  "achieved": outcome.achieved, "truth": outcome.truth,

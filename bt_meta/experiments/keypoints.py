@@ -2,7 +2,7 @@
 
 The MagneticAttach plan (``trees/magnetic_attach.yaml``, problem ``attach_only``: pick the active part from
 above, carry it onto the reference part, release) is run tick by tick with its real skills (IK, joint
-trajectories, grasp by constraint, the simulator's magnetic attach rule) on
+trajectories, the robot's grasp, the simulator's magnetic attach rule) on
 :class:`~bt_meta.world.simulation.sim_world.SimWorld`.
 The keypoint relations of the two parts are read from the simulator's object states (AP and AN in the robot base
 frame) at two moments: before any motion (``start``) and after the attach motion (``end``):
@@ -23,7 +23,12 @@ says which relation separates nominal from failing states at each moment.
 
 Offers:
 
-* :func:`register` -- adds ``bt-meta experiment keypoints [--traces 3] [--seed 0] [--json]``
+The active part starts where the scene puts it (``active`` in ``trees/scenes/magnetic_attach.yaml``, placed in the
+robot's base frame by its workcell offset), so ``--robot panda`` runs the same experiment on the Panda and
+``--scene FILE`` on a scene of one's own with an ``active`` and a ``reference`` part.
+
+* :func:`register` -- adds ``bt-meta experiment keypoints [--traces 3] [--seed 0] [--robot R] [--scene FILE]
+  [--json]``
 * :func:`run` -- the experiment, returning the tables as a dict
 * :func:`side_magnet_part` -- object 2's model
 """
@@ -31,18 +36,19 @@ Offers:
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 from typing import Any
 
 import numpy as np
 
 from bt_meta.commands._common import print_json
+from bt_meta.commands._world_args import add_world_arguments, world_options
 from bt_meta.errors import UserInputError
 from bt_meta.world.simulation.objects import ObjectModel
 
 POSITION_TOLERANCE = 0.01
 ANGLE_TOLERANCE = math.radians(15.0)
-ACTIVE_START = (0.58, -0.40)
 JITTER_POSITION = 0.004
 JITTER_YAW = math.radians(3.0)
 MAX_TICKS = 3000
@@ -52,6 +58,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("keypoints", help="Tables 2 and 3: R_p and R_n for nominal and variant poses")
     parser.add_argument("--traces", type=int, default=3, help="nominal traces averaged into the expectation")
     parser.add_argument("--seed", type=int, default=0, help="seed of the nominal traces' start-pose jitter")
+    add_world_arguments(parser)
     parser.add_argument("--json", action="store_true", help="print JSON")
     parser.set_defaults(func=_main)
 
@@ -59,7 +66,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _main(args: argparse.Namespace) -> int:
     if not 1 <= args.traces <= 20:
         raise UserInputError("--traces must be between 1 and 20", path="<command line>")
-    result = run(traces=args.traces, seed=args.seed)
+    options = world_options(args)
+    if options["scene"] is not None:
+        from bt_meta.world.simulation.scenes import load_scene
+
+        scene = load_scene(options["scene"])
+        names = {o.name for o in scene.objects}
+        missing = sorted({"active", "reference"} - names)
+        if missing:
+            raise UserInputError(f"scene {scene.name!r} has no object {' or '.join(map(repr, missing))}: the "
+                                 "experiment measures the relation of an `active` and a `reference` part",
+                                 path=scene.path)
+    result = run(traces=args.traces, seed=args.seed, **options)
     if args.json:
         print_json(result)
     else:
@@ -84,9 +102,11 @@ def _relation(sim: Any) -> dict[str, float]:
 
 
 def attach_case(*, model: ObjectModel | None = None, rpy: tuple[float, float, float] = (0.0, 0.0, 0.0),
-                offset: tuple[float, float] = (0.0, 0.0), seed: int = 0) -> dict[str, Any]:
-    """Run ``attach_only`` with the active part (``model``, default the scene's) resting at its start position
-    (+ ``offset``) turned by ``rpy``; the relation at the start and after the attach motion, and the outcome."""
+                offset: tuple[float, float] = (0.0, 0.0), seed: int = 0, robot: Any = None,
+                scene: Any = None) -> dict[str, Any]:
+    """Run ``attach_only`` with the active part (``model``, default the scene's) resting at its start position in
+    the scene (+ ``offset``) turned by ``rpy``; the relation at the start and after the attach motion, and the
+    outcome. ``robot`` and ``scene`` as for :class:`~bt_meta.world.simulation.sim_world.SimWorld`."""
     from py_trees.common import Status
 
     from bt_meta.plugins import create_plugin_host
@@ -96,15 +116,16 @@ def attach_case(*, model: ObjectModel | None = None, rpy: tuple[float, float, fl
 
     path = trees_dir() / "magnetic_attach.yaml"
     with quiet_stdout():
-        world = SimWorld.from_task_file(path, "attach_only", seed=seed)
+        world = SimWorld.from_task_file(path, "attach_only", seed=seed, robot=robot, scene=scene)
     try:
         sim = world.sim
+        start_x, start_y = sim.object_pose("active")[:2]  # where the scene puts it, in this robot's base frame
         if model is not None:
             sim.remove("active")
             world.sync_collision()
         else:
             model = sim.object_model("active")
-        pose = sim.resting_pose(model, (ACTIVE_START[0] + offset[0], ACTIVE_START[1] + offset[1], 0.0, *rpy))
+        pose = sim.resting_pose(model, (start_x + offset[0], start_y + offset[1], 0.0, *rpy))
         if "active" in sim.object_names():
             sim.move_object("active", pose)
         else:
@@ -153,26 +174,28 @@ def _separation(nominal: list[dict[str, Any]], failing: list[dict[str, Any]], mo
     }
 
 
-def run(*, traces: int = 3, seed: int = 0) -> dict[str, Any]:
-    """Tables 2 and 3 (see the module docstring)."""
+def run(*, traces: int = 3, seed: int = 0, robot: Any = None, scene: Any = None) -> dict[str, Any]:
+    """Tables 2 and 3 (see the module docstring) on ``robot`` (default the grounding's) in ``scene`` (default
+    the magnetic-attach scene)."""
+    case_of = functools.partial(attach_case, robot=robot, scene=scene)
     rng = np.random.default_rng(seed)
     nominal = []
     for j in range(traces):
         dx, dy = rng.uniform(-JITTER_POSITION, JITTER_POSITION, 2)
         yaw = float(rng.uniform(-JITTER_YAW, JITTER_YAW))
-        case = attach_case(rpy=(0.0, 0.0, yaw), offset=(float(dx), float(dy)), seed=seed + j)
+        case = case_of(rpy=(0.0, 0.0, yaw), offset=(float(dx), float(dy)), seed=seed + j)
         case["label"] = f"nominal trace {j + 1}"
         nominal.append(case)
     expected = {moment: _mean(nominal, moment) for moment in ("start", "end")}
     half = math.pi / 2.0
     table2 = [
-        {"label": "object 1, on its side (active_on_side)", **attach_case(rpy=(half, 0.0, 0.0), seed=seed)},
-        {"label": "object 1, upside down (active_upside_down)", **attach_case(rpy=(math.pi, 0.0, 0.0), seed=seed)},
+        {"label": "object 1, on its side (active_on_side)", **case_of(rpy=(half, 0.0, 0.0), seed=seed)},
+        {"label": "object 1, upside down (active_upside_down)", **case_of(rpy=(math.pi, 0.0, 0.0), seed=seed)},
     ]
     side = side_magnet_part()
     table3 = [
-        {"label": "object 2, nominal (magnet down)", **attach_case(model=side, rpy=(0.0, -half, 0.0), seed=seed)},
-        {"label": "object 2, lying flat (magnet sideways)", **attach_case(model=side, seed=seed)},
+        {"label": "object 2, nominal (magnet down)", **case_of(model=side, rpy=(0.0, -half, 0.0), seed=seed)},
+        {"label": "object 2, lying flat (magnet sideways)", **case_of(model=side, seed=seed)},
     ]
     for case in [*nominal, *table2, *table3]:
         case["judged"] = {moment: _judge(case[moment], expected[moment]) for moment in ("start", "end")}

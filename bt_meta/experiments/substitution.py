@@ -42,6 +42,7 @@ from types import SimpleNamespace
 from typing import Any
 
 from bt_meta.commands._common import print_json
+from bt_meta.commands._world_args import add_world_arguments, world_options
 from bt_meta.errors import UserInputError
 
 __all__ = ["VARIANTS", "letter_cells", "letter_verifier", "record_nominal", "register", "run"]
@@ -66,6 +67,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--memory", metavar="PATH", default=None,
                         help="episodic memory to use; A and H are recorded into it unless it already has them "
                              "(default: a temporary file)")
+    add_world_arguments(parser)
     parser.add_argument("--json", action="store_true", help="print JSON")
     parser.set_defaults(func=_main)
 
@@ -81,7 +83,13 @@ def _main(args: argparse.Namespace) -> int:
     if not variants or any(v not in known for v in variants):
         raise UserInputError(f"--variants: expected a comma-separated subset of {', '.join(known)}, "
                              f"got {args.variants!r}", path="<command line>")
-    result = run(matchers=matchers, seed=args.seed, memory_path=args.memory, variants=variants)
+    options = world_options(args)
+    if options["scene"] is not None:
+        raise UserInputError("--scene: the substitution experiment runs letters A's own scene and its variants "
+                             "(they replace its crossbar); run a scene of one's own with "
+                             "`bt-meta run TASK --scene FILE`", path="<command line>")
+    result = run(matchers=matchers, seed=args.seed, memory_path=args.memory, variants=variants,
+                 robot=options["robot"])
     if args.json:
         print_json(result)
     else:
@@ -275,8 +283,9 @@ def _run_variant(task_file: Any, variant: str, memory: Any, matcher: str, expect
 
 
 def run(*, matchers: Sequence[str] = MATCHERS, seed: int = 0, memory_path: str | Path | None = None,
-        variants: Sequence[str] | None = None) -> dict[str, Any]:
-    """Record A and H (unless the memory has them), then tabulate retrieval and repaired runs per variant."""
+        variants: Sequence[str] | None = None, robot: Any = None) -> dict[str, Any]:
+    """Record A and H (unless the memory has them), then tabulate retrieval and repaired runs per variant, on
+    ``robot`` (a description; default the Baxter). A memory holds one robot's episodes: give each its own."""
     from bt_meta.htn import load_task_file
     from bt_meta.memory import EpisodicMemory
     from bt_meta.resources import trees_dir
@@ -291,7 +300,7 @@ def run(*, matchers: Sequence[str] = MATCHERS, seed: int = 0, memory_path: str |
         with quiet_stdout():  # pybullet prints its build time on import
             from bt_meta.world.simulation.sim import Simulation
 
-            sim = Simulation(seed=seed, visuals="light")
+            sim = Simulation(seed=seed, visuals="light", robot=robot)
         try:
             recorded: dict[str, Any] = {}
             with EpisodicMemory.open(file) as memory:

@@ -70,7 +70,7 @@ def test_a_users_file_extends_the_catalogue_through_a_scene(tmp_path):
         ("    features:\n      end: {point: [0.06, 0, 0], normal: [1, 0, 0]}\n"
          "      bottom: {point: [0, 0, -0.015], normal: [0, 0, -1]}\n    primary: bottom\n", "", "block_long:",
          "type 'block_long': missing key 'features' (its attachment points and normals, AP/AN)"),
-        ("shape: box", "shape: torus", "torus", "type 'block_long': unknown shape 'torus'; known: box, cylinder"),
+        ("shape: box", "shape: torus", "torus", "type 'block_long': unknown shape 'torus'; known: box, cylinder, mesh"),
         ("normal: [1, 0, 0]", "normal: [1, 1, 0]", "[1, 1, 0]",
          "feature 'end': the normal must be a unit vector (length 1.4142)"),
         ("[0, 0, 0.019, 180, 0, 90]", "[0, 0, 0.019]", "[0, 0, 0.019]",

@@ -57,7 +57,6 @@ def test_every_type_builds_with_its_default_colour_and_a_named_one():
         (lambda: megablok("2x2", "red"), "1x1 or 1x2, not '2x2'"),
         (lambda: AttachmentFeature("x", (0, 0, 0), (0, 0, 0)), "normal is zero"),
         (lambda: housing().feature("lid"), "no attachment feature 'lid'"),
-        (lambda: pose_to_matrix((1, 2, 3)), "6 numbers"),
     ],
 )
 def test_errors_name_the_problem(call, message):
@@ -84,3 +83,23 @@ def test_pose_round_trip_and_gimbal_lock():
         assert np.allclose(matrix_to_pose(pose_to_matrix(pose)), pose, atol=1e-9)
     locked = pose_to_matrix((0, 0, 0, 0.3, math.pi / 2, 0.2))
     assert np.allclose(pose_to_matrix(matrix_to_pose(locked)), locked, atol=1e-9)
+
+
+def test_a_pose_of_the_wrong_length_is_named():
+    from bt_meta.world.poses import PoseError
+
+    with pytest.raises(PoseError, match="6 numbers"):
+        pose_to_matrix((1, 2, 3))
+
+
+def test_the_skills_do_not_import_the_simulation_package():
+    """The skills speak poses (bt_meta.world.poses); the simulation's World imports the skills: no circle."""
+    import ast
+    from pathlib import Path
+
+    import bt_meta.world.skills
+
+    for path in sorted(Path(bt_meta.world.skills.__file__).parent.glob("*.py")):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        imported = [node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom) and node.module]
+        assert not [m for m in imported if m.startswith("bt_meta.world.simulation")], path.name

@@ -30,7 +30,7 @@ def test_panda_description_names_its_arm_hand_and_camera_frames():
     assert arm.gripper is not None and arm.gripper.opening == pytest.approx(0.08)
     assert arm.gripper.opening > 0.061  # wider than a Mega Blok, unlike the Baxter's
     assert panda.home["panda_joint4"] == pytest.approx(-2.35619)
-    assert panda.scene_offset == (-0.33, 0.20, 0.20)
+    assert panda.scene_offset == (-0.22, 0.20, 0.20)
     assert load_robot("baxter").scene_offset == (0.0, 0.0, 0.0)
 
 
@@ -45,7 +45,7 @@ def test_panda_home_points_the_hand_down_in_front_of_the_base():
 
 def test_scene_offset_errors_are_located(tmp_path: Path):
     path = tmp_path / "panda2.yaml"
-    path.write_text(PANDA_TEXT.replace("scene_offset: [-0.33, 0.20, 0.20]", "scene_offset: [-0.33, 0.20]"))
+    path.write_text(PANDA_TEXT.replace("scene_offset: [-0.22, 0.20, 0.20]", "scene_offset: [-0.22, 0.20]"))
     line = next(n for n, text in enumerate(path.read_text().splitlines(), 1) if "scene_offset" in text)
     with pytest.raises(ConfigError) as info:
         load_robot(path)
@@ -146,9 +146,34 @@ def test_magnetic_attach_nominal_on_the_panda(capsys):
 
 
 @pytest.mark.slow
+def test_letter_h_on_the_panda(capsys):
+    """The lift next to a wrist joint limit and the fingers beside placed blocks: IK keeps off the limits
+    (joint_limit_margin), Place turns the fingers to a free side."""
+    code, result = run_json(capsys, str(trees_dir() / "letters.yaml"), "--problem", "H", "--robot", "panda")
+    assert code == 0 and result["status"] == "SUCCESS", result["failures"]
+    assert len(result["plan"]) == 8
+    for line in result["plan"]:
+        _, block, x, y = line.split()
+        assert ["at", block, x, y] in result["symbolic_state"]
+        assert result["objects"][block]["held_by"] is None and result["objects"][block]["pose"][2] < 0.05
+
+
+@pytest.mark.slow
+def test_housing_insertion_nominal_on_the_panda(capsys):
+    """The pose symbols point the hand down with the Panda's own top-down yaw (0, not the Baxter's 180)."""
+    code, result = run_json(capsys, str(trees_dir() / "housing_insertion.yaml"), "--problem", "nominal",
+                            "--robot", "panda")
+    assert code == 0 and result["status"] == "SUCCESS", result["failures"]
+    housing, board = result["objects"]["housing"], result["objects"]["board"]
+    assert housing["held_by"] is None
+    assert housing["an"][2] == pytest.approx(-1.0, abs=0.02)  # upright: its insertable end faces down
+    assert np.linalg.norm(np.array(housing["pose"][:2]) - np.array(board["pose"][:2])) < 0.01  # in the board
+
+
+@pytest.mark.slow
 def test_a_robot_placed_too_far_from_the_objects_reports_reachability(tmp_path, capsys):
     far = tmp_path / "far_panda.yaml"
-    far.write_text(PANDA_TEXT.replace("scene_offset: [-0.33, 0.20, 0.20]", "scene_offset: [0.45, 0.20, 0.20]"))
+    far.write_text(PANDA_TEXT.replace("scene_offset: [-0.22, 0.20, 0.20]", "scene_offset: [0.45, 0.20, 0.20]"))
     code, result = run_json(capsys, str(trees_dir() / "letters.yaml"), "--problem", "A", "--robot", str(far))
     assert code == 1 and result["status"] == "FAILURE"
     (failure,) = result["failures"]

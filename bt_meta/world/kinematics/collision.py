@@ -80,9 +80,9 @@ class Contact:
 class SceneObject:
     name: str
     shape: str
-    """``box``, ``cylinder`` or ``sphere``."""
+    """``box``, ``cylinder``, ``sphere`` or ``convex``."""
     dimensions: tuple[float, ...]
-    """box: (size x, size y, size z); cylinder: (radius, length along z); sphere: (radius,)."""
+    """box: (size x, size y, size z); cylinder: (radius, length along z); sphere: (radius,); convex: (points,)."""
     attached_to: str | None
     """The robot frame carrying the object, or None when it is fixed in the base frame."""
 
@@ -207,6 +207,17 @@ class CollisionChecker:
         """A cylinder whose axis is the z axis of ``pose``, centred at ``pose``."""
         r, h = _positive((radius, length), 2, "cylinder radius and length")
         self._add(SceneObject(name, "cylinder", (r, h), None), coal.Cylinder(r, h), pose)
+
+    def add_convex(self, name: str, points: np.ndarray, pose: Pose) -> None:
+        """The convex hull of ``points`` ((n, 3), in the frame of ``pose``): a mesh object as pybullet collides it."""
+        points = np.asarray(points, dtype=float).reshape(-1, 3)
+        if len(points) < 4:
+            raise KinematicsError(f"convex {name!r}: a hull needs at least 4 points, got {len(points)}")
+        vertices = coal.StdVec_Vec3s()
+        for point in points:
+            vertices.append(point)
+        self._add(SceneObject(name, "convex", (float(len(points)),), None),
+                  coal.Convex.convexHull(vertices, False, "Qt"), pose)
 
     def add_sphere(self, name: str, radius: float, pose: Pose) -> None:
         (r,) = _positive((radius,), 1, "sphere radius")

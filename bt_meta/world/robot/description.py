@@ -3,8 +3,10 @@
 Offers:
 
 * :func:`load_robot` -- a :class:`RobotDescription` from a shipped name (``"baxter"``) or a YAML path
-* :class:`RobotDescription` -- model files, arms, cameras, home pose, joint limits, IK settings
-* :class:`ArmDescription`, :class:`GripperDescription`, :class:`IKSettings` -- its parts
+* :class:`RobotDescription` -- model files, arms, cameras, home pose, joint limits (``joint_limit_margin`` keeps IK
+  off the URDF limits), IK settings, the workcell offset
+* :class:`ArmDescription`, :class:`GripperDescription` (how the simulator grasps: ``fixed`` or ``friction``),
+  :class:`IKSettings` -- its parts
 * :class:`UrdfSummary` / :func:`read_urdf_summary` -- joint and link names, types and limits of a URDF
 
 A wrong robot file raises :class:`~bt_meta.errors.ConfigError` located at the offending YAML node
@@ -46,6 +48,18 @@ class GripperDescription:
     closed: tuple[float, ...]
     opening: float
     """Distance between the open fingers (m)."""
+    grasp: str = "fixed"
+    """How the simulator holds a part: ``fixed`` (a rigid constraint at the relative pose when the gripper closes:
+    the Baxter's gripper is narrower than a Mega Blok) or ``friction`` (the fingers close on the part and hold it
+    by contact and friction alone, so heavy or slippery parts slip; a part wider than ``opening`` across the
+    fingers is still held by constraint)."""
+    force: float = 20.0
+    """Friction grasps: the force (N) each finger's motor closes with."""
+    depth: float = 0.012
+    """Friction grasps: how far below a part's top the end-effector frame goes, so the finger pads overlap it."""
+    fingertip: float = 0.0
+    """How far the fingertips reach below the end-effector frame (m): a friction grasp keeps them above the
+    surface the part stands on."""
 
 
 @dataclass(frozen=True)
@@ -255,7 +269,8 @@ class _RobotFile(YamlNodeReader):
         top = self.mapping(root, "robot description")
         self.check_keys(
             top,
-            {"name", "files", "base_frame", "arms", "head", "home", "joint_limits", "ik", "workcell"},
+            {"name", "files", "base_frame", "arms", "head", "home", "joint_limits", "joint_limit_margin", "ik",
+             "workcell"},
             "robot description",
         )
         name = self.string(self.require(top, "name", root, "robot description"), "name")
@@ -304,6 +319,10 @@ class _RobotFile(YamlNodeReader):
                     )
                 limits[jname] = (lower, upper)
 
+        if "joint_limit_margin" in top:
+            named = set(self.mapping(top["joint_limits"][1], "joint_limits")) if "joint_limits" in top else set()
+            self.limit_margin(top["joint_limit_margin"][1], limits, arms, named)
+
         home = {j: min(max(0.0, limits[j][0]), limits[j][1]) for j in urdf.movable_joints}
         if "home" in top:
             for jname, (key_node, value_node) in self.mapping(top["home"][1], "home").items():
@@ -340,6 +359,22 @@ class _RobotFile(YamlNodeReader):
             urdf=urdf,
             scene_offset=scene_offset,
         )
+
+    def limit_margin(self, node: yaml.Node, limits: dict[str, tuple[float, float]],
+                     arms: dict[str, ArmDescription], named: set[str]) -> None:
+        """Keep every arm joint ``margin`` inside its URDF limits (joints ``joint_limits`` names keep theirs): IK
+        then never returns a configuration on a limit, where the simulator's motors cannot hold the pose and
+        the next move has no room to turn that joint."""
+        margin = self.number(node, "joint_limit_margin (radians)")
+        for arm in arms.values():
+            for joint in arm.joints:
+                lower, upper = limits[joint]
+                if joint in named or not (math.isfinite(lower) and math.isfinite(upper)):
+                    continue
+                if margin < 0.0 or 2.0 * margin >= upper - lower:
+                    raise self.error(f"joint_limit_margin {margin} must be at least 0 and leave {joint} a range "
+                                     f"(its limits are [{lower}, {upper}])", node)
+                limits[joint] = (lower + margin, upper - margin)
 
     def workcell(self, node: yaml.Node) -> tuple[float, float, float]:
         entries = self.mapping(node, "workcell")
@@ -407,7 +442,8 @@ class _RobotFile(YamlNodeReader):
 
     def gripper(self, what: str, node: yaml.Node, urdf: UrdfSummary) -> GripperDescription:
         entries = self.mapping(node, what)
-        self.check_keys(entries, {"joints", "open", "closed", "opening"}, what)
+        self.check_keys(entries, {"joints", "open", "closed", "opening", "grasp", "force", "depth", "fingertip"},
+                        what)
         joints_node = self.require(entries, "joints", node, what)
         joints = tuple(self.joint(n, f"{what}.joints", urdf) for n in self.sequence(joints_node, f"{what}.joints"))
         values = {}
@@ -423,7 +459,14 @@ class _RobotFile(YamlNodeReader):
                     raise self.error(f"{what}.{key}: {joint} = {value} is outside [{lower}, {upper}]", item)
             values[key] = numbers
         opening = self.number(self.require(entries, "opening", node, what), f"{what}.opening", positive=True)
-        return GripperDescription(joints, values["open"], values["closed"], opening)
+        grasp = "fixed"
+        if "grasp" in entries:
+            grasp = self.string(entries["grasp"][1], f"{what}.grasp")
+            if grasp not in ("fixed", "friction"):
+                raise self.error(f"{what}.grasp must be 'fixed' or 'friction', not {grasp!r}", entries["grasp"][1])
+        options = {key: self.number(entries[key][1], f"{what}.{key}", positive=key == "force")
+                   for key in ("force", "depth", "fingertip") if key in entries}
+        return GripperDescription(joints, values["open"], values["closed"], opening, grasp, **options)
 
     def ik(self, node: yaml.Node) -> IKSettings:
         entries = self.mapping(node, "ik")

@@ -1,6 +1,7 @@
 """Object types as data: the shipped catalogue (``trees/objects/catalogue.yaml``) and a user's files.
 
-An entry gives a type's geometry (a box or a cylinder), mass, default colour, friction, magnetic role, its
+An entry gives a type's geometry (a box, a cylinder, or a mesh file: one shipped beside the catalogue or inside an
+installed package such as example-robot-data), mass, default colour, friction, magnetic role, its
 attachment features (the paper's AP and AN, in the object frame) and its grasp frames. Scene files name entries
 by ``type:`` next to the types built in code (:data:`~bt_meta.world.simulation.objects.OBJECT_TYPES`: Mega Bloks,
 magnetic parts, housing, shaft, task board, whose compound geometry stays in code), and extend the catalogue
@@ -25,26 +26,29 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 from bt_meta.errors import ConfigError
 from bt_meta.resources import trees_dir
 from bt_meta.world._yaml_nodes import YamlNodeReader
+from bt_meta.world.simulation.meshes import MeshError, distribution_file, read_vertices
 from bt_meta.world.simulation.objects import (
     COLOURS,
     OBJECT_TYPES,
     AttachmentFeature,
     Box,
     Cylinder,
+    Mesh,
     ObjectModel,
     Part,
 )
 
 __all__ = ["CatalogueEntry", "catalogue_path", "load_catalogue", "object_types", "shipped_catalogue"]
 
-_ENTRY_KEYS = {"description", "shape", "size", "radius", "length", "mass", "colour", "friction", "role", "features",
-               "primary", "grasp_frames"}
-_SHAPES = {"box": ("size",), "cylinder": ("radius", "length")}
+_ENTRY_KEYS = {"description", "shape", "size", "radius", "length", "mesh", "scale", "mass", "colour", "friction",
+               "role", "features", "primary", "grasp_frames"}
+_SHAPES = {"box": ("size",), "cylinder": ("radius", "length"), "mesh": ("mesh", "scale")}
 
 Pose6 = tuple[float, float, float, float, float, float]
 
@@ -124,16 +128,18 @@ class _CatalogueFile(YamlNodeReader):
         shape = self.string(shape_node, f"{what} shape")
         if shape not in _SHAPES:
             raise self.error(f"{what}: unknown shape {shape!r}; known: {', '.join(_SHAPES)}", shape_node)
-        for key in ("size", "radius", "length"):
+        for key in ("size", "radius", "length", "mesh", "scale"):
             if key in entries and key not in _SHAPES[shape]:
                 raise self.error(f"{what}: a {shape} takes {', '.join(_SHAPES[shape])}, not {key}", entries[key][0])
         part: Part
         if shape == "box":
             size = self.vector(self.require(entries, "size", node, what), f"{what} size", positive=True)
             part = Box(size)
-        else:
+        elif shape == "cylinder":
             part = Cylinder(self.number(self.require(entries, "radius", node, what), f"{what} radius", positive=True),
                             self.number(self.require(entries, "length", node, what), f"{what} length", positive=True))
+        else:
+            part = self.mesh(self.require(entries, "mesh", node, what), entries.get("scale"), what)
         mass = self.number(self.require(entries, "mass", node, what), f"{what} mass")
         if mass < 0:
             raise self.error(f"{what}: mass must be at least 0 (0: a static body)", entries["mass"][1])
@@ -186,6 +192,28 @@ class _CatalogueFile(YamlNodeReader):
             else ""
         return CatalogueEntry(name, description, (part,), mass, colour, friction, role, tuple(features), primary,
                               frames, self.path)
+
+    def mesh(self, node: yaml.Node, scale: tuple[yaml.Node, yaml.Node] | None, what: str) -> Mesh:
+        """``mesh: FILE`` (beside this catalogue) or ``mesh: {distribution: NAME, path: FILE}`` (inside an
+        installed package's files), scaled by ``scale: [x, y, z]`` (default 1)."""
+        if isinstance(node, yaml.MappingNode):
+            spec = self.mapping(node, f"{what} mesh", {"distribution", "path"})
+            distribution = self.string(self.require(spec, "distribution", node, f"{what} mesh"), f"{what} mesh")
+            relative = self.string(self.require(spec, "path", node, f"{what} mesh"), f"{what} mesh path")
+            try:
+                path = distribution_file(distribution, relative)
+            except MeshError as error:
+                raise self.error(f"{what}: {error}", node) from None
+        else:
+            path = self.path.parent / self.string(node, f"{what} mesh")
+            if not path.is_file():
+                raise self.error(f"{what}: mesh file {path} does not exist", node)
+        factors = (1.0, 1.0, 1.0) if scale is None else self.vector(scale[1], f"{what} scale", positive=True)
+        try:
+            vertices = read_vertices(path) * np.array(factors)
+        except MeshError as error:
+            raise self.error(f"{what}: {error}", node) from None
+        return Mesh(str(path.resolve()), factors, tuple(tuple(float(v) for v in row) for row in vertices))
 
     def vector(self, node: yaml.Node, what: str, *, positive: bool = False) -> tuple[float, float, float]:
         items = self.sequence(node, what)

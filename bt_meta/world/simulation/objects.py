@@ -7,14 +7,15 @@ from models; perception and the meta-reasoner read the same features back in the
 Offers:
 
 * :data:`LB` -- the Mega Bloks unit, 6.1 cm
-* :class:`Box`, :class:`Cylinder` -- the primitive parts of a model
+* :class:`Box`, :class:`Cylinder`, :class:`Mesh` -- the primitive parts of a model
 * :class:`AttachmentFeature` -- a named attachment point and normal in the object frame
 * :class:`ObjectModel` -- one kind of object (type, colour, parts, mass, features, primary feature, role)
 * :func:`megablok`, :func:`magnetic_part`, :func:`task_board`, :func:`housing`, :func:`shaft` -- the paper's objects
 * :func:`make_model` / :data:`OBJECT_TYPES` / :data:`COLOURS` -- build a model from a type name and a colour name
 * :class:`AttachmentRelation` / :func:`attachment_relation` -- the magnetic attach rule (points coincide, normals
   oppose) and the paper's R_p, R_n keypoint relations
-* :func:`pose_to_matrix`, :func:`matrix_to_pose`, :func:`rpy_to_matrix` -- (x, y, z, roll, pitch, yaw) poses
+* :func:`pose_to_matrix`, :func:`matrix_to_pose`, :func:`rpy_to_matrix` -- (x, y, z, roll, pitch, yaw) poses,
+  from :mod:`bt_meta.world.poses` (kept here for the modules that import them from here)
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bt_meta.errors import BtMetaError
+from bt_meta.world.poses import Pose6, matrix_to_pose, pose_to_matrix, rpy_to_matrix
 
 __all__ = [
     "COLOURS",
@@ -35,8 +37,10 @@ __all__ = [
     "AttachmentRelation",
     "Box",
     "Cylinder",
+    "Mesh",
     "ObjectModel",
     "ObjectModelError",
+    "Pose6",
     "attachment_relation",
     "housing",
     "magnetic_part",
@@ -53,7 +57,6 @@ LB = 0.061
 """One Mega Bloks unit (m): a 1x1 block is LB x LB in plan (paper, section 6.1)."""
 
 Vec3 = tuple[float, float, float]
-Pose6 = tuple[float, float, float, float, float, float]
 
 COLOURS: dict[str, tuple[float, float, float, float]] = {
     "red": (0.85, 0.08, 0.08, 1.0),
@@ -71,48 +74,6 @@ COLOURS: dict[str, tuple[float, float, float, float]] = {
 
 class ObjectModelError(BtMetaError):
     """An object type or colour that does not exist, or a model built with impossible dimensions."""
-
-
-# --------------------------------------------------------------------------------------------------------------
-# Poses
-
-
-def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """Rotation for fixed-axis X-Y-Z angles (R = Rz(yaw) Ry(pitch) Rx(roll)), pybullet's and ROS's convention."""
-    cr, sr = math.cos(roll), math.sin(roll)
-    cp, sp = math.cos(pitch), math.sin(pitch)
-    cy, sy = math.cos(yaw), math.sin(yaw)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
-
-
-def pose_to_matrix(pose: Sequence[float]) -> np.ndarray:
-    """4x4 homogeneous transform of a (x, y, z, roll, pitch, yaw) pose."""
-    if len(pose) != 6:
-        raise ObjectModelError(f"a pose has 6 numbers (x, y, z, roll, pitch, yaw), got {len(pose)}")
-    out = np.eye(4)
-    out[:3, :3] = rpy_to_matrix(pose[3], pose[4], pose[5])
-    out[:3, 3] = pose[:3]
-    return out
-
-
-def matrix_to_pose(matrix: np.ndarray) -> Pose6:
-    """(x, y, z, roll, pitch, yaw) of a 4x4 transform; at pitch = +-90 degrees roll is reported as 0."""
-    r = matrix[:3, :3]
-    pitch = math.asin(max(-1.0, min(1.0, -r[2, 0])))
-    if abs(r[2, 0]) < 1.0 - 1e-9:
-        roll = math.atan2(r[2, 1], r[2, 2])
-        yaw = math.atan2(r[1, 0], r[0, 0])
-    else:  # gimbal lock: fold roll into yaw
-        roll = 0.0
-        yaw = math.atan2(-r[0, 1], r[1, 1])
-    x, y, z = (float(v) for v in matrix[:3, 3])
-    return (x, y, z, roll, pitch, yaw)
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -152,7 +113,22 @@ class Cylinder:
         return pts @ rpy_to_matrix(*self.rpy).T + np.array(self.position)
 
 
-Part = Box | Cylinder
+@dataclass(frozen=True)
+class Mesh:
+    """A mesh part: the OBJ/STL ``file`` (absolute) scaled by ``scale``, at ``position`` turned by ``rpy``.
+    ``vertices`` are the file's, scaled (mesh frame): the outline everything else computes from."""
+
+    file: str
+    scale: Vec3
+    vertices: tuple[Vec3, ...] = field(repr=False)
+    position: Vec3 = (0.0, 0.0, 0.0)
+    rpy: Vec3 = (0.0, 0.0, 0.0)
+
+    def corners(self) -> np.ndarray:
+        return np.array(self.vertices, dtype=float) @ rpy_to_matrix(*self.rpy).T + np.array(self.position)
+
+
+Part = Box | Cylinder | Mesh
 
 
 @dataclass(frozen=True)
@@ -228,6 +204,12 @@ class ObjectModel:
         """How far below the origin the geometry reaches when turned by (roll, pitch): resting height on a plane."""
         rotated = self.points() @ rpy_to_matrix(roll, pitch, 0.0).T
         return float(-rotated[:, 2].min())
+
+    def grasp_frames(self) -> list[Pose6]:
+        """The model's grasp frames (catalogue types give them): gripper poses in the object frame, radians."""
+        names = [key[len("grasp_"):-len("_x")] for key in self.info if key.startswith("grasp_") and key.endswith("_x")]
+        return [tuple(self.info[f"grasp_{name}_{axis}"] for axis in ("x", "y", "z", "roll", "pitch", "yaw"))
+                for name in names]  # type: ignore[misc]
 
     def extent(self) -> tuple[np.ndarray, np.ndarray]:
         """Axis-aligned bounds (min, max) of the geometry in the object frame."""

@@ -7,8 +7,9 @@ Offers:
 
 * :class:`Simulation` -- own physics client (``gui=True`` for a person at a screen), context manager; robot
   joints (teleport or drive targets and step), objects by name (spawn, move, remove, pose), grasp by fixed
-  constraint and release, the magnetic attach rule (checked at every step, joins by fixed constraint),
-  :meth:`Simulation.object_states` with AP/AN in the base frame, static obstacles (:meth:`Simulation.add_obstacle`)
+  constraint or by the fingers' friction (per robot: ``gripper: grasp:``) and release, the magnetic attach rule
+  (checked at every step, joins by fixed constraint), :meth:`Simulation.object_states` with AP/AN in the base
+  frame, static obstacles (:meth:`Simulation.add_obstacle`); object parts are boxes, cylinders and meshes
 * :class:`SimObjectState` -- ground truth of one object: pose, AP/AN (base and object frame), all features
 * :class:`Table` -- where the table is (defaults: top 0.2 m below the base frame, front edge 0.45 m ahead)
 * :class:`SimulationError` -- unknown object or link names, duplicate names, impossible requests
@@ -40,6 +41,7 @@ from bt_meta.world.simulation.objects import (
     AttachmentRelation,
     Box,
     Cylinder,
+    Mesh,
     ObjectModel,
     Pose6,
     attachment_relation,
@@ -132,6 +134,29 @@ class _Grasp:
     arm: str
     object_name: str
     constraint_id: int
+    """The constraint holding the object (for a friction grasp, one no stronger than the fingers' friction)."""
+    friction: bool = False
+    """Held by the fingers' friction: released when they stop touching it or it slides in them."""
+    relative: np.ndarray | None = None
+    """Friction grasps: the object's pose in the end-effector frame when the fingers closed."""
+    lost: int = 0
+    """Friction grasps: consecutive checks the fingers did not both touch the object."""
+
+
+_FINGER_FRICTION = 1.0
+"""Lateral friction of the finger links of a friction gripper (rubber pads)."""
+_PRESHAPE_MARGIN = 0.006
+"""Each side (m): how much wider than the part the fingers open before closing on it."""
+_MAX_COMPOUND = 16
+"""pybullet's MAX_COMPOUND_COLLISION_SHAPES: shapes one createCollisionShapeArray keeps."""
+_CLOSE_SPEED = 0.1
+"""m/s: how fast a friction gripper's fingers close (the Franka hand's limit is 0.2 in its URDF)."""
+_FIT_MARGIN = 0.002
+"""Each side (m): a part fits the fingers when it is this much narrower than their opening."""
+_CLOSE_STEPS = 120
+"""Physics steps (0.5 s) a friction grasp lets the fingers close before judging whether they hold the part."""
+_LOST_AFTER = 2
+"""A friction grasp is lost after this many consecutive step() calls without both fingers touching the part."""
 
 
 def _tuple3(v: Iterable[float]) -> tuple[float, float, float]:
@@ -292,11 +317,34 @@ class Simulation:
         self._grasps: dict[str, _Grasp] = {}
         self._joins: dict[frozenset[str], int] = {}
         self._pending_collision: list[tuple[str, str]] = []
+        self._finger_links: dict[str, tuple[int, ...]] = {}
+        self._forces: dict[str, float] = {}
+        """Motor force (N) of joints that do not use the default 500 (a friction gripper's fingers)."""
         self.set_joint_positions(self.robot.home)
         self.table_id = self._make_table()
         self._hand_links: dict[str, tuple[int, ...]] = {
             arm: self._descendants(self.link_index(self._hand_root(arm))) for arm in self.robot.arms
         }
+        for arm, description in self.robot.arms.items():
+            gripper = description.gripper
+            if gripper is None or gripper.grasp != "friction":
+                continue
+            self._finger_links[arm] = tuple(self._joint_index[j] for j in gripper.joints)
+            for joint in gripper.joints:
+                self._forces[joint] = gripper.force
+            for link in self._finger_links[arm]:
+                pybullet.changeDynamics(self.robot_id, link, lateralFriction=_FINGER_FRICTION,
+                                        physicsClientId=self.client)
+            if len(gripper.joints) == 2:
+                # The fingers move together, as the hand's mechanism couples them: two independent motors that
+                # both push at full force give a held part no lateral stiffness, it slides with the fingers.
+                first, second = self._finger_links[arm]
+                ratio = -1.0 if gripper.open[0] * gripper.open[1] > 0 else 1.0
+                gear = pybullet.createConstraint(self.robot_id, first, self.robot_id, second, pybullet.JOINT_GEAR,
+                                                 [1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0],
+                                                 physicsClientId=self.client)
+                pybullet.changeConstraint(gear, gearRatio=ratio, erp=0.1, maxForce=10.0 * gripper.force,
+                                          physicsClientId=self.client)
 
     def _hand_root(self, arm: str) -> str:
         """The wrist-side link of the hand: everything below it may touch a held object."""
@@ -419,7 +467,7 @@ class Simulation:
             idx,
             pybullet.POSITION_CONTROL,
             targetPositions=[self._targets[n] for n in names],
-            forces=[500.0] * len(idx),
+            forces=[self._forces.get(n, 500.0) for n in names],
             physicsClientId=self.client,
         )
         if max_velocity is not None:
@@ -429,7 +477,7 @@ class Simulation:
                     self._joint_index[name],
                     pybullet.POSITION_CONTROL,
                     targetPosition=float(value),
-                    force=500.0,
+                    force=self._forces.get(name, 500.0),
                     maxVelocity=max_velocity,
                     physicsClientId=self.client,
                 )
@@ -484,6 +532,8 @@ class Simulation:
                     self.try_attach(active, reference)
         if self._pending_collision:
             self._restore_collisions()
+        if self._finger_links:
+            self._check_friction_grasps()
 
     def settle(self, steps: int = 240) -> None:
         """Let objects come to rest (one second of simulated time by default)."""
@@ -529,14 +579,54 @@ class Simulation:
         return next((name for name, body in self._obstacles.items() if body.body_id == body_id), None)
 
     def _create_body(self, model: ObjectModel, pose: Sequence[float]) -> int:
+        """A pybullet body of the model's parts. pybullet takes at most 16 shapes per compound
+        (MAX_COMPOUND_COLLISION_SHAPES) and silently drops the rest: a model with more parts (the housing's 24
+        tube segments) is a base of 16 and links of up to 16 more each, fixed to it at the object frame."""
+        c = self.client
+        chunks = [model.parts[k : k + _MAX_COMPOUND] for k in range(0, len(model.parts), _MAX_COMPOUND)]
+        shapes = [self._shape_arrays(chunk) for chunk in chunks]
+        masses = [model.mass * len(chunk) / len(model.parts) for chunk in chunks]
+        extra = len(chunks) - 1
+        body = pybullet.createMultiBody(
+            masses[0],
+            shapes[0][0],
+            shapes[0][1],
+            list(pose[:3]),
+            list(pybullet.getQuaternionFromEuler(pose[3:])),
+            linkMasses=masses[1:],
+            linkCollisionShapeIndices=[col for col, _ in shapes[1:]],
+            linkVisualShapeIndices=[vis for _, vis in shapes[1:]],
+            linkPositions=[[0.0, 0.0, 0.0]] * extra,
+            linkOrientations=[[0.0, 0.0, 0.0, 1.0]] * extra,
+            linkInertialFramePositions=[[0.0, 0.0, 0.0]] * extra,
+            linkInertialFrameOrientations=[[0.0, 0.0, 0.0, 1.0]] * extra,
+            linkParentIndices=[0] * extra,
+            linkJointTypes=[pybullet.JOINT_FIXED] * extra,
+            linkJointAxis=[[0.0, 0.0, 1.0]] * extra,
+            physicsClientId=c,
+        )
+        for link in range(-1, extra):
+            # createVisualShapeArray has no per-shape colour (and crashes when given one): colour the whole body.
+            pybullet.changeVisualShape(body, link, rgbaColor=list(COLOURS[model.colour]), physicsClientId=c)
+            pybullet.changeDynamics(
+                body, link, lateralFriction=model.lateral_friction, spinningFriction=0.001, physicsClientId=c
+            )
+        return body
+
+    def _shape_arrays(self, parts: Sequence[Any]) -> tuple[int, int]:
+        """(collision, visual) shape arrays of up to 16 parts."""
         c = self.client
         kinds, halves, radii, lengths, positions, orientations = [], [], [], [], [], []
-        for part in model.parts:
+        files: list[str] = []
+        scales: list[list[float]] = []
+        for part in parts:
+            files.append(part.file if isinstance(part, Mesh) else "")
+            scales.append(list(part.scale) if isinstance(part, Mesh) else [1.0, 1.0, 1.0])
             positions.append(list(part.position))
             orientations.append(list(pybullet.getQuaternionFromEuler(part.rpy)))
             if isinstance(part, Box):
                 kinds.append(pybullet.GEOM_BOX)
-                halves.append([s / 2.0 for s in part.size])
+                halves.append([v / 2.0 for v in part.size])
                 radii.append(0.0)
                 lengths.append(0.0)
             elif isinstance(part, Cylinder):
@@ -544,40 +634,21 @@ class Simulation:
                 halves.append([0.0, 0.0, 0.0])
                 radii.append(part.radius)
                 lengths.append(part.length)
+            elif isinstance(part, Mesh):
+                kinds.append(pybullet.GEOM_MESH)
+                halves.append([0.0, 0.0, 0.0])
+                radii.append(0.0)
+                lengths.append(0.0)
             else:  # pragma: no cover - ObjectModel only holds these
                 raise SimulationError(f"unknown part {part!r}")
-        col = pybullet.createCollisionShapeArray(
-            kinds,
-            radii=radii,
-            halfExtents=halves,
-            lengths=lengths,
-            collisionFramePositions=positions,
-            collisionFrameOrientations=orientations,
-            physicsClientId=c,
-        )
-        vis = pybullet.createVisualShapeArray(
-            kinds,
-            radii=radii,
-            halfExtents=halves,
-            lengths=lengths,
-            visualFramePositions=positions,
-            visualFrameOrientations=orientations,
-            physicsClientId=c,
-        )
-        body = pybullet.createMultiBody(
-            model.mass,
-            col,
-            vis,
-            list(pose[:3]),
-            list(pybullet.getQuaternionFromEuler(pose[3:])),
-            physicsClientId=c,
-        )
-        # createVisualShapeArray has no per-shape colour (and crashes when given one): colour the whole body.
-        pybullet.changeVisualShape(body, -1, rgbaColor=list(COLOURS[model.colour]), physicsClientId=c)
-        pybullet.changeDynamics(
-            body, -1, lateralFriction=model.lateral_friction, spinningFriction=0.001, physicsClientId=c
-        )
-        return body
+        arrays = {"radii": radii, "halfExtents": halves, "lengths": lengths, "fileNames": files,
+                  "meshScales": scales}
+        col = pybullet.createCollisionShapeArray(kinds, collisionFramePositions=positions,
+                                                 collisionFrameOrientations=orientations, physicsClientId=c,
+                                                 **arrays)
+        vis = pybullet.createVisualShapeArray(kinds, visualFramePositions=positions,
+                                              visualFrameOrientations=orientations, physicsClientId=c, **arrays)
+        return col, vis
 
     def resting_pose(self, model: ObjectModel, pose: Sequence[float]) -> Pose6:
         """``pose`` with z set so the model, turned by its roll and pitch, rests on the table top."""
@@ -598,10 +669,7 @@ class Simulation:
         # or the next object with this id would pass through the hand.
         for arm, links in self._hand_links.items():
             if (arm, name) in self._pending_collision:
-                for link in links:
-                    pybullet.setCollisionFilterPair(
-                        self.robot_id, body.body_id, link, -1, 1, physicsClientId=self.client
-                    )
+                self._hand_collisions(body.body_id, links, True)
         self._pending_collision = [p for p in self._pending_collision if p[1] != name]
         pybullet.removeBody(body.body_id, physicsClientId=self.client)
         del self._bodies[name]
@@ -699,12 +767,19 @@ class Simulation:
     # -- grasp -----------------------------------------------------------------------------------------------
 
     def grasp(self, name: str, arm: str = "right", *, max_distance: float = 0.03) -> bool:
-        """Hold ``name`` in the arm's gripper by a fixed constraint at the current relative pose.
+        """Hold ``name`` in the arm's gripper: by friction when the gripper's description says ``grasp: friction``
+        and the part fits between its fingers (:meth:`fits`), else by a fixed constraint at the current relative
+        pose.
 
-        The gripper cannot open wide enough for a Mega Blok (4.62 cm < 6.1 cm), so a grasp is this constraint,
-        with collisions between the hand and the object off. Returns False (and holds nothing) when the
-        gripper frame is farther than ``max_distance`` from the object's surface or the arm already holds
-        something -- a physical failure the skill reports.
+        The Baxter's gripper cannot open wide enough for a Mega Blok (4.62 cm < 6.1 cm), so its grasp is this
+        constraint, with collisions between the hand and the object off. A friction grasp closes the fingers
+        (physics steps, up to 0.5 s) and holds the part only if both fingers then touch it, by a constraint no
+        stronger than their friction (pads x part friction x the fingers' squeeze); afterwards the part stays
+        held only while both fingers touch it and it has not slid 5 mm in them (checked at every
+        :meth:`step`): a part too heavy or too slippery for the fingers slips out, and :meth:`held` says so.
+        Returns False (and holds nothing)
+        when the gripper frame is farther than ``max_distance`` from the object's surface, the arm already holds
+        something, or the fingers closed without holding it -- a physical failure the skill reports.
         """
         body = self._body(name)
         if arm in self._grasps:
@@ -714,24 +789,129 @@ class Simulation:
         end = self.link_index(self.robot.arm(arm).end_effector)
         if self._distance_to_gripper(body.body_id, end) > max_distance:
             return False
+        if self.grasps_by_friction(name, arm):
+            return self._close_on(name, arm)
         c = self.client
         link_state = pybullet.getLinkState(self.robot_id, end, computeForwardKinematics=True, physicsClientId=c)
         parent = _transform(link_state[0], link_state[1])  # constraint frames are relative to the link's COM frame
         child = self.object_transform(name)
         rel = np.linalg.inv(parent) @ child
-        for link in self._hand_links[arm]:
-            pybullet.setCollisionFilterPair(self.robot_id, body.body_id, link, -1, 0, physicsClientId=c)
+        self._hand_collisions(body.body_id, self._hand_links[arm], False)
         self._pending_collision = [p for p in self._pending_collision if p[1] != name]
         cid = _fix(self.robot_id, end, body.body_id, rel, c)
         self._grasps[arm] = _Grasp(arm, name, cid)
         return True
 
+    def grasps_by_friction(self, name: str, arm: str = "right") -> bool:
+        """Whether a grasp of ``name`` by ``arm`` would be by the fingers' friction (the gripper is described
+        ``grasp: friction`` and the part, as it is turned now, fits between the open fingers)."""
+        return arm in self._finger_links and self.fits(name, arm)
+
+    def closing_axis(self, arm: str = "right") -> np.ndarray:
+        """Unit vector (base frame) along which the arm's first finger moves when the gripper opens."""
+        gripper = self.robot.arm(arm).gripper
+        if gripper is None:
+            raise SimulationError(f"arm {arm!r} has no gripper")
+        joint = self._joint_index[gripper.joints[0]]
+        axis = np.array(pybullet.getJointInfo(self.robot_id, joint, physicsClientId=self.client)[13], dtype=float)
+        state = pybullet.getLinkState(self.robot_id, joint, computeForwardKinematics=True,
+                                      physicsClientId=self.client)
+        world = _transform(state[4], state[5])[:3, :3] @ axis
+        return world / max(float(np.linalg.norm(world)), 1e-12)
+
+    def width_across(self, name: str, arm: str = "right") -> float:
+        """The part's extent (m) along the arm's finger closing axis, as it is turned now."""
+        t = self.object_transform(name)
+        points = self._body(name).model.points() @ t[:3, :3].T
+        along = points @ self.closing_axis(arm)
+        return float(along.max() - along.min())
+
+    def fits(self, name: str, arm: str = "right") -> bool:
+        """Whether the part fits between the arm's open fingers."""
+        gripper = self.robot.arm(arm).gripper
+        return gripper is not None and self.width_across(name, arm) <= gripper.opening - 2.0 * _FIT_MARGIN
+
+    def preshape(self, arm: str, name: str) -> None:
+        """Open the fingers of a friction gripper just wider than ``name`` (a few millimetres each side), so
+        they go down around it without touching what stands next to it. Nothing for other grippers."""
+        if not self.grasps_by_friction(name, arm):
+            return
+        self._open_to(arm, self.width_across(name, arm) + 2.0 * _PRESHAPE_MARGIN)
+
+    def _open_to(self, arm: str, width: float) -> None:
+        gripper = self.robot.arm(arm).gripper
+        assert gripper is not None
+        fraction = min(1.0, max(0.0, width / gripper.opening))
+        values = [c + fraction * (o - c) for o, c in zip(gripper.open, gripper.closed, strict=True)]
+        self.set_joint_targets(dict(zip(gripper.joints, values, strict=True)))
+
+    def touching_fingers(self, name: str, arm: str = "right") -> int:
+        """How many of the arm's fingers touch ``name`` (friction grippers; 0 for others)."""
+        body = self._body(name).body_id
+        return sum(
+            1
+            for link in self._finger_links.get(arm, ())
+            if pybullet.getContactPoints(self.robot_id, body, linkIndexA=link, physicsClientId=self.client)
+        )
+
+    def _close_on(self, name: str, arm: str) -> bool:
+        gripper = self.robot.arm(arm).gripper
+        assert gripper is not None
+        # at the hand's speed: a 15 g finger driven by its full force alone crosses a 2.6 cm wall in one physics
+        # step (the housing's flange), closing inside it
+        self.set_joint_targets(dict(zip(gripper.joints, gripper.closed, strict=True)), max_velocity=_CLOSE_SPEED)
+        fingers = len(self._finger_links[arm])
+        for _ in range(_CLOSE_STEPS // 8):
+            self.step(8)
+            if self.touching_fingers(name, arm) == fingers:
+                moving = pybullet.getJointStates(self.robot_id, list(self._finger_links[arm]),
+                                                 physicsClientId=self.client)
+                if all(abs(state[1]) < 1e-3 for state in moving):
+                    break
+        if self.touching_fingers(name, arm) < fingers:
+            self.preshape(arm, name)
+            return False
+        # What the fingers can hold: Coulomb friction at both pads, mu (pads x part, Bullet's product) times the
+        # squeeze. A constraint at the relative pose, limited to that force, holds the part without the creep
+        # and pivoting of Bullet's soft contacts under a sustained squeeze; a part whose weight and inertia need
+        # more is dragged out of it, and :meth:`_check_friction_grasps` lets it go.
+        end = self.link_index(self.robot.arm(arm).end_effector)
+        link_state = pybullet.getLinkState(self.robot_id, end, computeForwardKinematics=True,
+                                           physicsClientId=self.client)
+        relative = np.linalg.inv(_transform(link_state[0], link_state[1])) @ self.object_transform(name)
+        cid = _fix(self.robot_id, end, self._body(name).body_id, relative, self.client)
+        capacity = _FINGER_FRICTION * self._body(name).model.lateral_friction * fingers * gripper.force
+        pybullet.changeConstraint(cid, maxForce=capacity, physicsClientId=self.client)
+        self._grasps[arm] = _Grasp(arm, name, cid, friction=True, relative=relative)
+        return True
+
+    def _check_friction_grasps(self, slide: float = 0.005) -> None:
+        for arm, grasp in list(self._grasps.items()):
+            if not grasp.friction:
+                continue
+            assert grasp.relative is not None
+            end = self.link_index(self.robot.arm(arm).end_effector)
+            state = pybullet.getLinkState(self.robot_id, end, computeForwardKinematics=True,
+                                          physicsClientId=self.client)
+            now = np.linalg.inv(_transform(state[0], state[1])) @ self.object_transform(grasp.object_name)
+            slid = float(np.linalg.norm(now[:3, 3] - grasp.relative[:3, 3])) > slide
+            touching = self.touching_fingers(grasp.object_name, arm) == len(self._finger_links[arm])
+            grasp.lost = 0 if touching else grasp.lost + 1
+            if slid or grasp.lost >= _LOST_AFTER:  # slipped out: the fingers hold nothing
+                pybullet.removeConstraint(grasp.constraint_id, physicsClientId=self.client)
+                del self._grasps[arm]
+
     def release(self, arm: str = "right") -> str | None:
         """Let go of what the arm holds (its name, or ``None``). Hand-object collisions come back once they no
-        longer overlap, so the object does not get kicked out of the fingers."""
+        longer overlap, so the object does not get kicked out of the fingers; a friction gripper opens its
+        fingers a few millimetres wider than the part."""
         grasp = self._grasps.pop(arm, None)
         if grasp is None:
             return None
+        if grasp.friction:
+            pybullet.removeConstraint(grasp.constraint_id, physicsClientId=self.client)
+            self._open_to(arm, self.width_across(grasp.object_name, arm) + 2.0 * _PRESHAPE_MARGIN)
+            return grasp.object_name
         pybullet.removeConstraint(grasp.constraint_id, physicsClientId=self.client)
         self._pending_collision.append((arm, grasp.object_name))
         self._restore_collisions()
@@ -740,6 +920,11 @@ class Simulation:
     def held(self, arm: str = "right") -> str | None:
         grasp = self._grasps.get(arm)
         return grasp.object_name if grasp else None
+
+    def holds_by_friction(self, arm: str = "right") -> bool:
+        """Whether the arm holds something by its fingers' friction (it may turn or slide in them)."""
+        grasp = self._grasps.get(arm)
+        return grasp is not None and grasp.friction
 
     def grasp_transform(self, arm: str = "right") -> np.ndarray | None:
         """4x4 pose of the held object in the end-effector frame (``None`` if nothing is held): the kinematic
@@ -792,9 +977,15 @@ class Simulation:
             if overlapping:
                 still.append((arm, name))
                 continue
-            for link in links:
-                pybullet.setCollisionFilterPair(self.robot_id, body, link, -1, 1, physicsClientId=self.client)
+            self._hand_collisions(body, links, True)
         self._pending_collision = still
+
+    def _hand_collisions(self, body: int, hand: Sequence[int], enabled: bool) -> None:
+        """Switch collisions between the hand's links and every link of an object's body on or off."""
+        for part in range(-1, pybullet.getNumJoints(body, physicsClientId=self.client)):
+            for link in hand:
+                pybullet.setCollisionFilterPair(self.robot_id, body, link, part, int(enabled),
+                                                physicsClientId=self.client)
 
     # -- magnetic attach -------------------------------------------------------------------------------------
 
@@ -822,7 +1013,7 @@ class Simulation:
         ta, tr = self.object_transform(active), self.object_transform(reference)
         rel = np.linalg.inv(tr) @ ta
         c = self.client
-        pybullet.setCollisionFilterPair(a.body_id, r.body_id, -1, -1, 0, physicsClientId=c)
+        self._object_collisions(a.body_id, r.body_id, False)
         cid = _fix(r.body_id, -1, a.body_id, rel, c)
         self._joins[pair] = cid
         return True
@@ -833,10 +1024,15 @@ class Simulation:
         if cid is None:
             return False
         pybullet.removeConstraint(cid, physicsClientId=self.client)
-        pybullet.setCollisionFilterPair(
-            self._body(a).body_id, self._body(b).body_id, -1, -1, 1, physicsClientId=self.client
-        )
+        self._object_collisions(self._body(a).body_id, self._body(b).body_id, True)
         return True
+
+    def _object_collisions(self, first: int, second: int, enabled: bool) -> None:
+        """Switch collisions between every link of two objects' bodies on or off."""
+        c = self.client
+        for a in range(-1, pybullet.getNumJoints(first, physicsClientId=c)):
+            for b in range(-1, pybullet.getNumJoints(second, physicsClientId=c)):
+                pybullet.setCollisionFilterPair(first, second, a, b, int(enabled), physicsClientId=c)
 
     def attachments(self) -> list[tuple[str, str]]:
         """Joined pairs, each sorted by name."""

@@ -1,8 +1,7 @@
 """SimWorld: the :class:`~bt_meta.world.base.World` of a task file's problem in the pybullet simulator.
 
 A SimWorld owns a :class:`~bt_meta.world.simulation.sim.Simulation` with the problem's scene (and variant) built in
-it, the
-Baxter's kinematics, a collision checker whose scene mirrors the simulator's objects, and mink IK. HTN primitives
+it, the robot's kinematics, a collision checker whose scene mirrors the simulator's objects, and mink IK. HTN primitives
 map onto skills (:mod:`bt_meta.world.skills`) through a **grounding file** -- data, not code: ``poses/<domain>.yaml``
 next to the task file or in the shipped ``trees/poses/``. It says, per problem, which scene and variant to build;
 per primitive, which skill runs it; how the task file's symbols become numbers (letter cells in lb from a scene
@@ -13,7 +12,10 @@ succeeded (the world does not re-derive facts from poses; perception plugins com
 
 Offers:
 
-* :class:`SimWorld` -- the world; :meth:`SimWorld.from_task_file` builds it from a file, a problem, a variant, a seed
+* :class:`SimWorld` -- the world; :meth:`SimWorld.from_task_file` builds it from a file, a problem, a variant, a seed;
+  what skills ask of it includes where a top-down grasp goes (:meth:`SimWorld.grasp_xy`: a catalogue grasp frame
+  pointing down, else the centroid) and how deep (:meth:`SimWorld.grasp_height`: a friction grasp's pads on the
+  part's widest band)
 * :class:`Grounding` / :func:`load_grounding` -- the grounding file
 * :class:`PrimitiveSkill` -- a skill run for a primitive: applies the primitive's effects on success
 * :func:`quiet_stdout` -- silences what pybullet prints on the C level (keeps ``--json`` output clean)
@@ -43,7 +45,7 @@ from bt_meta.hookspecs import hookimpl
 from bt_meta.htn.state import State
 from bt_meta.resources import trees_dir
 from bt_meta.world.base import FAILURE, SUCCESS, Atom, SkillFailure, ground_effects
-from bt_meta.world.simulation.objects import Box, Cylinder, ObjectModel, pose_to_matrix, rpy_to_matrix
+from bt_meta.world.simulation.objects import Box, Cylinder, Mesh, ObjectModel, pose_to_matrix, rpy_to_matrix
 from bt_meta.world.skills import SKILLS
 from bt_meta.world.skills.base import SimSkill, SkillAbort
 
@@ -370,10 +372,7 @@ class SimWorld:
         for name, (model, transform) in sim.obstacles().items():  # static: added once, never moved
             for k, (kind, dims, local) in enumerate(_collision_shapes(model)):
                 part = name if k == 0 else f"{name}{_PART}{k}"
-                if kind == "box":
-                    self.collision.add_box(part, dims, transform @ local)
-                else:
-                    self.collision.add_cylinder(part, dims[0], dims[1], transform @ local)
+                self._add_shape(part, kind, dims, transform @ local)
         self.sync_collision()
         self._state = initial_state(problem)
         self.executed: list[dict[str, Any]] = []
@@ -477,12 +476,56 @@ class SimWorld:
         return name
 
     def allow_hand(self, name: str, arm: str, allowed: bool = True) -> None:
-        """Let the hand touch ``name`` in collision checks (approaching it to grasp), or stop letting it."""
+        """Let the hand touch ``name`` in collision checks (approaching it to grasp), or stop letting it. Allowing
+        it also opens a friction gripper's fingers just wider than ``name``, for the way down around it."""
+        if allowed and self.sim.held(arm) is None:
+            self.sim.preshape(arm, name)
         for part in self._geometry.get(name, []):
             if allowed:
                 self.collision.allow(part, self._hand_links[arm])
             else:
                 self.collision.disallow(part)
+
+    def grasp_xy(self, name: str) -> tuple[float, float]:
+        """Where (base frame x, y) a top-down grasp of ``name`` goes: over the first of its type's catalogue grasp
+        frames that points down as the object is turned now (within 30 degrees), else over its centroid (a part
+        lying on another face than its frames were written for, a built-in type)."""
+        t = self.sim.object_transform(name)
+        for frame in self.sim.object_model(name).grasp_frames():
+            approach = t[:3, :3] @ rpy_to_matrix(*frame[3:])[:, 2]
+            if float(approach[2]) <= -math.cos(math.radians(30.0)):
+                point = t[:3, :3] @ np.asarray(frame[:3]) + t[:3, 3]
+                return float(point[0]), float(point[1])
+        return float(t[0, 3]), float(t[1, 3])
+
+    def grasp_height(self, name: str, arm: str, clearance: float) -> float:
+        """Where the end-effector frame goes for a grasp of ``name``, above the top of it (negative: below).
+
+        A fixed-constraint grasp stops ``clearance`` above the top; a friction grasp (:meth:`Simulation.fits
+        <bt_meta.world.simulation.sim.Simulation.fits>`) centres the finger pads on the highest of the part's
+        widest pieces across the fingers (a block's body below its studs, the housing's flange), at most the
+        gripper's ``depth`` below the top, with the fingertips on that piece and never within 4 mm of the part's
+        bottom."""
+        sim = self.sim
+        if not sim.grasps_by_friction(name, arm):
+            return clearance
+        gripper = sim.robot.arm(arm).gripper
+        t = sim.object_transform(name)
+        axis = sim.closing_axis(arm)
+        parts = [part.corners() @ t[:3, :3].T + t[:3, 3] for part in sim.object_model(name).parts]
+        spans = [(float(p[:, 2].min()), float(p[:, 2].max())) for p in parts]
+        pieces = []  # (width across the fingers, lowest z, highest z) of each height band the parts make
+        for low, high in sorted(set(spans)):
+            middle = 0.5 * (low + high)
+            along = np.concatenate([p for p, (a, b) in zip(parts, spans, strict=True) if a <= middle <= b]) @ axis
+            pieces.append((float(along.max() - along.min()), low, high))
+        widest = max(width for width, _, _ in pieces)
+        _, low, high = max((p for p in pieces if p[0] >= widest - 0.002), key=lambda p: p[2])
+        top, bottom = self.object_top(name), self.object_lowest(name)
+        # the fingertips stay on the band (below it they would close past a flange onto the narrower body)
+        depth = min(top - 0.5 * (low + high), gripper.depth, top - low - gripper.fingertip - 0.001,
+                    top - bottom - gripper.fingertip - 0.004)
+        return -max(0.0, depth)
 
     def allow_objects(self, name: str, others: Iterable[str]) -> None:
         """Let object ``name`` touch the ``others`` in collision checks (a part going into a hole)."""
@@ -579,18 +622,20 @@ class SimWorld:
     def ground_pose(self, symbol: str, arm: str | None = None) -> np.ndarray:
         """The gripper pose (4x4, base frame) a pose symbol of the task file stands for, now.
 
-        Kinds of entries (``rpy`` in degrees, default pointing down with yaw 180):
+        Kinds of entries (``rpy`` in degrees, default pointing down with the arm's ``top_down_yaw``):
 
         * ``pose: [x, y, z, roll, pitch, yaw]`` -- absolute (an instructor's pose; metres, degrees);
-        * ``above: OBJECT, height: h`` -- top-down over the object's centroid, ``h`` above the top of it and of
-          whatever rests on it (grasp poses: a few millimetres);
+        * ``above: OBJECT, height: h`` -- top-down over the object's grasp point (its catalogue grasp frame, else
+          its centroid), ``h`` above the top of it and of whatever rests on it (grasp poses: a few millimetres;
+          ``touch: true`` marks a grasp pose: a friction grasp goes as deep as :meth:`grasp_height` says);
         * ``above_feature: FEATURE, height: h`` -- the held object's lowest point ``h`` above the feature's point,
           its centroid over it (the gripper itself when nothing is held);
         * ``anchor: NAME, offset: [dx, dy, dz]`` -- a scene anchor plus an offset.
         """
         arm = arm or self.default_arm
         spec = self.pose_spec(symbol)
-        down = spec.get("rpy", [180.0, 0.0, 180.0])
+        # default: pointing down, the hand turned as the arm's description says top-down means (Baxter 180, Panda 0)
+        down = spec.get("rpy", [180.0, 0.0, math.degrees(self.sim.robot.arm(arm).top_down_yaw)])
         out = np.eye(4)
         out[:3, :3] = rpy_to_matrix(*(math.radians(float(v)) for v in down))
         height = float(spec.get("height", 0.0))
@@ -602,8 +647,10 @@ class SimWorld:
             return pose_to_matrix((x, y, z, math.radians(roll), math.radians(pitch), math.radians(yaw)))
         if "above" in spec:
             name = self.object_name(str(spec["above"]))
-            centre = self.sim.object_transform(name)[:3, 3]
-            out[:3, 3] = (centre[0], centre[1], self.stack_top(name) + height)
+            if spec.get("touch"):  # a grasp pose: as deep as this gripper grasps
+                height = self.grasp_height(name, arm, height)
+            x, y = self.grasp_xy(name)
+            out[:3, 3] = (x, y, self.stack_top(name) + height)
             return out
         if "above_feature" in spec:
             obj, feature = self.feature_of(str(spec["above_feature"]))
@@ -684,6 +731,14 @@ class SimWorld:
                  if last in model.supports[obj.parentJoint]}
         return sorted(links)
 
+    def _add_shape(self, name: str, kind: str, dims: tuple[float, ...], pose: np.ndarray) -> None:
+        if kind == "box":
+            self.collision.add_box(name, dims, pose)
+        elif kind == "cylinder":
+            self.collision.add_cylinder(name, dims[0], dims[1], pose)
+        else:
+            self.collision.add_convex(name, np.asarray(dims, dtype=float).reshape(-1, 3), pose)
+
     def sync_collision(self) -> None:
         """Mirror the simulator's objects into the collision scene (held objects ride with the gripper)."""
         sim, checker = self.sim, self.collision
@@ -699,16 +754,23 @@ class SimWorld:
                 parts = []
                 for k, (kind, dims, local) in enumerate(shapes):
                     part = name if k == 0 else f"{name}{_PART}{k}"
-                    pose = transform @ local
-                    if kind == "box":
-                        checker.add_box(part, dims, pose)
-                    else:
-                        checker.add_cylinder(part, dims[0], dims[1], pose)
+                    self._add_shape(part, kind, dims, transform @ local)
                     parts.append(part)
                 self._geometry[name] = parts
             elif name not in held:
                 for part, (_, _, local) in zip(self._geometry[name], shapes, strict=True):
                     checker.move(part, transform @ local)
+        q = None
+        for arm in sim.robot.arms:  # a part held by friction may have turned in the fingers: carry it as it is now
+            name = sim.held(arm)
+            if name is None or not sim.holds_by_friction(arm) or name not in self._geometry:
+                continue
+            q = self.current_q() if q is None else q
+            transform = sim.object_transform(name)
+            shapes = _collision_shapes(sim.object_model(name))
+            for part, (_, _, local) in zip(self._geometry[name], shapes, strict=True):
+                checker.detach(part, pose=transform @ local)
+                checker.attach(part, self.end_effector(arm), q, allow=self._hand_links[arm])
         for a, b in sim.attachments():  # magnetically joined parts touch by construction: not a collision
             for part in self._geometry.get(a, []):
                 checker.allow(part, self._geometry.get(b, []))
@@ -739,6 +801,8 @@ def _collision_shapes(model: ObjectModel) -> list[tuple[str, tuple[float, ...], 
         elif isinstance(part, Cylinder):
             radius, length = shrunk(2.0 * part.radius, part.length)
             out.append(("cylinder", (radius / 2.0, length), local))
+        elif isinstance(part, Mesh):  # its convex hull, as pybullet collides a moving mesh
+            out.append(("convex", tuple(float(v) for row in part.vertices for v in row), local))
     return out
 
 

@@ -1,10 +1,11 @@
-"""Skills of the simulated Baxter, tick by tick, one per module; the registry the grounding files name them by.
+"""Skills of the simulated robot (Baxter, Panda, or a user's own), tick by tick, one per module; the registry the
+grounding files name them by.
 
 Offers:
 
 * :data:`SKILLS` -- skill name (as written in ``trees/poses/*.yaml``) -> skill class
 * :mod:`~bt_meta.world.skills.move_to` -- MoveTo(pose): IK + joint trajectory over several ticks
-* :mod:`~bt_meta.world.skills.grasp` -- Grasp: toggle the gripper (hold by constraint / release)
+* :mod:`~bt_meta.world.skills.grasp` -- Grasp: toggle the gripper (hold / release)
 * :mod:`~bt_meta.world.skills.place` -- Place(block, x, y): pick a block and put it down at a point
 * :mod:`~bt_meta.world.skills.insert` -- Insert(part, target): put a part's insertable end into a hole feature
 """

@@ -1,8 +1,9 @@
-"""Grasp: toggle the gripper -- hold the object within reach by a fixed constraint, or release the held one.
+"""Grasp: toggle the gripper -- hold the object within reach, or release the held one.
 
-Baxter's gripper opens 4.62 cm, less than a Mega Blok: the simulator grasps by constraint (see
-:meth:`bt_meta.world.simulation.sim.Simulation.grasp`). Toggling is the paper's primitive (section 7.1); ``start([])``
-toggles,
+How the simulator holds it is the robot's (:meth:`bt_meta.world.simulation.sim.Simulation.grasp`): the Baxter's
+gripper opens 4.62 cm, less than a Mega Blok, and grasps by constraint; the Panda's fingers close on a part that
+fits and hold it by friction, and a part too heavy or slippery slips out (a ``physical`` failure of the skill
+that carries it). Toggling is the paper's primitive (section 7.1); ``start([])`` toggles,
 ``start([object])`` grasps that object (or releases it when it is the one held); a grounding file's
 ``mode: close`` / ``mode: open`` makes it a CloseGripper / OpenGripper primitive. After a release the skill lets the
 physics run a few ticks so the object comes to rest (and the magnetic attach rule, checked at every physics step,

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from bt_meta.bt.failures import FailureKind
-from bt_meta.world.simulation.objects import matrix_to_pose
+from bt_meta.world.poses import matrix_to_pose
 from bt_meta.world.skills.base import PhasedSkill, SkillAbort, rounded
 from bt_meta.world.skills.grasp import Grasp
 from bt_meta.world.skills.move_to import MoveTo
@@ -95,13 +95,14 @@ class Insert(PhasedSkill):
         return MoveTo(self.world, self.arm, **options).begin(pose, label)
 
     def _over_part(self, height: float) -> np.ndarray:
-        centre = self.world.sim.object_transform(self.part)[:3, 3]
-        return top_down(centre[0], centre[1], self.world.object_top(self.part) + height,
+        x, y = self.world.grasp_xy(self.part)  # its catalogue grasp frame, else its centroid
+        return top_down(x, y, self.world.object_top(self.part) + height,
                         self.world.sim.robot.arm(self.arm).top_down_yaw)
 
     def _descend(self) -> MoveTo:
         self.world.allow_hand(self.part, self.arm)
-        return self._move(self._over_part(0.002), "grasp " + self.part)
+        return self._move(self._over_part(self.world.grasp_height(self.part, self.arm, 0.002)),
+                          "grasp " + self.part)
 
     def _shifted(self, dx: float, dy: float, dz: float) -> np.ndarray:
         pose = self.world.sim.link_transform(self.world.end_effector(self.arm)).copy()

@@ -26,7 +26,7 @@ import pinocchio as pin
 
 from bt_meta.bt.failures import FailureKind
 from bt_meta.world.base import RUNNING, SUCCESS
-from bt_meta.world.simulation.objects import matrix_to_pose, pose_to_matrix
+from bt_meta.world.poses import matrix_to_pose, pose_to_matrix
 from bt_meta.world.skills.base import SimSkill, SkillAbort, rounded
 
 __all__ = ["MoveTo"]

@@ -3,7 +3,8 @@
 Built from MoveTo and Grasp as a small state machine (paper, section 6.1: "grasps and then moves the block to
 (x, y)"): approach above the block, descend, grasp, lift, move above the target, descend, release, retreat. The
 grasp is top-down at the block's centroid; the block is turned on the way so its axes line up with the target
-frame's (a 1x2 block lies along the letter's x axis). The symbols x and y are grounded by the world through the
+frame's (a 1x2 block lies along the letter's x axis); a catalogue type with grasp frames is held over its first
+one instead of its centroid. The symbols x and y are grounded by the world through the
 grounding file's frame (letters: lb = 6.1 cm from the scene's ``letter_origin`` anchor).
 
 After the release the block must rest within ``tolerance`` of the target, else kind ``physical``.
@@ -24,12 +25,17 @@ from typing import Any
 import numpy as np
 
 from bt_meta.bt.failures import FailureKind
-from bt_meta.world.simulation.objects import matrix_to_pose, pose_to_matrix
+from bt_meta.world.poses import matrix_to_pose, pose_to_matrix
 from bt_meta.world.skills.base import PhasedSkill, SkillAbort, rounded
 from bt_meta.world.skills.grasp import Grasp
 from bt_meta.world.skills.move_to import MoveTo
 
 __all__ = ["Place", "nearest_yaw", "symmetry", "top_down"]
+
+_PAD_THICKNESS = 0.016
+"""Thickness (m) of a finger pad along the closing axis, for checking what the fingers would touch."""
+_PAD_HALF_WIDTH = 0.009
+"""Half the width (m) of a finger pad across the closing axis (and how far it reaches above the hand frame)."""
 
 GRIPPER_YAW = math.pi
 """Preferred world yaw of a top-down gripper (near Baxter's home orientation)."""
@@ -88,6 +94,7 @@ class Place(PhasedSkill):
                              {"object": block, "present": list(self.world.sim.object_names())})
         self.block = block
         self.goal = goal
+        self._yaw: float | None = None
         self.info.update(block=block, goal=rounded(goal))
         self.begin_phases()
         return self
@@ -110,18 +117,70 @@ class Place(PhasedSkill):
         return MoveTo(self.world, self.arm).begin(pose, label)
 
     def _grasp_yaw(self) -> float:
-        transform = self.world.sim.object_transform(self.block)
-        model = self.world.sim.object_model(self.block)
-        return nearest_yaw(object_yaw(transform), symmetry(model), self.world.sim.robot.arm(self.arm).top_down_yaw)
+        """The gripper's yaw for the pick: nearest the arm's comfortable top-down yaw among the block's
+        symmetric turns, but turned a quarter when that keeps the fingers out of the blocks around the block
+        here or around its target (a parallel gripper wider than the block closes across a free side)."""
+        if self._yaw is None:
+            sim = self.world.sim
+            transform = sim.object_transform(self.block)
+            period = symmetry(sim.object_model(self.block))
+            preferred = nearest_yaw(object_yaw(transform), period, sim.robot.arm(self.arm).top_down_yaw)
+            turns = [preferred + k * period for k in range(max(1, round(math.pi / period)))]
+            self._yaw = min(turns, key=self._finger_obstruction)  # ties: the first, the preferred yaw
+        return self._yaw
+
+    def _finger_obstruction(self, yaw: float) -> int:
+        """How many sample points of the two finger pads, gripping with the gripper at ``yaw``, fall inside other
+        objects, at the pick and at the goal."""
+        world, sim = self.world, self.world.sim
+        block = sim.object_transform(self.block)
+        model = sim.object_model(self.block)
+        gripper = sim.robot.arm(self.arm).gripper
+        if gripper is None:
+            return 0
+        ee = sim.link_transform(world.end_effector(self.arm))
+        local_axis = ee[:3, :3].T @ sim.closing_axis(self.arm)  # in the gripper frame
+        relative = yaw - object_yaw(block)
+        top = world.object_top(self.block) - block[2, 3] + world.grasp_height(self.block, self.arm, 0.004)
+        count = 0
+        for pose in (block, self._goal_block()):
+            gripper_yaw = object_yaw(pose) + relative
+            axis = top_down(0.0, 0.0, 0.0, gripper_yaw)[:3, :3] @ local_axis
+            across = np.array([-axis[1], axis[0], 0.0])
+            along = model.points() @ (pose[:3, :3].T @ axis)
+            inner = 0.5 * float(along.max() - along.min()) if sim.grasps_by_friction(self.block, self.arm) \
+                else 0.5 * gripper.opening
+            tcp_z = pose[2, 3] + top
+            for side in (1.0, -1.0):
+                for a in np.linspace(inner, inner + _PAD_THICKNESS, 3):
+                    for b in np.linspace(-_PAD_HALF_WIDTH, _PAD_HALF_WIDTH, 3):
+                        for z in np.linspace(tcp_z - gripper.fingertip, tcp_z + _PAD_HALF_WIDTH, 3):
+                            point = pose[:3, 3] + side * a * axis + b * across
+                            point[2] = z
+                            count += self._inside_others(point)
+        return count
+
+    def _inside_others(self, point: np.ndarray, margin: float = 0.002) -> int:
+        sim = self.world.sim
+        for other in sim.object_names():
+            if other == self.block:
+                continue
+            t = sim.object_transform(other)
+            local = t[:3, :3].T @ (point - t[:3, 3])
+            low, high = sim.object_model(other).extent()
+            if np.all(local >= low - margin) and np.all(local <= high + margin):
+                return 1
+        return 0
 
     def _over_block(self, height: float) -> np.ndarray:
-        centre = self.world.sim.object_transform(self.block)[:3, 3]
+        x, y = self.world.grasp_xy(self.block)  # its catalogue grasp frame, else its centroid
         top = self.world.object_top(self.block)
-        return top_down(centre[0], centre[1], top + height, self._grasp_yaw())
+        return top_down(x, y, top + height, self._grasp_yaw())
 
     def _descend(self) -> MoveTo:
         self.world.allow_hand(self.block, self.arm)
-        return self._move(self._over_block(0.004), "grasp " + self.block)
+        return self._move(self._over_block(self.world.grasp_height(self.block, self.arm, 0.004)),
+                          "grasp " + self.block)
 
     def _lifted(self) -> np.ndarray:
         pose = self.world.sim.link_transform(self.world.end_effector(self.arm)).copy()

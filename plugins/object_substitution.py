@@ -24,7 +24,11 @@ The steps, as the paper gives them:
    ``splice`` replacing the invoked task's remaining steps with the matched decomposition's steps, rebound to the
    unknown entities (A's bar drawn with two 1x1 blocks at the cells of H's bar).
 
-**Spares** (:mod:`bt_meta_plugins._spares`, no memory needed) come first: a missing entity that a step still to
+**Grounding spares** (:mod:`bt_meta_plugins._grounding_spares`) come first: a missing part that the plan names
+only through a grounding symbol (the magnetic plan's poses are defined over ``active_part``) gets a ``rebind``
+proposal binding the symbol to an unused object of the part's demonstrated type.
+
+**Spares** (:mod:`bt_meta_plugins._spares`, no memory needed) come next: a missing entity that a step still to
 run uses is replaced one for one (``substitute``) by an object seen on the table that the plan does not use, when
 the precondition of every method that chose the missing entity holds with the spare in its place -- so colour
 counts only where the task's symbols name one. Besides ``unknown_entity`` and ``unexpected_configuration``, a
@@ -66,6 +70,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from bt_meta_plugins._decompositions import Decomposition, Library, bind, why_not
+from bt_meta_plugins._grounding_spares import rebind_proposals
 from bt_meta_plugins._mismatch import Entity, MismatchVector, mismatch_vector
 from bt_meta_plugins._spares import spare_proposals
 
@@ -406,14 +411,15 @@ class ObjectSubstitution:
     def bt_meta_propose_repairs(self, failure: Any, context: Any) -> list[RepairProposal] | None:
         if failure.kind not in _KINDS and failure.kind not in _STEP_KINDS:
             return None
+        rebinds = rebind_proposals(failure, context) if self.spares else []
         vector = mismatch_vector(failure, context)
         if vector is None:
-            return None
+            return rebinds or None
         if failure.kind in _STEP_KINDS and not _names_missing(failure, vector):
             return None  # a motion or grasp failure of a step whose entities are as the plan assumes
         plan = failure.evidence.get("plan") or []
         vector = _without_placed(vector, plan)
-        proposals = spare_proposals(vector, failure, context) if self.spares else []
+        proposals = rebinds + (spare_proposals(vector, failure, context) if self.spares else [])
         memory = memory_for(context, self.memory) if vector.unknown else None
         if memory is not None:
             retrieval = self.retrieve(vector, plan, memory, root_task(context))

@@ -26,6 +26,7 @@ Offers:
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import os
 import sys
@@ -556,6 +557,13 @@ class SimWorld:
             if np.linalg.norm(position[:2] - centre[:2]) < radius and position[2] > centre[2]:
                 top = max(top, self.object_top(other))
         return top
+
+    def rebind_object(self, symbol: str, name: str) -> None:
+        """Ground the task-file object ``symbol`` as the simulator object ``name`` from now on (a spare standing in
+        for a missing part): poses defined over the symbol follow. This world's grounding only; the file is kept."""
+        if name not in self.sim.object_names():
+            raise BtMetaError(f"cannot rebind {symbol!r}: there is no object {name!r} in the world")
+        self.grounding = dataclasses.replace(self.grounding, objects={**self.grounding.objects, symbol: name})
 
     def register_pose(self, symbol: str) -> bool:
         """Make a durable pose symbol (:func:`pose_symbol`) known: its type fact ``pose(symbol)`` joins the symbolic

@@ -20,7 +20,12 @@ On a ``verification`` (or keypoint ``unexpected_configuration``) failure the plu
    the same solver and seed as the MoveTo skill); a chain that only works from where the run stands is still
    proposed, marked ``keep: False`` so the executor does not save it as a refinement;
 5. proposes ``backtrack {"to_step": k, "args": {step: [pose symbol]}}`` with a durable pose symbol the world grounds
-   (``pose:x:y:z:roll:pitch:yaw``, registered with ``world.register_pose``), scored by how well the traces agree;
+   and registers (``world.register_pose``): the held part's pose in the reference's frame
+   (``held:REFERENCE:x:y:z:roll:pitch:yaw``, REFERENCE the task-file symbol), which the world turns into a gripper
+   pose through the grasp at the time of the move -- so a refinement that keeps it stays right when the reference
+   has moved within the refinement's tolerance, or the part was picked a little differently (an absolute gripper
+   pose ``pose:...`` keeps the first run's reference and grasp, and misses the joint); an absolute symbol only for a
+   world that does not ground held poses. Scored by how well the traces agree;
    when no sampled pose at any remaining depth is feasible it answers with a ``collision`` or ``reachability``
    :class:`~bt_meta.bt.failures.Failure` carrying the evidence (the colliding pair, the unreachable target): the
    reasoner reports it and never loops on it.
@@ -197,8 +202,9 @@ class PoseBacktracking:
                   traces: Sequence[Any], replayable: bool) -> list[RepairProposal] | None:
         """The ``backtrack`` proposal for a feasible chain (its pose symbols registered with the world)."""
         symbols = {}
-        for step, pose, _ in chain:
-            symbol = self._symbol(world, pose)
+        relative_to = self._reference_symbol(world, evidence["reference"])
+        for step, pose, where in chain:
+            symbol = self._symbol(world, pose, relative_to, where.get("relative"))
             if symbol is None:
                 return None
             symbols[str(step)] = [symbol]
@@ -264,6 +270,7 @@ class PoseBacktracking:
         turns = [self.turns[0], *(self.turns[int(k) + 1] for k in rng.permutation(len(self.turns) - 1))]
         per_step = {step: good_object_poses(traces, step, active, reference, reference_now=objects[reference],
                                             active_now=objects[active], turns=turns, order=order) for step in steps}
+        reference_frame = _state_pose(objects[reference])
         count = min(self.max_candidates, *(len(c) for c in per_step.values()))
         origins = [_current_q(world), *(q for q in starts if q is not None)]
         fallback = None
@@ -274,10 +281,12 @@ class PoseBacktracking:
             chain = []
             for step in steps:
                 candidate = per_step[step][index]
-                pose = _parse_symbol_pose(gripper_pose_for(candidate.object_pose, grasp))
+                relative = _rounded(np.linalg.inv(reference_frame) @ candidate.object_pose)
+                pose = gripper_pose_for(reference_frame @ relative, grasp)  # as the world grounds the symbol now
                 chain.append((step, pose, {"step": step, "trace": candidate.trace,
                                            "turn_deg": round(math.degrees(candidate.turn), 1),
-                                           "target": [round(v, 4) for v in matrix_to_pose(pose)]}))
+                                           "target": [round(v, 4) for v in matrix_to_pose(pose)],
+                                           "relative": [round(v, 4) for v in matrix_to_pose(relative)]}))
             problem = None
             for number, origin in enumerate(origins):
                 problem = self._check_chain(world, arm, chain, origin, after, active)
@@ -325,15 +334,37 @@ class PoseBacktracking:
                 return None
         return None
 
-    def _symbol(self, world: Any, pose: np.ndarray) -> str | None:
-        from bt_meta.world.simulation.sim_world import pose_symbol
+    def _symbol(self, world: Any, pose: np.ndarray, relative_to: str | None = None,
+                relative: Sequence[float] | None = None) -> str | None:
+        """The held part's pose relative to ``relative_to`` when the world grounds such symbols, else the gripper's
+        absolute ``pose``; registered with the world (``None`` when it cannot ground either)."""
+        from bt_meta.world.simulation.sim_world import held_pose_symbol, pose_symbol
 
-        symbol = pose_symbol(matrix_to_pose(pose))
         register = getattr(world, "register_pose", None)
-        if register is None or not register(symbol):
-            log.info("pose backtracking: the world cannot ground the pose symbol %s", symbol)
+        if register is None:
             return None
-        return symbol
+        symbols = [pose_symbol(matrix_to_pose(pose))]
+        if relative_to is not None and relative is not None:
+            symbols.insert(0, held_pose_symbol(relative_to, relative))
+        for symbol in symbols:
+            if register(symbol):
+                return symbol
+        log.info("pose backtracking: the world cannot ground the pose symbols %s", symbols)
+        return None
+
+    def _reference_symbol(self, world: Any, reference: str) -> str | None:
+        """The task-file symbol of the reference (the root task's second argument; it follows a rebinding), or its
+        world name when the task does not name it."""
+        tasks = getattr(getattr(getattr(self, "_run", None), "problem", None), "tasks", None) or []
+        to_world = getattr(world, "object_name", None)
+        if tasks and len(tasks[0]) >= 3 and to_world is not None:
+            symbol = str(tasks[0][2])
+            try:
+                if str(to_world(symbol)) == reference:
+                    return symbol
+            except Exception:  # a symbol the world does not ground: use the object's name
+                pass
+        return reference if ":" not in reference else None
 
     def _agreement(self, rows: list[StepRelation], steps: list[int]) -> float:
         """How consistent the traces are (0..1) about the steps whose poses they supply: 1 when every trace had
@@ -375,7 +406,7 @@ def _current_q(world: Any) -> np.ndarray | None:
     return None if current is None else current()
 
 
-def _parse_symbol_pose(pose: np.ndarray) -> np.ndarray:
+def _rounded(pose: np.ndarray) -> np.ndarray:
     """``pose`` as the world will ground its symbol (rounded as :func:`pose_symbol` rounds)."""
     from bt_meta.world.simulation.sim_world import parse_pose_symbol, pose_symbol
 

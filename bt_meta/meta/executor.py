@@ -272,7 +272,10 @@ class MetaExecutor:
         report.plan = [[a, *args] for a, args in plan_state.full_plan()]
         report.rebound = dict(plan_state.rebound)
         if report.status == "success" and report.attempts and self.refinements is not None and self.save_refinements:
-            unkept = [a.number for a in report.attempts if (a.proposal.get("evidence") or {}).get("keep") is False]
+            # a repair that only replays through its own replay plan must be the last one (whose plan is saved)
+            unkept = [a.number for a in report.attempts if _survives(a, report.plan) and (
+                (a.proposal.get("evidence") or {}).get("keep") is False
+                or ((a.proposal.get("evidence") or {}).get("replay_plan") and a is not report.attempts[-1]))]
             if unkept:  # a repair that worked from where this run stood, not from the initial state
                 report.refinement_saved = {"saved": False, "reason": f"attempt(s) {unkept}: the proposing plugin says "
                                                                      "the repaired plan does not replay from the start"}
@@ -448,6 +451,21 @@ class MetaExecutor:
         log.info("meta: run %s %s after %d attempt(s) in %.3f s%s", report.problem, report.status,
                  len(report.attempts), report.seconds, f" ({report.stop_reason})" if report.stop_reason else "")
         return report
+
+
+def _survives(attempt: Attempt, plan: list[list[str]]) -> bool:
+    """Whether what ``attempt`` changed is still in the final ``plan``: a backtrack whose new arguments a later
+    attempt rewrote again (a deeper backtrack) left nothing of itself there. Other kinds are assumed to survive."""
+    proposal = attempt.proposal or {}
+    changes = proposal.get("changes") or {}
+    if proposal.get("action") not in ("backtrack", "rewrite_args"):
+        return True
+    args = changes.get("args") or {}
+    values = [a for group in (args.values() if isinstance(args, dict) else [args]) for a in group]
+    if not values:
+        return True
+    used = {str(a) for step in plan for a in step[1:]}
+    return any(str(v) in used for v in values)
 
 
 def _rebind(world: Any, before: dict[str, str], after: dict[str, str]) -> None:

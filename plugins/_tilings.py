@@ -9,7 +9,9 @@ their *perceived* shapes, spares and unknown blocks -- by a depth-first search o
 x): each first uncovered cell gets a block that starts there and covers only needed, uncovered cells. A tile is
 bound to a block of its shape, preferring the block the plan put on one of its cells, then the plan's other blocks,
 then the others by name; colour counts only where the problem gives the plan's blocks one colour for all (the
-methods' symbols then ask for it), else any colour does. The result is a ``splice`` of the remaining steps, in the
+methods' symbols then ask for it) and only for blocks the plan does not already use (the plan's own blocks were
+bound by its methods; perception does not rebind them: a grid-map compares occupancy, not colour), else any
+colour does. The result is a ``splice`` of the remaining steps, in the
 order the plan would have reached the tiles' cells.
 
 This finds what A's letter needs when one 1x2 stands where two 1x1 blocks that are not side by side were planned:
@@ -176,7 +178,7 @@ def tiling_proposals(vector: Any, failure: Any, context: Any) -> list[RepairProp
     if len(planned_colours) == 1 and None not in planned_colours:
         colour = planned_colours.pop()  # the methods' symbols ask the plan's blocks for one colour
     on_hand = sorted((n for n in seen if n not in placed and _width(seen[n].get("shape")) is not None
-                      and (colour is None or seen[n].get("colour") == colour)),
+                      and (colour is None or n in plan_blocks or seen[n].get("colour") == colour)),
                      key=lambda n: (n not in plan_blocks, plan_blocks.index(n) if n in plan_blocks else 0, n))
     cells = [c for p in placements for c in p[3]]
     if len(set(cells)) != len(cells):

@@ -72,8 +72,14 @@ def test_one_1x2_where_two_1x1_that_are_not_side_by_side_were_planned_is_tiled_i
 
 
 def test_colour_counts_where_the_plan_s_blocks_share_one(letters):
-    """The same scene with the 1x2 red: every block of A's plan is blue (its methods ask for blue), so no tiling."""
-    objects = {n: v for n, v in NOMINAL_A.items() if n != "b0"}
-    objects["b3"] = ("1x2", "red")
+    """Every block of A's plan is blue (its methods ask for blue): a red 1x2 spare does not stand in for the
+    missing b0 and b3 (a 1x1 as planned), so no tiling; a blue one does."""
+    objects = {n: v for n, v in NOMINAL_A.items() if n not in ("b0", "b1")}
+    objects["spare"] = ("1x2", "red")
     report, _ = _run(letters, letters.problem("A"), objects)
     assert all((a.proposal.get("evidence") or {}).get("matcher") != "tiling" for a in report.attempts)
+    objects["spare"] = ("1x2", "blue")  # 3 1x1 (b2, b3, b4) and 2 1x2 (b5, spare): A's 7 cells
+    report, _ = _run(letters, letters.problem("A"), objects)
+    tilings = [a for a in report.attempts if (a.proposal.get("evidence") or {}).get("matcher") == "tiling"]
+    assert report.ok and len(tilings) == 1, report.stop_reason
+    assert "spare" in {a[1] for a in tilings[0].proposal["changes"]["actions"]}

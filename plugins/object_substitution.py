@@ -52,7 +52,8 @@ what was seen, and it keeps what was anchored with a learned refinement (``docs/
 Settings (:class:`ObjectSubstitution` arguments, :func:`configure` for the module-level plugin, or the
 environment variable ``BT_META_SUBSTITUTION_MATCHER`` = ``gridmap`` | ``symbolic`` for the module's default):
 ``matcher``, ``k`` (matches kept), ``rotations``, ``level`` (``task`` | ``step``), ``max_proposals``, ``memory``,
-``spares`` (spares and grounding spares), ``geometry`` (tilings).
+``spares`` (spares and grounding spares), ``geometry`` (tilings; default: with the ``gridmap`` matcher only --
+the ``symbolic`` matcher is the symbol-only baseline).
 Nothing here is random: ties are broken by rank, then by entity name.
 
 Offers:
@@ -215,7 +216,7 @@ class ObjectSubstitution:
 
     def __init__(self, memory: Any = None, *, matcher: str | None = None, k: int = 5, rotations: bool = False,
                  level: str = "task", max_proposals: int = 3, anchor: bool = True, candidates: int = 200,
-                 spares: bool = True, geometry: bool = True) -> None:
+                 spares: bool = True, geometry: bool | None = None) -> None:
         where = "<plugin settings>"
         if matcher is None:
             matcher = os.environ.get(ENV_MATCHER) or "gridmap"
@@ -237,7 +238,9 @@ class ObjectSubstitution:
         self.anchor = anchor
         self.candidates = candidates
         self.spares = spares
-        self.geometry = geometry
+        # the tilings read the placements' cells -- sub-symbolic, as the grid-maps are: the symbol-only baseline
+        # (the symbolic matcher, the paper's comparison) goes without them unless asked
+        self.geometry = (matcher == "gridmap") if geometry is None else geometry
 
     # -- steps 2 to 4 -----------------------------------------------------------------------------------------------
 

@@ -24,13 +24,21 @@ The steps, as the paper gives them:
    ``splice`` replacing the invoked task's remaining steps with the matched decomposition's steps, rebound to the
    unknown entities (A's bar drawn with two 1x1 blocks at the cells of H's bar).
 
-**Spares** (:mod:`bt_meta_plugins._spares`, no memory needed) come first: a missing entity that a step still to
+**Grounding spares** (:mod:`bt_meta_plugins._grounding_spares`) come first: a missing part that the plan names
+only through a grounding symbol (the magnetic plan's poses are defined over ``active_part``) gets a ``rebind``
+proposal binding the symbol to an unused object of the part's demonstrated type.
+
+**Spares** (:mod:`bt_meta_plugins._spares`, no memory needed) come next: a missing entity that a step still to
 run uses is replaced one for one (``substitute``) by an object seen on the table that the plan does not use, when
 the precondition of every method that chose the missing entity holds with the spare in its place -- so colour
 counts only where the task's symbols name one. Besides ``unknown_entity`` and ``unexpected_configuration``, a
 ``collision``, ``physical``, ``precondition`` or ``reachability`` failure is answered when the failed step itself
 names a missing entity (a 1x2 block placed where a 1x1 was planned collides: A's bar then stands in for H's two
 1x1 placements).
+
+**Tilings** (:mod:`bt_meta_plugins._tilings`, no memory needed) come last: the cells the remaining placements
+need, covered anew with the blocks on the table (many-for-one and one-for-many shape substitutions the
+demonstrations never decomposed: one 1x2 where two 1x1 blocks that are not side by side were planned).
 
 Before proposing, the unknown entities are **anchored** in the world's symbolic state (``world.apply_symbolic``):
 their perceived ``block``/``shape``/``colour`` facts replace what the problem assumed, and an unknown entity the
@@ -43,7 +51,9 @@ what was seen, and it keeps what was anchored with a learned refinement (``docs/
 
 Settings (:class:`ObjectSubstitution` arguments, :func:`configure` for the module-level plugin, or the
 environment variable ``BT_META_SUBSTITUTION_MATCHER`` = ``gridmap`` | ``symbolic`` for the module's default):
-``matcher``, ``k`` (matches kept), ``rotations``, ``level`` (``task`` | ``step``), ``max_proposals``, ``memory``.
+``matcher``, ``k`` (matches kept), ``rotations``, ``level`` (``task`` | ``step``), ``max_proposals``, ``memory``,
+``spares`` (spares and grounding spares), ``geometry`` (tilings; default: with the ``gridmap`` matcher only --
+the ``symbolic`` matcher is the symbol-only baseline).
 Nothing here is random: ties are broken by rank, then by entity name.
 
 Offers:
@@ -66,8 +76,10 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from bt_meta_plugins._decompositions import Decomposition, Library, bind, why_not
+from bt_meta_plugins._grounding_spares import rebind_proposals
 from bt_meta_plugins._mismatch import Entity, MismatchVector, mismatch_vector
 from bt_meta_plugins._spares import spare_proposals
+from bt_meta_plugins._tilings import covers_the_same_cells, tiling_proposals
 
 from bt_meta.bt.failures import FailureKind, RepairProposal
 from bt_meta.errors import ConfigError
@@ -204,7 +216,7 @@ class ObjectSubstitution:
 
     def __init__(self, memory: Any = None, *, matcher: str | None = None, k: int = 5, rotations: bool = False,
                  level: str = "task", max_proposals: int = 3, anchor: bool = True, candidates: int = 200,
-                 spares: bool = True) -> None:
+                 spares: bool = True, geometry: bool | None = None) -> None:
         where = "<plugin settings>"
         if matcher is None:
             matcher = os.environ.get(ENV_MATCHER) or "gridmap"
@@ -226,6 +238,9 @@ class ObjectSubstitution:
         self.anchor = anchor
         self.candidates = candidates
         self.spares = spares
+        # the tilings read the placements' cells -- sub-symbolic, as the grid-maps are: the symbol-only baseline
+        # (the symbolic matcher, the paper's comparison) goes without them unless asked
+        self.geometry = (matcher == "gridmap") if geometry is None else geometry
 
     # -- steps 2 to 4 -----------------------------------------------------------------------------------------------
 
@@ -360,6 +375,20 @@ class ObjectSubstitution:
                 changes={"start": start, "end": end, "actions": calls}, evidence=evidence))
         return out
 
+    def _same_cells(self, proposals: list[RepairProposal], plan: Sequence[Mapping[str, Any]], context: Any
+                    ) -> list[RepairProposal]:
+        """``proposals`` without the splices whose placements would cover other cells than the steps they replace
+        (a remembered decomposition of another part of the letter: the letter would have a hole and a block too
+        many elsewhere)."""
+        problem = getattr(getattr(context, "run", None), "problem", None)
+        facts = list(getattr(problem, "init", None) or getattr(problem, "state", None) or ())
+        assumed = {str(f[1]): str(f[2]) for f in facts if len(f) == 3 and f[0] == "shape"}
+        observe = getattr(getattr(context, "world", None), "observe", None)
+        seen = ((observe() or {}).get("objects") or {}) if observe is not None else {}
+        perceived = {str(k): str(v["shape"]) for k, v in seen.items() if isinstance(v, Mapping) and v.get("shape")}
+        return [p for p in proposals if p.action != SPLICE
+                or covers_the_same_cells(p, plan, assumed, perceived) is not False]
+
     def _score(self, match: Match) -> float:
         """Experience-based: above the retry baseline (0.3), higher for nearer matches."""
         scale = 36.0 if self.matcher == "gridmap" else 12.0
@@ -406,18 +435,27 @@ class ObjectSubstitution:
     def bt_meta_propose_repairs(self, failure: Any, context: Any) -> list[RepairProposal] | None:
         if failure.kind not in _KINDS and failure.kind not in _STEP_KINDS:
             return None
+        rebinds = rebind_proposals(failure, context) if self.spares else []
         vector = mismatch_vector(failure, context)
         if vector is None:
-            return None
+            return rebinds or None
         if failure.kind in _STEP_KINDS and not _names_missing(failure, vector):
             return None  # a motion or grasp failure of a step whose entities are as the plan assumes
         plan = failure.evidence.get("plan") or []
         vector = _without_placed(vector, plan)
-        proposals = spare_proposals(vector, failure, context) if self.spares else []
+        spares = spare_proposals(vector, failure, context) if self.spares else []
+        renamed = {k for p in spares for k in (p.changes.get("mapping") or {})}
+        # a symbol the plan's arguments name and a renaming spare covers is renamed (its methods' conditions are
+        # checked); rebinding is for the parts the plan names only through the grounding
+        proposals = [p for p in rebinds if not set(p.changes["symbols"]) & renamed] + spares
         memory = memory_for(context, self.memory) if vector.unknown else None
         if memory is not None:
             retrieval = self.retrieve(vector, plan, memory, root_task(context))
             proposals += self.proposals(retrieval, plan)
+        if self.geometry:
+            proposals = self._same_cells(proposals, plan, context)
+            known = [p.changes.get("actions") for p in proposals if p.action == SPLICE]
+            proposals += [p for p in tiling_proposals(vector, failure, context) if p.changes["actions"] not in known]
         proposals.sort(key=lambda p: -p.score)
         if proposals and self.anchor:
             self.anchor_entities(vector, failure, context, proposals)

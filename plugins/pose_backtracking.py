@@ -20,7 +20,12 @@ On a ``verification`` (or keypoint ``unexpected_configuration``) failure the plu
    the same solver and seed as the MoveTo skill); a chain that only works from where the run stands is still
    proposed, marked ``keep: False`` so the executor does not save it as a refinement;
 5. proposes ``backtrack {"to_step": k, "args": {step: [pose symbol]}}`` with a durable pose symbol the world grounds
-   (``pose:x:y:z:roll:pitch:yaw``, registered with ``world.register_pose``), scored by how well the traces agree;
+   and registers (``world.register_pose``): the held part's pose in the reference's frame
+   (``held:REFERENCE:x:y:z:roll:pitch:yaw``, REFERENCE the task-file symbol), which the world turns into a gripper
+   pose through the grasp at the time of the move -- so a refinement that keeps it stays right when the reference
+   has moved within the refinement's tolerance, or the part was picked a little differently (an absolute gripper
+   pose ``pose:...`` keeps the first run's reference and grasp, and misses the joint); an absolute symbol only for a
+   world that does not ground held poses. Scored by how well the traces agree;
    when no sampled pose at any remaining depth is feasible it answers with a ``collision`` or ``reachability``
    :class:`~bt_meta.bt.failures.Failure` carrying the evidence (the colliding pair, the unreachable target): the
    reasoner reports it and never loops on it.
@@ -105,6 +110,8 @@ class PoseBacktracking:
         self._current: dict[int, dict[str, Any]] = {}
         self._q: dict[int, np.ndarray] = {}
         """The robot's configuration after each step of the run (where a replay of a repaired plan passes)."""
+        self._grasps: dict[int, dict[str, np.ndarray]] = {}
+        """After each step, each held object's pose in its gripper's frame (the grasp a replay holds it with)."""
 
     # -- the current trace ---------------------------------------------------------------------------------------
 
@@ -117,9 +124,14 @@ class PoseBacktracking:
             return None
         run = getattr(context, "run", None)
         if run is not self._run:
-            self._run, self._current, self._q = run, {}, {}
-        objects = observe().get("objects") or {}
+            self._run, self._current, self._q, self._grasps = run, {}, {}, {}
+        seen = observe()
+        objects = seen.get("objects") or {}
         self._current[int(step)] = {name: dict(state) for name, state in objects.items()}
+        grippers = seen.get("gripper") or {}
+        self._grasps[int(step)] = {
+            name: np.linalg.inv(_matrix(grippers[arm])) @ _state_pose(objects[name])
+            for arm, name in (seen.get("held") or {}).items() if name in objects and arm in grippers}
         current_q = getattr(world, "current_q", None)
         if current_q is not None:
             self._q[int(step)] = np.array(current_q(), dtype=float)
@@ -180,8 +192,11 @@ class PoseBacktracking:
             steps = [s for s in window if s >= to_step]
             after = self._next_move(world, held_by, plan, steps[-1])
             replay = self._q.get(to_step - 1) if self._run is context.run else None
+            # a replay holds the part as this run held it before the first rewritten move, not as it holds it now
+            # (the part may have been picked again since, from somewhere else)
+            replay_grasp = (self._grasps.get(to_step - 1) or {}).get(active, grasp) if replay is not None else grasp
             chain, replayable = self._feasible_chain(world, held_by, steps, traces, active, reference, objects, grasp,
-                                                     rng, limits, after, deadline, starts=[replay])
+                                                     rng, limits, after, deadline, starts=[(replay, replay_grasp)])
             if chain is not None and not replayable:
                 fallback = fallback or (steps, chain)
                 continue
@@ -189,23 +204,34 @@ class PoseBacktracking:
                 continue
             return self._proposal(world, steps, chain, rows, limits, evidence, active, traces, True)
         if fallback is not None:
-            return self._proposal(world, *fallback, rows, limits, evidence, active, traces, False)
+            replay_plan = self._replay_through(plan, fallback[0][0], failed, failure.kind)
+            return self._proposal(world, *fallback, rows, limits, evidence, active, traces, False, replay_plan)
         return [self._limit(limits, window, evidence)]
 
     def _proposal(self, world: Any, steps: list[int], chain: list[tuple[int, np.ndarray, dict[str, Any]]],
                   rows: list[StepRelation], limits: list[dict[str, Any]], evidence: dict[str, Any], active: str,
-                  traces: Sequence[Any], replayable: bool) -> list[RepairProposal] | None:
-        """The ``backtrack`` proposal for a feasible chain (its pose symbols registered with the world)."""
+                  traces: Sequence[Any], replayable: bool, replay_plan: list[list[str]] | None = None
+                  ) -> list[RepairProposal] | None:
+        """The ``backtrack`` proposal for a feasible chain (its pose symbols registered with the world);
+        ``replay_plan`` (with the chain's steps still to be filled in) when the plan replays only through the moves
+        this run made before the repair."""
         symbols = {}
-        for step, pose, _ in chain:
-            symbol = self._symbol(world, pose)
+        relative_to = self._reference_symbol(world, evidence["reference"])
+        for step, pose, where in chain:
+            symbol = self._symbol(world, pose, relative_to, where.get("relative"))
             if symbol is None:
                 return None
             symbols[str(step)] = [symbol]
         agreement = self._agreement(rows, steps)
         evidence.update(to_step=steps[0], rewritten=steps, candidates=[where for _, _, where in chain],
                         infeasible_before=len(limits), agreement=round(agreement, 4), replayable=replayable)
-        if not replayable:
+        if not replayable and replay_plan is not None:
+            # The chain works from where this run stands; a replay gets there through the same moves (the part
+            # held all along): keep that plan -- the run's prefix, then the repaired steps -- not the tree's.
+            evidence["replay_plan"] = [[a, *(symbols.get(str(k), args) if k is not None else args)]
+                                       for k, a, args in replay_plan]
+            evidence["replay"] = "through the moves this run made before the repair (the part held all along)"
+        elif not replayable:
             evidence["keep"] = False  # works from where this run stands, not in a replay from the start
             evidence["not_kept_because"] = next((item for item in limits if item.get("from")), {})
         return [RepairProposal(
@@ -215,6 +241,28 @@ class PoseBacktracking:
             changes={"to_step": steps[0], "args": symbols}, evidence=evidence)]
 
     # -- helpers -------------------------------------------------------------------------------------------------
+
+    def _replay_through(self, plan: list[dict[str, Any]], to_step: int, failed: int, kind: FailureKind
+                        ) -> list[tuple[int | None, str, list[str]]] | None:
+        """A plan that replays from the start and reaches the repaired steps as this run did: the steps before
+        ``to_step``, the executed steps ``to_step..failed`` as they ran, then the plan from ``to_step`` again
+        (``(step, action, args)``; ``step`` is ``None`` for the moves kept as they ran, so the repair's new
+        arguments go into the repeated ones only). ``None`` unless those executed steps are pose-setting moves
+        only (no grasp, no release: nothing of a failed attempt is replayed) that finished (a monitor or a
+        verification objected after the move: ``kind``)."""
+        if kind not in KINDS or failed < to_step:
+            return None
+        by_step = {int(r["step"]): r for r in plan}
+        between = [by_step.get(k) for k in range(to_step, failed + 1)]
+        if any(r is None or r["action"] not in self.pose_actions
+               or any(str(t).lower().startswith("verify") for t in r.get("tasks") or []) for r in between):
+            return None
+        prefix = [(int(r["step"]), str(r["action"]), [str(a) for a in r["args"]]) for r in plan
+                  if int(r["step"]) < to_step]
+        ran = [(None, str(r["action"]), [str(a) for a in r["args"]]) for r in between if r is not None]
+        rest = [(int(r["step"]), str(r["action"]), [str(a) for a in r["args"]]) for r in plan
+                if int(r["step"]) >= to_step]
+        return [*prefix, *ran, *rest]
 
     def _pair(self, context: Any, world: Any) -> tuple[str | None, str | None]:
         tasks = getattr(getattr(context.run, "problem", None), "tasks", None) or []
@@ -252,11 +300,14 @@ class PoseBacktracking:
     def _feasible_chain(self, world: Any, arm: str, steps: list[int], traces: Sequence[Any], active: str,
                         reference: str, objects: Mapping[str, Any], grasp: np.ndarray, rng: np.random.Generator,
                         limits: list[dict[str, Any]], after: tuple[int, np.ndarray] | None = None,
-                        deadline: float = math.inf, starts: Sequence[np.ndarray | None] = ()
+                        deadline: float = math.inf,
+                        starts: Sequence[tuple[np.ndarray | None, np.ndarray]] = ()
                         ) -> tuple[list[tuple[int, np.ndarray, dict[str, Any]]] | None, bool]:
         """The first sampled candidate (trace, turn) whose gripper poses for ``steps`` are all reachable without
-        collision in a row from the current configuration and from each of ``starts`` (where a later run that
-        replays the repaired plan begins the first of them), and from whose last pose the plan's next move
+        collision in a row from the current configuration and from each of ``starts`` (configuration and grasp
+        where a later run that replays the repaired plan begins the first of them: the part's poses relative to
+        the reference are the candidate's, the gripper's follow from that grasp), and from whose last pose the
+        plan's next move
         (``after``: step and gripper pose, the retreat once the part is let go) is free too: ``(chain, True)``.
         Else the first that works from the current configuration only: ``(chain, False)``; else ``(None, False)``.
         Failures are appended to ``limits``."""
@@ -264,8 +315,9 @@ class PoseBacktracking:
         turns = [self.turns[0], *(self.turns[int(k) + 1] for k in rng.permutation(len(self.turns) - 1))]
         per_step = {step: good_object_poses(traces, step, active, reference, reference_now=objects[reference],
                                             active_now=objects[active], turns=turns, order=order) for step in steps}
+        reference_frame = _state_pose(objects[reference])
         count = min(self.max_candidates, *(len(c) for c in per_step.values()))
-        origins = [_current_q(world), *(q for q in starts if q is not None)]
+        origins = [(_current_q(world), grasp), *((q, g) for q, g in starts if q is not None)]
         fallback = None
         for index in range(count):
             if time.perf_counter() > deadline:
@@ -274,13 +326,18 @@ class PoseBacktracking:
             chain = []
             for step in steps:
                 candidate = per_step[step][index]
-                pose = _parse_symbol_pose(gripper_pose_for(candidate.object_pose, grasp))
+                relative = _rounded(np.linalg.inv(reference_frame) @ candidate.object_pose)
+                pose = gripper_pose_for(reference_frame @ relative, grasp)  # as the world grounds the symbol now
                 chain.append((step, pose, {"step": step, "trace": candidate.trace,
                                            "turn_deg": round(math.degrees(candidate.turn), 1),
-                                           "target": [round(v, 4) for v in matrix_to_pose(pose)]}))
+                                           "target": [round(v, 4) for v in matrix_to_pose(pose)],
+                                           "relative": [round(v, 4) for v in matrix_to_pose(relative)]}))
             problem = None
-            for number, origin in enumerate(origins):
-                problem = self._check_chain(world, arm, chain, origin, after, active)
+            for number, (origin, held_as) in enumerate(origins):
+                moves = chain if held_as is grasp else [
+                    (step, gripper_pose_for(reference_frame @ pose_to_matrix(where["relative"]), held_as), where)
+                    for step, _, where in chain]
+                problem = self._check_chain(world, arm, moves, origin, after, active)
                 if problem is not None:
                     if number:
                         problem["from"] = "the configuration a replay of the repaired plan starts from"
@@ -325,15 +382,37 @@ class PoseBacktracking:
                 return None
         return None
 
-    def _symbol(self, world: Any, pose: np.ndarray) -> str | None:
-        from bt_meta.world.simulation.sim_world import pose_symbol
+    def _symbol(self, world: Any, pose: np.ndarray, relative_to: str | None = None,
+                relative: Sequence[float] | None = None) -> str | None:
+        """The held part's pose relative to ``relative_to`` when the world grounds such symbols, else the gripper's
+        absolute ``pose``; registered with the world (``None`` when it cannot ground either)."""
+        from bt_meta.world.simulation.sim_world import held_pose_symbol, pose_symbol
 
-        symbol = pose_symbol(matrix_to_pose(pose))
         register = getattr(world, "register_pose", None)
-        if register is None or not register(symbol):
-            log.info("pose backtracking: the world cannot ground the pose symbol %s", symbol)
+        if register is None:
             return None
-        return symbol
+        symbols = [pose_symbol(matrix_to_pose(pose))]
+        if relative_to is not None and relative is not None:
+            symbols.insert(0, held_pose_symbol(relative_to, relative))
+        for symbol in symbols:
+            if register(symbol):
+                return symbol
+        log.info("pose backtracking: the world cannot ground the pose symbols %s", symbols)
+        return None
+
+    def _reference_symbol(self, world: Any, reference: str) -> str | None:
+        """The task-file symbol of the reference (the root task's second argument; it follows a rebinding), or its
+        world name when the task does not name it."""
+        tasks = getattr(getattr(getattr(self, "_run", None), "problem", None), "tasks", None) or []
+        to_world = getattr(world, "object_name", None)
+        if tasks and len(tasks[0]) >= 3 and to_world is not None:
+            symbol = str(tasks[0][2])
+            try:
+                if str(to_world(symbol)) == reference:
+                    return symbol
+            except Exception:  # a symbol the world does not ground: use the object's name
+                pass
+        return reference if ":" not in reference else None
 
     def _agreement(self, rows: list[StepRelation], steps: list[int]) -> float:
         """How consistent the traces are (0..1) about the steps whose poses they supply: 1 when every trace had
@@ -375,7 +454,7 @@ def _current_q(world: Any) -> np.ndarray | None:
     return None if current is None else current()
 
 
-def _parse_symbol_pose(pose: np.ndarray) -> np.ndarray:
+def _rounded(pose: np.ndarray) -> np.ndarray:
     """``pose`` as the world will ground its symbol (rounded as :func:`pose_symbol` rounds)."""
     from bt_meta.world.simulation.sim_world import parse_pose_symbol, pose_symbol
 

@@ -108,6 +108,12 @@ class VariantOutcome:
     def attempts(self) -> list[dict[str, Any]]:
         return list(self.report.get("attempts") or [])
 
+    @property
+    def succeeded(self) -> bool:
+        """The run reported success and the simulator's ground truth does not contradict it (a run the truth
+        says failed is a false success, never counted as a success)."""
+        return self.status == "success" and self.achieved is not False
+
     def to_dict(self) -> dict[str, Any]:
         v = self.variant
         report = self.report
@@ -186,8 +192,8 @@ class DemoResult:
                 "first_pass_attempts": sum(len(r.attempts) for r in first),
                 "first_pass_achieved": sum(bool(r.achieved) for r in first),
                 "false_successes": sum(r.status == "success" and r.achieved is False for r in self.runs),
-                "second_pass_success": sum(r.status == "success" for r in second),
-                "second_pass_zero_attempts": sum(r.status == "success" and not r.attempts for r in second),
+                "second_pass_success": sum(r.succeeded for r in second),
+                "second_pass_zero_attempts": sum(r.succeeded and not r.attempts for r in second),
                 "second_pass_using_refinements": sum(bool(r.report.get("refinements_used")) for r in second),
             },
             "refinements": self.refinements,

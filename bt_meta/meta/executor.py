@@ -15,7 +15,10 @@ The loop (``docs/meta-reasoning.md``):
    repairs wrote into the world's symbolic state from perception and the goal as the repairs rewrote it;
 6. a learned refinement whose precondition holds at the start (its objects where they were, its entities seen as
    they were) has its perceived facts added to the world's and the problem's state before planning, and a run
-   that uses it is verified against its rewritten goal.
+   that uses it is verified against its rewritten goal;
+7. a ``rebind`` repair (a grounding symbol grounded as a spare, :data:`~bt_meta.meta.proposals.REBIND`) is passed
+   to the world (``world.rebind_object``) before the plan runs again, and kept with the refinement: a refinement
+   whose precondition holds rebinds the same symbols before planning.
 
 Offers:
 
@@ -96,6 +99,8 @@ class RunReport:
     refinements_used: list[str] = field(default_factory=list)
     refinement_saved: dict[str, Any] | None = None
     message: str = ""
+    rebound: dict[str, str] = field(default_factory=dict)
+    """Grounding symbols the run grounded as other world objects (repairs, or a refinement that kept them)."""
 
     @property
     def repairs(self) -> list[dict[str, Any]]:
@@ -113,7 +118,7 @@ class RunReport:
             "segments": self.segments, "attempts": [a.to_dict() for a in self.attempts], "repairs": self.repairs,
             "failures": self.failures, "reported": self.reported, "initial_plan": self.initial_plan,
             "plan": self.plan, "executed": self.executed, "refinements_used": self.refinements_used,
-            "refinement_saved": self.refinement_saved,
+            "refinement_saved": self.refinement_saved, "rebound": self.rebound,
         }
 
 
@@ -181,7 +186,8 @@ class MetaExecutor:
         # Perceived entity facts of the refinements that apply here: known to the world and the planner (below).
         anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]] = (set(), set())
         assumed = planned.state  # what the problem assumed, before any perceived facts
-        planned = self._perceive(domain, [stored[n] for n in added if n in stored], planned, run, anchored)
+        planned = self._perceive(domain, [stored[n] for n in added if n in stored], planned, run, anchored,
+                                 report.rebound)
         start_state = planned.state
         start_objects = _objects(self.world)
         run.start_objects = start_objects  # what repair plugins compare the start with (a part's first orientation)
@@ -194,7 +200,7 @@ class MetaExecutor:
             report.status, report.message = "no_plan", f"{result.status}: {result.message}"
             report.stop_reason = "no plan for the problem"
             return self._finish(report, run, started)
-        plan_state = PlanState(result.tree)
+        plan_state = PlanState(result.tree, rebound=dict(report.rebound))
         report.refinements_used = [n.method for n in result.tree.walk() if n.method in added]
         report.initial_plan = [[a, *args] for a, args in plan_state.full_plan()]
         refined_goal = next((g for m in report.refinements_used if m in stored
@@ -251,6 +257,7 @@ class MetaExecutor:
                 run.emit("repair", outcome="stopped", reason=report.stop_reason, diagnosis=diagnosis.to_dict(),
                          skipped=skipped)
                 break
+            _rebind(self.world, plan_state.rebound, applied.rebound)
             plan_state = applied
             keep_goal = bool((report.attempts[-1].proposal.get("evidence") or {}).get("keep_goal"))
             if base_goal and not keep_goal:  # the goal as the repair rewrote it (spliced placements stand for the
@@ -263,8 +270,12 @@ class MetaExecutor:
                                     self.plugins.external_predicate)
                 run.problem = dataclasses.replace(run.problem, goal=goal)
         report.plan = [[a, *args] for a, args in plan_state.full_plan()]
+        report.rebound = dict(plan_state.rebound)
         if report.status == "success" and report.attempts and self.refinements is not None and self.save_refinements:
-            unkept = [a.number for a in report.attempts if (a.proposal.get("evidence") or {}).get("keep") is False]
+            # a repair that only replays through its own replay plan must be the last one (whose plan is saved)
+            unkept = [a.number for a in report.attempts if _survives(a, report.plan) and (
+                (a.proposal.get("evidence") or {}).get("keep") is False
+                or ((a.proposal.get("evidence") or {}).get("replay_plan") and a is not report.attempts[-1]))]
             if unkept:  # a repair that worked from where this run stood, not from the initial state
                 report.refinement_saved = {"saved": False, "reason": f"attempt(s) {unkept}: the proposing plugin says "
                                                                      "the repaired plan does not replay from the start"}
@@ -272,11 +283,13 @@ class MetaExecutor:
                 # kept: how what was perceived differs from what the problem assumed at the start
                 facts = ({f for f in anchored[0] if f not in assumed}, {f for f in anchored[1] if f in assumed})
                 report.refinement_saved = self._save_refinement(domain, _replayed(report), start_objects, facts,
-                                                                list(getattr(run.problem, "goal", None) or []))
+                                                                list(getattr(run.problem, "goal", None) or []),
+                                                                report.rebound)
         return self._finish(report, run, started)
 
     def _perceive(self, domain: Any, refinements: list[Any], problem: Any, run: RunContext,
-                  anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]]) -> Any:
+                  anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]],
+                  rebound: dict[str, str] | None = None) -> Any:
         """``problem`` (and the world's symbolic state) with the perceived entity facts of every refinement whose
         precondition holds now -- its objects where they were, its entities seen as they were -- so the planner
         checks the refinement's steps against what is seen (two red 1x1 blocks, not the blue 1x2 the problem
@@ -287,7 +300,8 @@ class MetaExecutor:
         for refinement in refinements:
             add, delete = refinement.fact_atoms()
             method = methods.get(refinement.method)
-            if not (add or delete) or method is None:
+            symbols = refinement.rebind_symbols()
+            if not (add or delete or symbols) or method is None:
                 continue
             try:
                 holds = method.precondition.holds(problem.state, {}, self.plugins.external_predicate)
@@ -295,6 +309,12 @@ class MetaExecutor:
                 log.info("meta: refinement %s: precondition not checkable: %s", refinement.method, error)
                 continue
             if not holds:
+                continue
+            if symbols and rebound is not None and not rebound:  # the first that holds (they are tried in order)
+                log.info("meta: refinement %s applies; it rebinds %s", refinement.method, symbols)
+                _rebind(self.world, {}, symbols)
+                rebound.update(symbols)
+            if not (add or delete):
                 continue
             log.info("meta: refinement %s applies; its perceived facts join the state: +%s -%s", refinement.method,
                      ", ".join(atom_text(a) for a in add), ", ".join(atom_text(a) for a in delete))
@@ -411,13 +431,14 @@ class MetaExecutor:
 
     def _save_refinement(self, domain: Any, report: RunReport, start_objects: dict[str, Any],
                          anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]],
-                         goal: list[Any]) -> dict[str, Any] | None:
+                         goal: list[Any], rebound: dict[str, str] | None = None) -> dict[str, Any] | None:
         from bt_meta.meta.refinements import RefinementError
 
         try:
             saved = self.refinements.save_repair(self.base_domain, self.problem, report, start_objects,
                                                  variant=self.variant, names=_world_names(self.world, self.problem),
-                                                 facts=(sorted(anchored[0]), sorted(anchored[1])), goal=goal)
+                                                 facts=(sorted(anchored[0]), sorted(anchored[1])), goal=goal,
+                                                 rebind=rebound or None)
         except RefinementError as error:
             log.info("meta: repaired plan not saved as a refinement: %s", error)
             return {"saved": False, "reason": str(error)}
@@ -430,6 +451,29 @@ class MetaExecutor:
         log.info("meta: run %s %s after %d attempt(s) in %.3f s%s", report.problem, report.status,
                  len(report.attempts), report.seconds, f" ({report.stop_reason})" if report.stop_reason else "")
         return report
+
+
+def _survives(attempt: Attempt, plan: list[list[str]]) -> bool:
+    """Whether what ``attempt`` changed is still in the final ``plan``: a backtrack whose new arguments a later
+    attempt rewrote again (a deeper backtrack) left nothing of itself there. Other kinds are assumed to survive."""
+    proposal = attempt.proposal or {}
+    changes = proposal.get("changes") or {}
+    if proposal.get("action") not in ("backtrack", "rewrite_args"):
+        return True
+    args = changes.get("args") or {}
+    values = [a for group in (args.values() if isinstance(args, dict) else [args]) for a in group]
+    if not values:
+        return True
+    used = {str(a) for step in plan for a in step[1:]}
+    return any(str(v) in used for v in values)
+
+
+def _rebind(world: Any, before: dict[str, str], after: dict[str, str]) -> None:
+    """Tell the world the grounding symbols ``after`` binds differently from ``before`` (``rebind_object``)."""
+    rebind = getattr(world, "rebind_object", None)
+    for symbol, name in after.items():
+        if before.get(symbol) != name and rebind is not None:
+            rebind(symbol, name)
 
 
 def _replayed(report: RunReport) -> RunReport:

@@ -25,7 +25,15 @@ kind               changes                                                      
                                                                                  keeping the executed prefix
 ``replan_scratch`` ``{}``                                                        plan the problem's task network
                                                                                  afresh from the current state
+``rebind``         ``{"symbols": {symbol: object}, "from_step": k}`` (default:   ground task-file symbols as other
+                   the failed step)                                              world objects from now on (a
+                                                                                 spare for a missing part that the
+                                                                                 plan names only through poses);
+                                                                                 resume at k
 ================== ============================================================ ================================
+
+A ``rebind`` changes no step: the plan state records it (:attr:`PlanState.rebound`) and the executor tells the world
+(``world.rebind_object(symbol, object)``) before it runs the plan again.
 
 Offers:
 
@@ -57,6 +65,7 @@ from bt_meta.htn.tree import DecompositionNode, DecompositionTree
 __all__ = [
     "BACKTRACK",
     "PROPOSAL_KINDS",
+    "REBIND",
     "REPLAN",
     "REPLAN_SCRATCH",
     "RETRY",
@@ -78,7 +87,8 @@ BACKTRACK = "backtrack"
 SPLICE = "splice"
 REPLAN = "replan"
 REPLAN_SCRATCH = "replan_scratch"
-PROPOSAL_KINDS: tuple[str, ...] = (RETRY, REWRITE_ARGS, SUBSTITUTE, BACKTRACK, SPLICE, REPLAN, REPLAN_SCRATCH)
+REBIND = "rebind"
+PROPOSAL_KINDS: tuple[str, ...] = (RETRY, REWRITE_ARGS, SUBSTITUTE, BACKTRACK, SPLICE, REPLAN, REPLAN_SCRATCH, REBIND)
 
 
 class ProposalError(BtMetaError):
@@ -99,6 +109,9 @@ class PlanState:
     unguarded: frozenset[str] = frozenset()
     """Compound nodes whose method precondition is not checked again: a repair changed steps below them, knowingly
     departing from the method's bindings (e.g. another arm than the method's precondition chose)."""
+    rebound: dict[str, str] = field(default_factory=dict)
+    """Task-file symbols grounded as other world objects than the grounding file says (``rebind`` proposals, in
+    the order applied): part of what the plan does, so of its effect."""
 
     def steps(self) -> list[DecompositionNode]:
         return self.tree.primitives()
@@ -155,7 +168,10 @@ def plan_effect(plan_state: PlanState) -> str:
     A replan from a new decomposition node that yields the plan that already failed is the same attempt again."""
     steps = plan_state.steps()
     suffix = [[n.task[0], *map(str, n.task[1:])] for n in steps[plan_state.cursor:]]
-    return json.dumps({"at": len(plan_state.committed) + plan_state.cursor, "run": suffix})
+    effect: dict[str, Any] = {"at": len(plan_state.committed) + plan_state.cursor, "run": suffix}
+    if plan_state.rebound:  # the same steps on another object are another attempt
+        effect["rebound"] = dict(sorted(plan_state.rebound.items()))
+    return json.dumps(effect)
 
 
 # -- tree surgery ----------------------------------------------------------------------------------------------
@@ -318,6 +334,18 @@ def apply_proposal(
         calls = ", ".join(_call(tree, s) for s in range(start, start + len(actions)))
         account = f"steps {start}..{end - 1} replaced by {calls}"
         return _changed(plan_state, tree, start, range(start, start + len(actions))), account
+    if kind == REBIND:
+        symbols = {str(k): str(v) for k, v in dict(changes.get("symbols") or {}).items()}
+        if not symbols:
+            raise ProposalError("rebind needs a non-empty 'symbols' {symbol: object}")
+        from_step = _int(changes, "from_step", failed_step)
+        if not 0 <= from_step <= failed_step:
+            raise ProposalError(f"rebind from step {from_step}: must be between 0 and the failed step")
+        if all(plan_state.rebound.get(k) == v for k, v in symbols.items()):
+            raise ProposalError(f"rebind {symbols}: the symbols are bound so already")
+        pairs = ", ".join(f"{k} -> {v}" for k, v in symbols.items())
+        return (dataclasses.replace(plan_state, cursor=from_step, rebound={**plan_state.rebound, **symbols}),
+                f"rebind {pairs}; resume at step {from_step}")
     if kind == REPLAN:
         from bt_meta.htn import replan
 
@@ -332,7 +360,8 @@ def apply_proposal(
         kept = int(result.stats.get("kept_steps", 0))
         kept_ids = set(result.tree.nodes)
         return PlanState(result.tree, kept, list(plan_state.committed),
-                         frozenset(i for i in plan_state.unguarded if i in kept_ids)), result.message
+                         frozenset(i for i in plan_state.unguarded if i in kept_ids),
+                         dict(plan_state.rebound)), result.message
     if kind == REPLAN_SCRATCH:
         from bt_meta.htn import plan
 
@@ -346,7 +375,7 @@ def apply_proposal(
         done = [(n.task[0], tuple(n.task[1:])) for n in steps[:failed_step]]
         account = (f"planned the task network afresh: {len(result.plan)} step(s) in "
                    f"{time.perf_counter() - started:.3f} s")
-        return PlanState(result.tree, 0, [*plan_state.committed, *done]), account
+        return PlanState(result.tree, 0, [*plan_state.committed, *done], rebound=dict(plan_state.rebound)), account
     raise ProposalError(f"unknown proposal kind {kind!r}; expected one of: {', '.join(PROPOSAL_KINDS)}")
 
 
@@ -357,7 +386,7 @@ def _changed(plan_state: PlanState, tree: DecompositionTree, cursor: int, steps:
     for node in tree.primitives():
         if node.step in wanted:
             unguarded.update(a.id for a in tree.ancestors(node.id))
-    return PlanState(tree, cursor, list(plan_state.committed), frozenset(unguarded))
+    return PlanState(tree, cursor, list(plan_state.committed), frozenset(unguarded), dict(plan_state.rebound))
 
 
 def _call(tree: DecompositionTree, step: int) -> str:

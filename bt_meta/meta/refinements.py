@@ -9,10 +9,12 @@ problem assumed a blue 1x2) are kept with the refinement (:attr:`Refinement.fact
 attribute, value)`` conditions (the world reports the object with that attribute): the executor adds the facts
 when the refinement's precondition holds, so it applies exactly when the same entities are seen again. The
 repair's rewrite of the goal (:func:`rewrite_goal`) is kept as :attr:`Refinement.goal`, the goal a run that uses
-the refinement is verified against. Refinements live in the episodic memory file (table ``refinements``, schema
-v3; ``facts`` and ``goal`` ride in its ``repair`` column); the next run of the same variant plans with them
-first, so it succeeds with zero repair attempts; a run whose objects are elsewhere (or other) fails the
-precondition and plans as before.
+the refinement is verified against. A repair that grounded a task-file symbol as another object (a spare for a
+missing part, ``rebind``) is kept as :attr:`Refinement.rebind`: the executor rebinds the same symbols when the
+precondition (which then names the spare's starting pose) holds. Refinements live in the episodic memory file
+(table ``refinements``, schema v3; ``facts``, ``goal`` and ``rebind`` ride in its ``repair`` column); the next
+run of the same variant plans with them first, so it succeeds with zero repair attempts; a run whose objects are
+elsewhere (or other) fails the precondition and plans as before.
 
 Offers:
 
@@ -120,6 +122,8 @@ class Refinement:
     holds. Atoms are lists of strings."""
     goal: list[list[str]] | None = None
     """The problem's goal as the repair rewrote it (``None``: unchanged); what a run using it is verified against."""
+    rebind: dict[str, str] = field(default_factory=dict)
+    """Task-file symbol -> world object the repair grounded it as (a spare standing in for a missing part)."""
     id: int | None = None
     created: str = ""
 
@@ -130,6 +134,9 @@ class Refinement:
         """(add, delete) of :attr:`facts` as atoms."""
         return ([tuple(str(a) for a in f) for f in self.facts.get("add") or []],
                 [tuple(str(a) for a in f) for f in self.facts.get("delete") or []])
+
+    def rebind_symbols(self) -> dict[str, str]:
+        return {str(k): str(v) for k, v in (self.rebind or {}).items()}
 
     def goal_atoms(self) -> list[tuple[str, ...]] | None:
         return None if self.goal is None else [tuple(str(a) for a in g) for g in self.goal]
@@ -314,7 +321,8 @@ class RefinementStore:
     def save_repair(self, domain: Any, problem: Any, report: Any, start_objects: dict[str, Any],
                     variant: str | None = None, names: dict[str, str] | None = None,
                     facts: tuple[Iterable[Sequence[str]], Iterable[Sequence[str]]] | None = None,
-                    goal: Sequence[Sequence[str]] | None = None) -> Refinement:
+                    goal: Sequence[Sequence[str]] | None = None,
+                    rebind: dict[str, str] | None = None) -> Refinement:
         """Turn a successful repaired run (``report``, a :class:`~bt_meta.meta.executor.RunReport`) into a
         refinement of the problem's task and store it; the objects' starting poses become its precondition.
 
@@ -323,14 +331,16 @@ class RefinementStore:
         (add, delete) are the facts the repair wrote into the world's symbolic state; those naming an object of
         the refinement the world reported are kept, and each ``attribute(obj, value)`` among them that the world
         reported at the start (``start_objects[obj][attribute] == value``) becomes a ``seen`` condition. ``goal``
-        is the goal as the repair rewrote it (kept when it differs from the problem's)."""
+        is the goal as the repair rewrote it (kept when it differs from the problem's). ``rebind`` are the grounding
+        symbols the repair grounded as other objects (``names`` then already maps them so)."""
         tasks = list(getattr(problem, "tasks", None) or [])
         if len(tasks) != 1:
             raise RefinementError(f"the problem has {len(tasks)} root tasks; a refinement refines exactly one")
         task = tuple(tasks[0])
         if task[0] not in domain.tasks:
             raise RefinementError(f"the root task {task[0]} is a primitive: there is no method to refine")
-        if report.plan == report.initial_plan:
+        rebind = {str(k): str(v) for k, v in (rebind or {}).items()}
+        if report.plan == report.initial_plan and not rebind:
             raise RefinementError("the repairs did not change the plan (retries only): nothing new to keep")
         subtasks = [atom_text(tuple(step)) for step in report.plan]
         mentioned = {str(a) for a in task[1:]} | {str(a) for step in report.plan for a in step[1:]}
@@ -341,7 +351,8 @@ class RefinementStore:
         goal_atoms = None if goal is None else [[str(a) for a in g] for g in goal]
         if goal_atoms is not None and goal_atoms == [[str(a) for a in g] for g in getattr(problem, "goal", None) or []]:
             goal_atoms = None
-        digest = hashlib.sha1(json.dumps([subtasks, poses, kept, goal_atoms], sort_keys=True).encode()).hexdigest()[:8]
+        identity = [subtasks, poses, kept, goal_atoms] + ([rebind] if rebind else [])
+        digest = hashlib.sha1(json.dumps(identity, sort_keys=True).encode()).hexdigest()[:8]
         method = f"refined_{task[0]}_{digest}"
         existing = [r for r in self.list(domain=domain.name) if r.method == method]
         if existing:
@@ -351,7 +362,7 @@ class RefinementStore:
         refinement = Refinement(
             domain=domain.name, domain_path=domain_path, task=atom_text(task), method=method,
             precondition=pose_precondition(poses, self.tolerance, seen), subtasks=subtasks, poses=poses,
-            facts=kept, goal=goal_atoms,
+            facts=kept, goal=goal_atoms, rebind=rebind,
             tolerance=dict(self.tolerance), problem=getattr(problem, "name", None), variant=variant,
             repair={"attempts": len(report.attempts), "kinds": [a.kind for a in report.attempts],
                     "proposals": [{"action": a.proposal.get("action"), "plugin": a.proposal.get("plugin"),
@@ -378,10 +389,12 @@ class RefinementStore:
             repair = json.loads(row[11])
             facts = repair.pop("facts", None) if isinstance(repair, dict) else None
             goal = repair.pop("goal", None) if isinstance(repair, dict) else None
+            rebind = repair.pop("rebind", None) if isinstance(repair, dict) else None
             refinements.append(Refinement(
                 id=row[0], created=row[1], domain=row[2], task=row[3], method=row[4], precondition=row[5],
                 subtasks=json.loads(row[6]), poses=json.loads(row[7]), tolerance=json.loads(row[8]),
-                problem=row[9], variant=row[10], repair=repair, domain_path=row[12], facts=facts or {}, goal=goal))
+                problem=row[9], variant=row[10], repair=repair, domain_path=row[12], facts=facts or {}, goal=goal,
+                rebind=rebind or {}))
         return refinements
 
     def apply(self, domain: Any, problem: Any = None) -> tuple[Any, list[str]]:
@@ -406,6 +419,8 @@ def _repair_column(refinement: Refinement) -> dict[str, Any]:
         column["facts"] = refinement.facts
     if refinement.goal is not None:
         column["goal"] = refinement.goal
+    if refinement.rebind:
+        column["rebind"] = refinement.rebind
     return column
 
 

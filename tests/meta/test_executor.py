@@ -288,3 +288,19 @@ def test_a_replan_that_yields_the_failed_plan_again_is_not_applied_twice(blocks)
     assert [(t["action"], t["outcome"]) for t in tried[1:]] == [("replan", "not_applied"),
                                                                ("replan_scratch", "not_applied")]
     assert tried[2]["why"].startswith("equivalent to attempt 1")
+
+
+def test_an_unkept_attempt_a_later_one_overwrote_does_not_block_the_refinement():
+    """``keep: False`` says the attempt's plan does not replay from the start; once a deeper backtrack rewrote its
+    poses, nothing of it is in the final plan, and it no longer stops the refinement from being saved."""
+    from bt_meta.meta.executor import _survives
+    from bt_meta.meta.reasoner import Attempt
+
+    def attempt(action: str, changes: dict) -> Attempt:
+        return Attempt(1, {}, "verification", {"action": action, "changes": changes, "evidence": {"keep": False}},
+                       "", 5, 0.0)
+
+    plan = [["MoveTo", "above"], ["MoveTo", "held:ref:0:0:0.1:0:0:0"], ["Grasp"]]
+    assert _survives(attempt("backtrack", {"to_step": 1, "args": {"1": ["held:ref:0:0:0.1:0:0:0"]}}), plan)
+    assert not _survives(attempt("backtrack", {"to_step": 1, "args": {"1": ["held:ref:0:0:0.2:0:0:0"]}}), plan)
+    assert _survives(attempt("splice", {"start": 0, "end": 1, "actions": [["MoveTo", "x"]]}), plan)  # assumed kept

@@ -102,7 +102,7 @@ def test_part_on_its_side_is_repaired_by_backtracking_and_the_refinement_is_used
     # the last move that set the part's pose (MoveTo(joint), step 5) gets a sampled known-good pose
     assert proposal["changes"]["to_step"] == 5 and list(proposal["changes"]["args"]) == ["5"]
     symbol = proposal["changes"]["args"]["5"][0]
-    assert symbol.startswith("pose:")
+    assert symbol.startswith("held:reference_part:")  # the part relative to the reference, not a gripper pose
     evidence = proposal["evidence"]
     assert evidence["first_deviating_step"] == 0 and evidence["pose_steps"] == [3, 4, 5]
     relations = {row["step"]: row for row in evidence["relations"]}
@@ -194,10 +194,14 @@ def test_blocked_good_poses_are_reported_with_their_motion_limit_not_looped_on(m
     assert report.refinement_saved is None
 
 
-def test_a_keypoint_mismatch_mid_plan_is_repaired_but_not_kept_when_the_repair_would_not_replay(memory_file):
+def test_a_keypoint_mismatch_mid_plan_is_kept_as_a_refinement_that_replays_through_the_run_s_own_moves(memory_file):
     """Monitoring R_p/R_n at the end of each task (section 7.5.3) flags the part on its side after PickPart
-    (step 3); the plugin redoes steps 3-5 from where the arm stands. Replayed from the start, turning the part right
-    above the table would hit it, so the repair is applied but not kept as a refinement."""
+    (step 3); the plugin redoes steps 3-5 from where the arm stands. Replayed straight from the start, turning the
+    part right above the table would hit it; the refinement therefore replays the run's own lift first (step 3 as
+    it ran, the part in hand -- no failed attach, release or re-pick), then the repaired moves. The next run of the
+    variant (monitored as the dual configuration monitors, at the staging verification) uses it with zero attempts
+    and the parts are joined. (Keypoint monitors at every task end would still flag the part on its side after
+    PickPart: they compare with the nominal traces, not with the refinement's run.)"""
     from bt_meta_plugins import ground_truth_perception, keypoint_expectations
 
     from bt_meta.htn import load_task_file
@@ -206,25 +210,45 @@ def test_a_keypoint_mismatch_mid_plan_is_repaired_but_not_kept_when_the_repair_w
 
     task_file = load_task_file(TASK_FILE)
     problem = task_file.problem("nominal")
-    with quiet_stdout():
-        world = SimWorld(task_file.domain, problem, load_grounding(task_file.domain.name, TASK_FILE),
-                         variant="active_on_side", seed=0)
-    try:
-        with EpisodicMemory.open(memory_file, readonly=True) as memory, RefinementStore.open(memory_file) as store:
-            plugins = create_plugin_host(entry_points=False, plugins=[
-                ("classification_rules", classification_rules), ("retry_repair", retry_repair),
-                ("refinement_predicates", refinement_predicates), ("ground_truth_perception", ground_truth_perception),
-                ("keypoint_expectations", keypoint_expectations.KeypointExpectations(memory, check="task_end")),
-                ("pose_backtracking", pose_backtracking.PoseBacktracking(memory, n=3, seed=0))])
-            report = MetaExecutor(task_file.domain, problem, world, plugins, task_file=task_file, refinements=store,
-                                  variant="active_on_side", memory=memory).run()
-            assert report.ok, report.stop_reason
-            assert [(a.kind, a.step, a.proposal["changes"]["to_step"]) for a in report.attempts] == [
-                ("unexpected_configuration", 3, 3)]
-            evidence = report.attempts[0].proposal["evidence"]
-            assert evidence["replayable"] is False and evidence["keep"] is False
-            assert evidence["not_kept_because"]["from"].startswith("the configuration a replay")
-            assert report.refinement_saved["saved"] is False and store.list() == []
-            assert world.sim.attachments() == [("active", "reference")]
-    finally:
-        world.close()
+
+    def run(task_end_monitors: bool = True) -> tuple[Any, list[Any]]:
+        with quiet_stdout():
+            world = SimWorld(task_file.domain, problem, load_grounding(task_file.domain.name, TASK_FILE),
+                             variant="active_on_side", seed=0)
+        try:
+            with EpisodicMemory.open(memory_file, readonly=True) as memory, \
+                    RefinementStore.open(memory_file) as store:
+                monitors = [("keypoint_expectations", keypoint_expectations.KeypointExpectations(
+                    memory, check="task_end"))] if task_end_monitors else []
+                plugins = create_plugin_host(entry_points=False, plugins=[
+                    ("classification_rules", classification_rules), ("retry_repair", retry_repair),
+                    ("refinement_predicates", refinement_predicates),
+                    ("ground_truth_perception", ground_truth_perception), *monitors,
+                    ("pose_backtracking", pose_backtracking.PoseBacktracking(memory, n=3, seed=0))])
+                report = MetaExecutor(task_file.domain, problem, world, plugins, task_file=task_file,
+                                      refinements=store, variant="active_on_side", memory=memory).run()
+            return report, list(world.sim.attachments())
+        finally:
+            world.close()
+
+    report, joined = run()
+    assert report.ok, report.stop_reason
+    assert joined == [("active", "reference")]
+    assert [(a.kind, a.step, a.proposal["changes"]["to_step"]) for a in report.attempts] == [
+        ("unexpected_configuration", 3, 3)]
+    evidence = report.attempts[0].proposal["evidence"]
+    assert evidence["replayable"] is False and "keep" not in evidence
+    replay = evidence["replay_plan"]
+    # the prefix, step 3 as it ran (the lift with the part in hand), then the repaired steps 3.. with new poses
+    assert replay[:4] == [["MoveTo", "active_above"], ["MoveTo", "active_grasp"], ["Grasp"],
+                          ["MoveTo", "active_above"]]
+    assert replay[4][0] == "MoveTo" and replay[4][1].startswith("held:reference_part:")
+    assert replay[4:] == report.plan[3:]
+    assert len(replay) == len(report.plan) + 1
+    saved = report.refinement_saved
+    assert saved is not None and saved.get("saved", True) is not False, saved
+    assert saved["subtasks"][:4] == ["MoveTo(active_above)", "MoveTo(active_grasp)", "Grasp()", "MoveTo(active_above)"]
+
+    again, joined = run(task_end_monitors=False)
+    assert again.ok and again.attempts == [] and again.refinements_used == [saved["method"]]
+    assert joined == [("active", "reference")]

@@ -122,3 +122,25 @@ def test_remaining_tree_drops_guards_of_started_tasks(planned):
     assert root.method is None  # draw() started already
     second = remaining.nodes[remaining.nodes[state.step_node(2).id].parent]
     assert second.method == "put_any"  # put_at(1, 0) has not started: its guard stays
+
+
+def test_rebind_changes_no_step_but_is_part_of_the_attempt_s_effect(planned):
+    from bt_meta.meta.proposals import plan_effect
+
+    retry, _ = _apply(planned, "retry")
+    new, change = _apply(planned, "rebind", {"symbols": {"b1": "spare"}})
+    assert change == "rebind b1 -> spare; resume at step 2"
+    assert (new.cursor, new.rebound) == (2, {"b1": "spare"}) and _plan(new) == _plan(planned[2])
+    assert plan_effect(new) != plan_effect(retry)  # the same steps on another object are another attempt
+    again = apply_proposal(RepairProposal("substitute", 1.0, changes={"mapping": {"b1": "b2"}}), new, failed_step=2,
+                           failed_node=new.step_node(2).id, domain=planned[0], problem=planned[1],
+                           state=planned[1].state)[0]
+    assert again.rebound == {"b1": "spare"}  # later repairs keep the rebinding
+    with pytest.raises(ProposalError, match="bound so already"):
+        apply_proposal(RepairProposal("rebind", 1.0, changes={"symbols": {"b1": "spare"}}), new, failed_step=2,
+                       failed_node=new.step_node(2).id, domain=planned[0], problem=planned[1],
+                       state=planned[1].state)
+    with pytest.raises(ProposalError, match="non-empty"):
+        _apply(planned, "rebind", {})
+    with pytest.raises(ProposalError, match="between 0 and the failed step"):
+        _apply(planned, "rebind", {"symbols": {"b1": "spare"}, "from_step": 3})

@@ -22,12 +22,16 @@ Offers:
 * :func:`pose_symbol` / :func:`parse_pose_symbol` -- durable pose symbols (``pose:x:y:z:roll:pitch:yaw``, metres and
   radians) that a repair creates and a learned refinement stores; the world grounds them without a grounding-file
   entry (:meth:`SimWorld.register_pose` also gives them their type fact ``pose(symbol)``)
+* :func:`held_pose_symbol` / :func:`parse_held_pose_symbol` -- durable poses of the *held object* relative to
+  another object (``held:OBJECT:x:y:z:roll:pitch:yaw``, the held object's pose in OBJECT's frame): grounded through
+  the grasp at the time of the move, so they stay right when OBJECT has moved or the part was grasped differently
 * :func:`bt_meta_make_world` -- hook implementation for ``--world sim`` (register this module as a plugin)
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import os
 import sys
@@ -49,12 +53,13 @@ from bt_meta.world.simulation.objects import Box, Cylinder, Mesh, ObjectModel, p
 from bt_meta.world.skills import SKILLS
 from bt_meta.world.skills.base import SimSkill, SkillAbort
 
-__all__ = ["POSE_SYMBOL_PREFIX", "Grounding", "PrimitiveSkill", "SimWorld", "load_grounding", "parse_pose_symbol",
-           "pose_symbol", "quiet_stdout"]
+__all__ = ["HELD_POSE_PREFIX", "POSE_SYMBOL_PREFIX", "Grounding", "PrimitiveSkill", "SimWorld", "held_pose_symbol",
+           "load_grounding", "parse_held_pose_symbol", "parse_pose_symbol", "pose_symbol", "quiet_stdout"]
 
 _PART = "~"  # collision geometry names: "<object>" for the first part, "<object>~<k>" for the others
 
 POSE_SYMBOL_PREFIX = "pose:"
+HELD_POSE_PREFIX = "held:"
 
 
 def pose_symbol(pose: Sequence[float], digits: int = 4) -> str:
@@ -82,6 +87,23 @@ def parse_pose_symbol(symbol: str) -> list[float] | None:
     except ValueError:
         return None
     return values if all(math.isfinite(v) for v in values) else None
+
+
+def held_pose_symbol(relative_to: str, pose: Sequence[float], digits: int = 4) -> str:
+    """A durable symbol for "the held object at ``pose`` in ``relative_to``'s frame" (x, y, z in metres, roll,
+    pitch, yaw in radians); ``relative_to`` is a task-file object symbol or a world object name."""
+    if not relative_to or ":" in relative_to:
+        raise BtMetaError(f"a held-pose symbol needs an object name without ':', got {relative_to!r}")
+    return HELD_POSE_PREFIX + relative_to + ":" + pose_symbol(pose, digits)[len(POSE_SYMBOL_PREFIX):]
+
+
+def parse_held_pose_symbol(symbol: str) -> tuple[str, list[float]] | None:
+    """(object, 6 numbers) of a :func:`held_pose_symbol`, or ``None`` when ``symbol`` is not one."""
+    if not symbol.startswith(HELD_POSE_PREFIX):
+        return None
+    name, _, rest = symbol[len(HELD_POSE_PREFIX):].partition(":")
+    values = parse_pose_symbol(POSE_SYMBOL_PREFIX + rest) if name else None
+    return None if values is None else (name, values)
 
 
 @contextlib.contextmanager
@@ -600,10 +622,17 @@ class SimWorld:
                 top = max(top, self.object_top(other))
         return top
 
+    def rebind_object(self, symbol: str, name: str) -> None:
+        """Ground the task-file object ``symbol`` as the simulator object ``name`` from now on (a spare standing in
+        for a missing part): poses defined over the symbol follow. This world's grounding only; the file is kept."""
+        if name not in self.sim.object_names():
+            raise BtMetaError(f"cannot rebind {symbol!r}: there is no object {name!r} in the world")
+        self.grounding = dataclasses.replace(self.grounding, objects={**self.grounding.objects, symbol: name})
+
     def register_pose(self, symbol: str) -> bool:
         """Make a durable pose symbol (:func:`pose_symbol`) known: its type fact ``pose(symbol)`` joins the symbolic
         state (typed primitives check it). False, and nothing changes, for any other symbol."""
-        if parse_pose_symbol(symbol) is None:
+        if parse_pose_symbol(symbol) is None and parse_held_pose_symbol(symbol) is None:
             return False
         if ("pose", symbol) not in self._state:
             self.apply_symbolic([("pose", symbol)], [])
@@ -613,6 +642,8 @@ class SimWorld:
         spec = self.grounding.poses.get(symbol)
         if spec is None and (values := parse_pose_symbol(symbol)) is not None:
             return {"pose": [*values[:3], *(math.degrees(v) for v in values[3:])], "frame": "base"}
+        if spec is None and (held := parse_held_pose_symbol(symbol)) is not None:
+            return {"held_in": held[0], "relative": held[1]}
         if spec is None:
             known = ", ".join(self.grounding.poses) or "none"
             raise SkillAbort(FailureKind.INTERNAL, f"no pose symbol {symbol!r} in {self.grounding.path}; "
@@ -634,6 +665,8 @@ class SimWorld:
         """
         arm = arm or self.default_arm
         spec = self.pose_spec(symbol)
+        if "held_in" in spec:
+            return self.held_pose(str(spec["held_in"]), spec["relative"], arm)
         # default: pointing down, the hand turned as the arm's description says top-down means (Baxter 180, Panda 0)
         down = spec.get("rpy", [180.0, 0.0, math.degrees(self.sim.robot.arm(arm).top_down_yaw)])
         out = np.eye(4)
@@ -672,6 +705,17 @@ class SimWorld:
             return out
         raise SkillAbort(FailureKind.INTERNAL,
                          f"pose {symbol!r} in {self.grounding.path}: give pose, above, above_feature or anchor")
+
+    def held_pose(self, relative_to: str, pose: Sequence[float], arm: str | None = None) -> np.ndarray:
+        """The gripper pose that puts the object held now at ``pose`` (x, y, z, roll, pitch, yaw; metres, radians)
+        in the frame of ``relative_to`` (a task-file symbol or an object name), through the current grasp; with
+        nothing held, the gripper itself goes there."""
+        arm = arm or self.default_arm
+        target = self.sim.object_transform(self.object_name(relative_to)) @ pose_to_matrix([float(v) for v in pose])
+        held = self.sim.held(arm)
+        if held is None:
+            return target
+        return target @ np.linalg.inv(self.held_relative(arm))
 
     def anchor(self, name: str) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """A scene anchor's position (z on the table top when the file says ``table``) and rpy."""

@@ -8,6 +8,8 @@ RUNNING until the gripper is within tolerance of the target. Failures are classi
 * ``reachability`` -- IK found no solution (evidence: target, best residual);
 * ``collision`` -- every IK solution, or a waypoint on the way, collides (evidence: the colliding pair);
 * ``physical`` -- the arm did not arrive (blocked), or the held object slipped out of the grasp.
+* ``verification`` -- at a pose with ``verify_lifted`` (section 7.3's staging), a listed part stayed on the table,
+  or came along without being joined to what is held, directly or through other joins (it rests on it).
 
 Offers:
 
@@ -260,11 +262,17 @@ class MoveTo(SimSkill):
         sim = self.world.sim
         heights = {name: float(self.world.object_lowest(name) - sim.table.top_z) for name in self.verify}
         left = sorted(name for name, h in heights.items() if h < margin)
+        # A part lifted only because it rests on (or leans in) what is held came along without being joined: the
+        # subassembly is what the gripper holds and what is joined to it, transitively.
+        held = sim.held(self.arm)
+        assembly = _joined_to(held, sim.attachments()) if held is not None else set()
+        loose = sorted(name for name in self.verify if name not in left and held is not None and name not in assembly)
         evidence: dict[str, Any] = {
             "lifted": {name: rounded(h, 4) for name, h in heights.items()},
             "left_on_table": left,
+            "not_joined": loose,
             "attachments": [list(p) for p in sim.attachments()],
-            "held": sim.held(self.arm),
+            "held": held,
         }
         roles = [n for n in self.verify if sim.object_model(n).role is not None]
         if len(roles) >= 2:
@@ -276,3 +284,21 @@ class MoveTo(SimSkill):
             raise SkillAbort(FailureKind.VERIFICATION,
                              f"move_to {self.label}: verification failed -- {', '.join(left)} stayed on the table "
                              "instead of coming along with the subassembly", evidence)
+        if loose:
+            raise SkillAbort(FailureKind.VERIFICATION,
+                             f"move_to {self.label}: verification failed -- {', '.join(loose)} came along without "
+                             f"being joined to the held {held} (it rests on the subassembly)", evidence)
+
+
+def _joined_to(name: str, pairs: Any) -> set[str]:
+    """``name`` and every object joined to it through ``pairs`` (magnetic attachments), transitively."""
+    found, frontier = {name}, [name]
+    links = [tuple(p) for p in pairs]
+    while frontier:
+        current = frontier.pop()
+        for a, b in links:
+            other = b if a == current else a if b == current else None
+            if other is not None and other not in found:
+                found.add(other)
+                frontier.append(other)
+    return found

@@ -1,0 +1,220 @@
+"""Shape substitutions from the task's geometry: cover the cells the plan still has to fill with the blocks on the
+table, many-for-one and one-for-many, whatever the demonstrations decomposed.
+
+The plan's placements say which cells the drawing needs: a step ``place(b, x, y)`` whose block the problem gives a
+shape ``RxC`` covers C unit cells along x centred on (x, y) (a 1x2 at (1.5, 1) covers (1, 1) and (2, 1); the place
+skill lays a block along the drawing's x, so only one-row shapes are tiled). The cells of the steps not yet run are
+tiled anew with the blocks the world shows on the table and no executed step placed -- the plan's own blocks with
+their *perceived* shapes, spares and unknown blocks -- by a depth-first search over the cells in order (row, then
+x): each first uncovered cell gets a block that starts there and covers only needed, uncovered cells. A tile is
+bound to a block of its shape, preferring the block the plan put on one of its cells, then the plan's other blocks,
+then the others by name; colour counts only where the problem gives the plan's blocks one colour for all (the
+methods' symbols then ask for it) and only for blocks the plan does not already use (the plan's own blocks were
+bound by its methods; perception does not rebind them: a grid-map compares occupancy, not colour), else any
+colour does. The result is a ``splice`` of the remaining steps, in the
+order the plan would have reached the tiles' cells.
+
+This finds what A's letter needs when one 1x2 stands where two 1x1 blocks that are not side by side were planned:
+the two 1x2 blocks laid across the tops of the legs and the bar cells, the 1x1 blocks at the feet and the apex.
+
+Offers:
+
+* :func:`footprint` -- the cells a block of a shape covers when placed at (x, y)
+* :func:`tile` -- a tiling of cells with blocks of given shapes (``None`` when none exists)
+* :func:`tiling_proposals` -- the ``splice`` proposal for a failure, when a tiling differs from the plan
+* :func:`covers_the_same_cells` -- whether a splice's placements cover the cells of the steps it replaces (a
+  remembered decomposition that draws another part of the letter does not)
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from bt_meta.bt.failures import RepairProposal
+from bt_meta.meta.proposals import SPLICE
+
+SCORE = 0.6
+"""Below the spares (0.85) and the nearest remembered decompositions: the plan the geometry alone gives is tried
+when nothing closer to what was demonstrated fits."""
+
+MAX_NODES = 20000
+"""Search nodes per tiling: a letter has a handful of cells; a larger drawing without a tiling stops here."""
+
+_SHAPE = re.compile(r"^(\d+)x(\d+)$")
+Cell = tuple[float, float]
+
+__all__ = ["covers_the_same_cells", "footprint", "tile", "tiling_proposals"]
+
+
+def _width(shape: str | None) -> int | None:
+    """Units along x of a one-row shape (``1x2`` -> 2), else ``None``."""
+    match = _SHAPE.match(str(shape or ""))
+    if match is None or int(match.group(1)) != 1 or int(match.group(2)) < 1:
+        return None
+    return int(match.group(2))
+
+
+def footprint(shape: str | None, x: float, y: float) -> list[Cell] | None:
+    """The unit cells a block of ``shape`` placed with its centroid at (x, y) covers, or ``None`` for a shape that
+    is not one row of units."""
+    width = _width(shape)
+    if width is None:
+        return None
+    return [(round(x + k - (width - 1) / 2.0, 3), round(float(y), 3)) for k in range(width)]
+
+
+def tile(cells: Sequence[Cell], counts: Mapping[str, int], prefer: Mapping[Cell, str] | None = None
+         ) -> list[tuple[str, Cell]] | None:
+    """Cover every cell once with blocks of the shapes in ``counts`` (how many of each are on hand; all needn't
+    be used): a list of (shape, centroid), or ``None``. ``prefer`` gives a shape to try first at a cell (what
+    the plan assumed there)."""
+    needed = sorted(set(cells), key=lambda c: (c[1], c[0]))
+    wanted = set(needed)
+    left = dict(counts)
+    covered: set[Cell] = set()
+    placed: list[tuple[str, Cell]] = []
+    budget = [MAX_NODES]
+    shapes = sorted((s for s in left if _width(s) is not None), key=lambda s: -int(_width(s) or 0))
+
+    def search() -> bool:
+        budget[0] -= 1
+        if budget[0] < 0:
+            return False
+        first = next((c for c in needed if c not in covered), None)
+        if first is None:
+            return True
+        order = sorted(shapes, key=lambda s: (s != (prefer or {}).get(first), -int(_width(s) or 0)))
+        for shape in order:
+            if left.get(shape, 0) <= 0:
+                continue
+            width = int(_width(shape) or 0)
+            centre = (round(first[0] + (width - 1) / 2.0, 3), first[1])
+            cover = footprint(shape, *centre) or []
+            if any(c not in wanted or c in covered for c in cover):
+                continue
+            left[shape] -= 1
+            covered.update(cover)
+            placed.append((shape, centre))
+            if search():
+                return True
+            placed.pop()
+            covered.difference_update(cover)
+            left[shape] += 1
+        return False
+
+    return list(placed) if search() else None
+
+
+def _cells(calls: Sequence[Sequence[Any]], shapes: Mapping[str, str | None]) -> list[Cell] | None:
+    """The cells placements ``[action, block, x, y]`` cover with blocks of ``shapes``; ``None`` when one is not
+    a placement of a one-row block."""
+    out: list[Cell] = []
+    for call in calls:
+        if len(call) != 4:
+            return None
+        x, y = _number(call[2]), _number(call[3])
+        cells = footprint(shapes.get(str(call[1])), x, y) if x is not None and y is not None else None
+        if cells is None:
+            return None
+        out += cells
+    return out
+
+
+def covers_the_same_cells(proposal: RepairProposal, plan: Sequence[Mapping[str, Any]], assumed: Mapping[str, str],
+                          perceived: Mapping[str, str]) -> bool | None:
+    """Whether a ``splice``'s new placements (blocks with their ``perceived`` shapes, else ``assumed``) cover the
+    same cells as the steps it replaces (with the shapes the plan ``assumed``); ``None`` when either are not
+    placements of one-row blocks (the geometry cannot tell)."""
+    changes = proposal.changes or {}
+    start, end = int(changes.get("start", 0)), int(changes.get("end", 0))
+    replaced = [[r["action"], *r["args"]] for r in plan if start <= int(r["step"]) < end]
+    before = _cells(replaced, assumed)
+    after = _cells(changes.get("actions") or [], {**assumed, **perceived})
+    if before is None or after is None:
+        return None
+    return sorted(before) == sorted(after)
+
+
+def _number(value: Any) -> float | None:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return None
+
+
+def tiling_proposals(vector: Any, failure: Any, context: Any) -> list[RepairProposal]:
+    """The ``splice`` of the remaining placements as a tiling of their cells with the blocks on the table, when it
+    differs from the plan; ``[]`` when the plan's steps are not placements of shaped blocks or no tiling exists."""
+    evidence = getattr(failure, "evidence", None) or {}
+    plan = list(evidence.get("plan") or [])
+    world = getattr(context, "world", None)
+    problem = getattr(getattr(context, "run", None), "problem", None)
+    observe = getattr(world, "observe", None)
+    if not plan or observe is None or problem is None:
+        return []
+    facts = list(getattr(problem, "init", None) or getattr(problem, "state", None) or ())
+    assumed = {str(f[1]): str(f[2]) for f in facts if len(f) == 3 and f[0] == "shape"}
+    colours = {str(f[1]): str(f[2]) for f in facts if len(f) == 3 and f[0] == "colour"}
+    todo = [p for p in plan if not p.get("done")]
+    placements = []
+    for record in todo:
+        args = [str(a) for a in record.get("args") or []]
+        x, y = (_number(args[1]), _number(args[2])) if len(args) == 3 else (None, None)
+        cells = footprint(assumed.get(args[0]), x, y) if args and x is not None and y is not None else None
+        if cells is None:
+            return []  # a step that is not a placement of a shaped block: the geometry does not say what it needs
+        placements.append((int(record["step"]), str(record["action"]), args[0], cells))
+    if not placements or len({p[1] for p in placements}) != 1:
+        return []
+    action = placements[0][1]
+    seen = {str(k): dict(v) for k, v in ((observe() or {}).get("objects") or {}).items()
+            if isinstance(v, Mapping) and v.get("shape")}
+    placed = {str(a) for p in plan if p.get("done") for a in (p.get("args") or [])[:1]}
+    plan_blocks = [p[2] for p in placements]
+    colour = None
+    planned_colours = {colours.get(b) for b in plan_blocks}
+    if len(planned_colours) == 1 and None not in planned_colours:
+        colour = planned_colours.pop()  # the methods' symbols ask the plan's blocks for one colour
+    on_hand = sorted((n for n in seen if n not in placed and _width(seen[n].get("shape")) is not None
+                      and (colour is None or n in plan_blocks or seen[n].get("colour") == colour)),
+                     key=lambda n: (n not in plan_blocks, plan_blocks.index(n) if n in plan_blocks else 0, n))
+    cells = [c for p in placements for c in p[3]]
+    if len(set(cells)) != len(cells):
+        return []  # the plan's own placements overlap: not a tiling problem
+    owner = {c: p[2] for p in placements for c in p[3]}
+    step_of = {c: p[0] for p in placements for c in p[3]}
+    counts: dict[str, int] = {}
+    for name in on_hand:
+        counts[str(seen[name]["shape"])] = counts.get(str(seen[name]["shape"]), 0) + 1
+    prefer = {c: assumed.get(owner[c]) for c in cells}
+    tiles = tile(cells, counts, prefer)
+    if tiles is None:
+        return []
+    free = list(on_hand)
+    calls: list[tuple[int, list[str]]] = []
+    for shape, centre in sorted(tiles, key=lambda t: min(step_of[c] for c in footprint(t[0], *t[1]) or [])):
+        cover = footprint(shape, *centre) or []
+        fitting = [n for n in free if str(seen[n]["shape"]) == shape]
+        mine = [n for n in fitting if n in {owner[c] for c in cover}]
+        block = (mine or fitting)[0]
+        free.remove(block)
+        calls.append((min(step_of[c] for c in cover), [action, block, _text(centre[0]), _text(centre[1])]))
+    actions = [call for _, call in calls]
+    old = [[str(r["action"]), *map(str, r["args"])] for r in todo]
+    if actions == old:
+        return []
+    start, end = placements[0][0], placements[-1][0] + 1
+    shown = "; ".join(f"{a[0]}({', '.join(a[1:])})" for a in actions)
+    return [RepairProposal(
+        SPLICE, SCORE, f"steps {start}..{end - 1} as a tiling of their {len(cells)} cell(s) with the blocks on the "
+        f"table: {shown}", changes={"start": start, "end": end, "actions": actions},
+        evidence={"matcher": "tiling", "vector": vector.to_dict() if hasattr(vector, "to_dict") else None,
+                  "cells": [list(c) for c in cells], "blocks": {n: seen[n].get("shape") for n in on_hand},
+                  "colour_required": colour})]
+
+
+def _text(value: float) -> str:
+    """A coordinate as the task file writes it (``1``, ``1.5``)."""
+    return str(int(value)) if float(value).is_integer() else f"{value:g}"

@@ -1,0 +1,85 @@
+"""Shape substitutions from the task's geometry (``bt_meta_plugins._tilings``): the cells the remaining placements
+need, covered anew with the blocks on the table. Units on cells and shapes, then A's letter on a small hand-built
+scene (fake world) where one 1x2 stands where two 1x1 blocks that are not side by side were planned."""
+
+from __future__ import annotations
+
+import pytest
+from bt_meta_plugins._tilings import covers_the_same_cells, footprint, tile
+
+from bt_meta.bt.failures import RepairProposal
+from bt_meta.htn import load_task_file
+from bt_meta.resources import trees_dir
+
+from .test_spare_substitution import NOMINAL_A, _run
+
+A_CELLS = [(0.0, 0.0), (0.0, 1.0), (3.0, 0.0), (3.0, 1.0), (1.0, 1.0), (2.0, 1.0), (1.5, 2.0)]
+
+
+@pytest.fixture(scope="module")
+def letters():
+    return load_task_file(trees_dir() / "letters.yaml")
+
+
+def test_footprints_lay_one_row_blocks_along_x():
+    assert footprint("1x2", 1.5, 1) == [(1.0, 1.0), (2.0, 1.0)]
+    assert footprint("1x1", 3, 0) == [(3.0, 0.0)]
+    assert footprint("1x3", 1, 2) == [(0.0, 2.0), (1.0, 2.0), (2.0, 2.0)]
+    assert footprint("2x2", 0, 0) is None and footprint(None, 0, 0) is None
+
+
+def test_a_letter_is_tiled_with_the_blocks_on_hand_or_not_at_all():
+    tiles = tile(A_CELLS, {"1x1": 3, "1x2": 2})
+    assert sorted(tiles) == [("1x1", (0.0, 0.0)), ("1x1", (1.5, 2.0)), ("1x1", (3.0, 0.0)),
+                             ("1x2", (0.5, 1.0)), ("1x2", (2.5, 1.0))]
+    # the demonstrated drawing when the plan's shapes are preferred and on hand
+    prefer = {c: "1x1" for c in A_CELLS} | {(1.0, 1.0): "1x2", (2.0, 1.0): "1x2"}
+    assert ("1x2", (1.5, 1.0)) in tile(A_CELLS, {"1x1": 5, "1x2": 1}, prefer)
+    assert tile(A_CELLS, {"1x1": 2, "1x2": 2}) is None  # 6 cells' worth for 7 cells
+    assert tile(A_CELLS, {"1x2": 4}) is None  # the apex and the feet need 1x1 blocks
+
+
+def test_a_remembered_splice_that_covers_other_cells_is_told_apart():
+    plan = [{"step": 0, "action": "place", "args": ["b0", "0", "0"]},
+            {"step": 1, "action": "place", "args": ["b1", "0", "1"]}]
+    assumed = {"b0": "1x1", "b1": "1x1", "b3": "1x1"}
+    elsewhere = RepairProposal("splice", 0.7, changes={"start": 0, "end": 2, "actions": [["place", "b3", "1.5", "1"]]})
+    assert covers_the_same_cells(elsewhere, plan, assumed, {"b3": "1x2"}) is False
+    same = RepairProposal("splice", 0.7, changes={"start": 0, "end": 2, "actions": [["place", "b3", "0.5", "0"]]})
+    assert covers_the_same_cells(same, [{"step": 0, "action": "place", "args": ["b0", "0", "0"]},
+                                        {"step": 1, "action": "place", "args": ["b1", "1", "0"]}],
+                                 assumed, {"b3": "1x2"}) is True
+    moving = RepairProposal("splice", 0.7, changes={"start": 0, "end": 1, "actions": [["pick", "b3"]]})
+    assert covers_the_same_cells(moving, plan, assumed, {}) is None  # not placements: the geometry cannot tell
+
+
+def test_one_1x2_where_two_1x1_that_are_not_side_by_side_were_planned_is_tiled_into_the_letter(letters):
+    """b0 (a foot) is gone and b3 (the top of the other leg) is a 1x2: 3 1x1 + 2 1x2 still cover A's 7 cells, the
+    two 1x2 laid across the leg tops and the bar cells. No demonstration decomposes A so; the geometry does."""
+    objects = {n: v for n, v in NOMINAL_A.items() if n != "b0"}
+    objects["b3"] = ("1x2", "blue")
+    report, _ = _run(letters, letters.problem("A"), objects)
+    assert report.ok, report.stop_reason
+    assert [(a.kind, a.proposal["action"]) for a in report.attempts] == [("unknown_entity", "splice")]
+    proposal = report.attempts[0].proposal
+    assert proposal["evidence"]["matcher"] == "tiling" and proposal["evidence"]["colour_required"] == "blue"
+    placed = sorted((a[1], a[2], a[3]) for a in proposal["changes"]["actions"])
+    assert placed == [("b1", "0", "0"), ("b2", "3", "0"), ("b3", "2.5", "1"), ("b4", "1.5", "2"),
+                      ("b5", "0.5", "1")]
+    cells = sorted(c for _, block, x, y in proposal["changes"]["actions"]
+                   for c in footprint(objects[block][0], float(x), float(y)))
+    assert cells == sorted(A_CELLS)
+
+
+def test_colour_counts_where_the_plan_s_blocks_share_one(letters):
+    """Every block of A's plan is blue (its methods ask for blue): a red 1x2 spare does not stand in for the
+    missing b0 and b3 (a 1x1 as planned), so no tiling; a blue one does."""
+    objects = {n: v for n, v in NOMINAL_A.items() if n not in ("b0", "b1")}
+    objects["spare"] = ("1x2", "red")
+    report, _ = _run(letters, letters.problem("A"), objects)
+    assert all((a.proposal.get("evidence") or {}).get("matcher") != "tiling" for a in report.attempts)
+    objects["spare"] = ("1x2", "blue")  # 3 1x1 (b2, b3, b4) and 2 1x2 (b5, spare): A's 7 cells
+    report, _ = _run(letters, letters.problem("A"), objects)
+    tilings = [a for a in report.attempts if (a.proposal.get("evidence") or {}).get("matcher") == "tiling"]
+    assert report.ok and len(tilings) == 1, report.stop_reason
+    assert "spare" in {a[1] for a in tilings[0].proposal["changes"]["actions"]}

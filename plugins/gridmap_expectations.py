@@ -10,13 +10,14 @@ into one blob) the remembered window itself is cropped. A trace matches when eve
 differs from the observation by at most ``max_cells`` cells; the step matches when any of the N traces does
 (nearest neighbour). Observed blobs that share no cell with the remembered map are left out of the count
 (another object in the window, e.g. a distractor a few centimetres off, is not what the step did; blobs are
-taken one colour at a time, so a distractor of another colour touching the block is left out too). Colour
-matters where the task's symbols say it does: a block the step moves with a ``colour(b, c)`` fact must cover its
-cells in colour ``c`` -- each cell of another colour differs (the blue bar the symbols name, seen green); for the
-other blocks occupancy is colour presence, as in the paper. A mismatch suggests ``unknown_entity`` when a block
-is seen there with another shape than the one remembered (the 1x2 replaced by a 1x1) or another colour than its
-symbols give it (the substitution plugins then look for a stand-in of the right colour), else
-``unexpected_configuration``.
+taken one colour at a time, so a distractor of another colour touching the block is left out too). With
+``symbol_colours`` (``BT_META_GRIDMAP_COLOURS=symbols``), colour matters where the task's symbols say it does: a
+block the step moves with a ``colour(b, c)`` fact must cover its cells in colour ``c`` -- each cell of another
+colour differs (the blue bar the symbols name, seen green); for the other blocks, and by default for all,
+occupancy is colour presence, as in the paper (whose letter A with a red bar counts as drawn). A mismatch
+suggests ``unknown_entity`` when a block is seen there with another shape than the one remembered (the 1x2
+replaced by a 1x1) or another colour than its symbols give it (the substitution plugins then look for a stand-in
+of the right colour), else ``unexpected_configuration``.
 
 An expectation made at the last primitive of a task is also that task's expectation (bubbled up, section 6.2):
 ``data["task_end"]`` and ``data["parent_task"]`` say so.
@@ -26,11 +27,13 @@ Offers:
 * :class:`GridMapExpectations` -- the plugin as an object (memory, N, tolerance in cells, colour, rotations)
 * :func:`bt_meta_expectations`, :func:`bt_meta_compare` -- the module-level plugin (see :func:`configure`)
 * :func:`symbol_colours` -- the colours the task's symbols give a step's arguments
-* :data:`KIND` -- ``"gridmap"``
+* :func:`colours_from_environment` -- the ``symbol_colours`` default, from :data:`ENV_COLOURS`
+* :data:`KIND` -- ``"gridmap"``; :data:`ENV_COLOURS` -- ``"BT_META_GRIDMAP_COLOURS"``
 """
 
 from __future__ import annotations
 
+import os
 from dataclasses import replace
 from typing import Any
 
@@ -38,12 +41,14 @@ import numpy as np
 
 from bt_meta.bt.expectations import Comparison, Expectation
 from bt_meta.bt.failures import FailureKind
+from bt_meta.errors import ConfigError
 from bt_meta.perception.gridmap import grid_difference, render
 from bt_meta.perception.recall import memory_for, remember
 from bt_meta.plugins import ConfiguredPlugin, hookimpl
 from bt_meta.world.simulation.objects import LB
 
 KIND = "gridmap"
+ENV_COLOURS = "BT_META_GRIDMAP_COLOURS"
 
 
 class GridMapExpectations:
@@ -51,13 +56,15 @@ class GridMapExpectations:
 
     ``max_cells``: cells that may differ; ``compare_colour``: a cell of another colour than remembered differs too
     (off by default: the paper's occupancy is colour presence); ``symbol_colours``: a block the step moves whose
-    colour the task's symbols name must show that colour (on by default: colour matters where the task says it
-    does); ``rotations``: the best quarter turn counts (off: the same step should put the block the same way);
-    ``memory``: an :class:`~bt_meta.memory.EpisodicMemory` (default: the run's, else the ``--memory`` file).
+    colour the task's symbols name must show that colour (default: ``$BT_META_GRIDMAP_COLOURS``, off unless it says
+    ``symbols`` -- the paper's demo counts letter A with a red bar as drawn); ``rotations``: the best quarter turn
+    counts (off: the same step should put the block the same way); ``memory``: an
+    :class:`~bt_meta.memory.EpisodicMemory` (default: the run's, else the ``--memory`` file).
     """
 
     def __init__(self, memory: Any = None, *, n: int = 5, max_cells: int = 2, compare_colour: bool = False,
-                 rotations: bool = False, recentre_radius: float = 0.25 * LB, symbol_colours: bool = True) -> None:
+                 rotations: bool = False, recentre_radius: float = 0.25 * LB, symbol_colours: bool | None = None
+                 ) -> None:
         if n < 1 or max_cells < 0 or recentre_radius < 0:
             raise ValueError("n must be >= 1, max_cells and recentre_radius >= 0")
         self.memory = memory
@@ -66,7 +73,7 @@ class GridMapExpectations:
         self.compare_colour = compare_colour
         self.rotations = rotations
         self.recentre_radius = recentre_radius
-        self.symbol_colours = symbol_colours
+        self.symbol_colours = colours_from_environment() if symbol_colours is None else symbol_colours
 
     @hookimpl
     def bt_meta_expectations(self, context: Any) -> list[Expectation] | None:
@@ -160,6 +167,15 @@ def _off_colour(expected: Any, observed: Any, code: int) -> int:
     moved = np.isin(labels, [k for k in np.unique(centre) if k != 0])
     wanted = np.asarray(expected.occupancy) != 0
     return int(np.count_nonzero(moved & wanted & (seen != code)))
+
+
+def colours_from_environment() -> bool:
+    """``$BT_META_GRIDMAP_COLOURS``: ``symbols`` (colour matters where the task's symbols name it) or ``occupancy``
+    (the paper's colour presence; also when unset)."""
+    value = os.environ.get(ENV_COLOURS, "").strip().lower()
+    if value not in ("", "occupancy", "symbols"):
+        raise ConfigError(f"${ENV_COLOURS} must be 'symbols' or 'occupancy', got {value!r}")
+    return value == "symbols"
 
 
 def symbol_colours(context: Any) -> dict[str, str]:

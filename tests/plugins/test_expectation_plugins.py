@@ -532,7 +532,8 @@ def test_gridmap_colour_matters_where_the_task_symbols_name_it(letters_memory, s
     state = HtnState([("shape", "b5", "1x2")] + ([("colour", "b5", symbol)] if symbol else []))
     context = StepContext(action="place", args=("b5", "1.5", "1"), step=4, node_id="n24",
                           run=letters_run(None), state_before=state)
-    expectation = gridmap_plugin.GridMapExpectations(letters_memory).bt_meta_expectations(context)[0]
+    plugin = gridmap_plugin.GridMapExpectations(letters_memory, symbol_colours=True)
+    expectation = plugin.bt_meta_expectations(context)[0]
     assert expectation.data["colours"] == ({"b5": symbol} if symbol else {})
     verdict = gridmap_plugin.compare(expectation, _bar_observations(seen))
     assert verdict.matched is matched, verdict.evidence
@@ -543,7 +544,21 @@ def test_gridmap_colour_matters_where_the_task_symbols_name_it(letters_memory, s
     # the other blocks' colour does not matter: only the step's arguments are looked at
     leg = StepContext(action="place", args=("b3", "3", "1"), step=3, node_id="n23", run=letters_run(None),
                       state_before=state)
-    assert gridmap_plugin.GridMapExpectations(letters_memory).bt_meta_expectations(leg)[0].data["colours"] == {}
+    assert plugin.bt_meta_expectations(leg)[0].data["colours"] == {}
+    # by default (the paper's occupancy, as the demo's red bar needs) no colour is compared
+    assert gridmap_plugin.GridMapExpectations(letters_memory).bt_meta_expectations(context)[0].data["colours"] == {}
+
+
+def test_gridmap_symbol_colours_from_the_environment(monkeypatch):
+    from bt_meta.errors import ConfigError
+
+    monkeypatch.setenv(gridmap_plugin.ENV_COLOURS, "symbols")
+    assert gridmap_plugin.GridMapExpectations().symbol_colours is True
+    monkeypatch.setenv(gridmap_plugin.ENV_COLOURS, "occupancy")
+    assert gridmap_plugin.GridMapExpectations().symbol_colours is False
+    monkeypatch.setenv(gridmap_plugin.ENV_COLOURS, "maybe")
+    with pytest.raises(ConfigError, match="BT_META_GRIDMAP_COLOURS must be 'symbols' or 'occupancy', got 'maybe'"):
+        gridmap_plugin.GridMapExpectations()
 
 
 def test_camera_perception_needs_a_camera():

@@ -138,3 +138,19 @@ def test_balancing_undoes_a_gain_and_refuses_what_is_not_an_image():
     assert np.abs(restored.astype(int) - image.astype(int)).max() <= 3
     with pytest.raises(ValueError, match="uint8 RGB image"):
         balance_to_background(image.astype(float), TABLE)
+
+
+@pytest.mark.parametrize("other", [c for c in COLOURS if c != "blue"])
+def test_a_block_touching_one_of_another_colour_stays_a_block_of_its_own(other):
+    """Touching blocks of different colours are two blobs with their own shape and centroid (one mask per colour);
+    the grid-map monitor labels its cells one colour at a time too."""
+    from bt_meta.world.simulation.objects import LB
+
+    projection = top_view_projection()
+    image = blank(projection)
+    draw_block(image, projection, 0.70, -0.20, 0.0, "1x1", "blue")
+    draw_block(image, projection, 0.70 + 1.5 * LB, -0.20, 0.0, "1x2", other)  # end to end, no gap
+    blocks = detect_blocks(image, projection, thresholds=scene_thresholds(TABLE))
+    assert sorted((b.colour, b.shape) for b in blocks) == sorted([("blue", "1x1"), (other, "1x2")])
+    blue = next(b for b in blocks if b.colour == "blue")
+    assert math.hypot(blue.centroid[0] - 0.70, blue.centroid[1] + 0.20) < 0.003

@@ -9,9 +9,15 @@ centroid, as the paper crops blobs; when no single block is there (nothing, or b
 into one blob) the remembered window itself is cropped. A trace matches when every one of its maps
 differs from the observation by at most ``max_cells`` cells; the step matches when any of the N traces does
 (nearest neighbour). Observed blobs that share no cell with the remembered map are left out of the count
-(another object in the window, e.g. a distractor a few centimetres off, is not what the step did). A mismatch
+(another object in the window, e.g. a distractor a few centimetres off, is not what the step did; blobs are
+taken one colour at a time, so a distractor of another colour touching the block is left out too). With
+``symbol_colours`` (``BT_META_GRIDMAP_COLOURS=symbols``), colour matters where the task's symbols say it does: a
+block the step moves with a ``colour(b, c)`` fact must cover its cells in colour ``c`` -- each cell of another
+colour differs (the blue bar the symbols name, seen green); for the other blocks, and by default for all,
+occupancy is colour presence, as in the paper (whose letter A with a red bar counts as drawn). A mismatch
 suggests ``unknown_entity`` when a block is seen there with another shape than the one remembered (the 1x2
-replaced by a 1x1), else ``unexpected_configuration``.
+replaced by a 1x1) or another colour than its symbols give it (the substitution plugins then look for a stand-in
+of the right colour), else ``unexpected_configuration``.
 
 An expectation made at the last primitive of a task is also that task's expectation (bubbled up, section 6.2):
 ``data["task_end"]`` and ``data["parent_task"]`` say so.
@@ -20,11 +26,14 @@ Offers:
 
 * :class:`GridMapExpectations` -- the plugin as an object (memory, N, tolerance in cells, colour, rotations)
 * :func:`bt_meta_expectations`, :func:`bt_meta_compare` -- the module-level plugin (see :func:`configure`)
-* :data:`KIND` -- ``"gridmap"``
+* :func:`symbol_colours` -- the colours the task's symbols give a step's arguments
+* :func:`colours_from_environment` -- the ``symbol_colours`` default, from :data:`ENV_COLOURS`
+* :data:`KIND` -- ``"gridmap"``; :data:`ENV_COLOURS` -- ``"BT_META_GRIDMAP_COLOURS"``
 """
 
 from __future__ import annotations
 
+import os
 from dataclasses import replace
 from typing import Any
 
@@ -32,25 +41,30 @@ import numpy as np
 
 from bt_meta.bt.expectations import Comparison, Expectation
 from bt_meta.bt.failures import FailureKind
+from bt_meta.errors import ConfigError
 from bt_meta.perception.gridmap import grid_difference, render
 from bt_meta.perception.recall import memory_for, remember
 from bt_meta.plugins import ConfiguredPlugin, hookimpl
 from bt_meta.world.simulation.objects import LB
 
 KIND = "gridmap"
+ENV_COLOURS = "BT_META_GRIDMAP_COLOURS"
 
 
 class GridMapExpectations:
     """Per-step grid-map expectations from the last ``n`` successful traces.
 
-    ``max_cells``: cells that may differ; ``compare_colour``: a cell of another colour differs too (off by
-    default: the paper's occupancy is colour presence); ``rotations``: the best quarter turn counts (off: the
-    same step should put the block the same way); ``memory``: an :class:`~bt_meta.memory.EpisodicMemory`
-    (default: the run's, else the ``--memory`` file).
+    ``max_cells``: cells that may differ; ``compare_colour``: a cell of another colour than remembered differs too
+    (off by default: the paper's occupancy is colour presence); ``symbol_colours``: a block the step moves whose
+    colour the task's symbols name must show that colour (default: ``$BT_META_GRIDMAP_COLOURS``, off unless it says
+    ``symbols`` -- the paper's demo counts letter A with a red bar as drawn); ``rotations``: the best quarter turn
+    counts (off: the same step should put the block the same way); ``memory``: an
+    :class:`~bt_meta.memory.EpisodicMemory` (default: the run's, else the ``--memory`` file).
     """
 
     def __init__(self, memory: Any = None, *, n: int = 5, max_cells: int = 2, compare_colour: bool = False,
-                 rotations: bool = False, recentre_radius: float = 0.25 * LB) -> None:
+                 rotations: bool = False, recentre_radius: float = 0.25 * LB, symbol_colours: bool | None = None
+                 ) -> None:
         if n < 1 or max_cells < 0 or recentre_radius < 0:
             raise ValueError("n must be >= 1, max_cells and recentre_radius >= 0")
         self.memory = memory
@@ -59,6 +73,7 @@ class GridMapExpectations:
         self.compare_colour = compare_colour
         self.rotations = rotations
         self.recentre_radius = recentre_radius
+        self.symbol_colours = colours_from_environment() if symbol_colours is None else symbol_colours
 
     @hookimpl
     def bt_meta_expectations(self, context: Any) -> list[Expectation] | None:
@@ -77,6 +92,7 @@ class GridMapExpectations:
                 traces.append({"episode": record.episode_id, "maps": chosen})
         if not traces:
             return None
+        colours = symbol_colours(context) if self.symbol_colours else {}
         call = f"{context.action}({', '.join(str(a) for a in context.args)})"
         return [Expectation(
             kind=KIND,
@@ -87,6 +103,7 @@ class GridMapExpectations:
                 "compare_colour": self.compare_colour,
                 "rotations": self.rotations,
                 "recentre_radius": self.recentre_radius,
+                "colours": colours,
                 "parent_task": remembered.parent_task,
                 "task_end": remembered.task_end,
                 "matched_by": remembered.key,
@@ -100,14 +117,26 @@ class GridMapExpectations:
         return compare(expectation, observations)
 
 
-def _touching(expected: Any, observed: Any) -> Any:
-    """``observed`` without the blobs that share no cell with what memory expected: another object in the window
-    (a distractor a few centimetres from the cell) is not what the step did. A block that landed elsewhere still
-    differs: the cells expected occupied are then empty."""
+def _blobs(grid: np.ndarray) -> tuple[np.ndarray, int]:
+    """Connected blobs of a coded grid, one colour at a time: two blocks of different colours that touch are two
+    blobs (a block is one colour), two of the same colour one."""
     from scipy import ndimage
 
+    labels = np.zeros(grid.shape, dtype=int)
+    count = 0
+    for code in (int(c) for c in np.unique(grid) if c != 0):
+        part, n = ndimage.label(grid == code, structure=np.ones((3, 3), dtype=int))
+        labels[part != 0] = part[part != 0] + count
+        count += n
+    return labels, count
+
+
+def _touching(expected: Any, observed: Any) -> Any:
+    """``observed`` without the blobs that share no cell with what memory expected: another object in the window
+    (a distractor a few centimetres from the cell, or touching the placed block but of another colour) is not what
+    the step did. A block that landed elsewhere still differs: the cells expected occupied are then empty."""
     seen = np.asarray(observed.occupancy)
-    labels, count = ndimage.label(seen != 0, structure=np.ones((3, 3), dtype=int))
+    labels, count = _blobs(seen)
     if count == 0:
         return observed
     wanted = np.asarray(expected.occupancy) != 0
@@ -125,6 +154,43 @@ def _distance(expected: Any, observed: Any, colour: bool, rotations: bool) -> in
         a, b = np.asarray(expected.occupancy), np.asarray(observed.occupancy)
         cells += int(np.count_nonzero((a != 0) & (b != 0) & (a != b)))
     return cells
+
+
+def _off_colour(expected: Any, observed: Any, code: int) -> int:
+    """Cells of the block the step moved -- the blob over the window's centre, where the crop is centred on it --
+    that memory expected occupied and that show another colour than ``code``, the one the task's symbols give the
+    block. The other blocks in the window (the legs below a bar) keep whatever colour they have."""
+    seen = np.asarray(observed.occupancy)
+    labels, _ = _blobs(seen)
+    rows, columns = seen.shape
+    centre = labels[rows // 2 - 1:rows // 2 + 1, columns // 2 - 1:columns // 2 + 1]
+    moved = np.isin(labels, [k for k in np.unique(centre) if k != 0])
+    wanted = np.asarray(expected.occupancy) != 0
+    return int(np.count_nonzero(moved & wanted & (seen != code)))
+
+
+def colours_from_environment() -> bool:
+    """``$BT_META_GRIDMAP_COLOURS``: ``symbols`` (colour matters where the task's symbols name it) or ``occupancy``
+    (the paper's colour presence; also when unset)."""
+    value = os.environ.get(ENV_COLOURS, "").strip().lower()
+    if value not in ("", "occupancy", "symbols"):
+        raise ConfigError(f"${ENV_COLOURS} must be 'symbols' or 'occupancy', got {value!r}")
+    return value == "symbols"
+
+
+def symbol_colours(context: Any) -> dict[str, str]:
+    """``{object: colour}`` for the step's arguments whose colour the task's symbols name (``colour(b5, blue)`` in
+    the belief the step started from, else in the problem's initial facts): where colour matters to the task."""
+    names = {str(a) for a in getattr(context, "args", ())}
+    facts: Any = None
+    state = getattr(context, "state_before", None)
+    if state is not None and hasattr(state, "atoms_of"):
+        facts = list(state.atoms_of("colour"))
+    if not facts:
+        problem = getattr(getattr(context, "run", None), "problem", None)
+        facts = getattr(problem, "init", None) or getattr(problem, "state", None) or ()
+    return {str(f[1]): str(f[2]) for f in facts
+            if len(f) == 3 and f[0] == "colour" and str(f[1]) in names}
 
 
 def compare(expectation: Expectation, observations: dict[str, Any]) -> Comparison | None:
@@ -147,9 +213,15 @@ def compare(expectation: Expectation, observations: dict[str, Any]) -> Compariso
             else:
                 observed = view.grid_map_at(expected.centroid)
             cells = _distance(expected, observed, data["compare_colour"], data["rotations"])
+            wanted = (data.get("colours") or {}).get(str(expected.object_name))
+            off_colour = 0
+            if wanted is not None and wanted in getattr(getattr(view, "thresholds", None), "names", ()):
+                off_colour = _off_colour(expected, observed, view.thresholds.code(wanted))
             details.append({
                 "object": expected.object_name,
-                "cells": cells,
+                "cells": cells + off_colour,
+                "off_colour": off_colour,
+                "symbol_colour": wanted,
                 "expected": {"colour": expected.colour, "shape": expected.shape,
                              "centroid": list(expected.centroid), "grid": render(expected)},
                 "observed": {"colour": observed.colour, "shape": observed.shape,
@@ -166,10 +238,12 @@ def compare(expectation: Expectation, observations: dict[str, Any]) -> Compariso
         return Comparison(matched=True, evidence=evidence)
     off = [d for d in best["maps"] if d["cells"] > data["max_cells"]]
     other_shape = any(d["observed"]["block_seen"] and d["observed"]["shape"] != d["expected"]["shape"] for d in off)
-    kind = FailureKind.UNKNOWN_ENTITY if other_shape else FailureKind.UNEXPECTED_CONFIGURATION
+    other_colour = any(d["off_colour"] for d in off)
+    kind = FailureKind.UNKNOWN_ENTITY if other_shape or other_colour else FailureKind.UNEXPECTED_CONFIGURATION
     shown = "; ".join(
-        f"{d['object']}: {d['cells']} cells differ (expected {d['expected']['colour']} {d['expected']['shape']}, "
-        f"seen {d['observed']['colour'] or 'nothing'} {d['observed']['shape'] or ''})".rstrip()
+        f"{d['object']}: {d['cells']} cells differ (expected {d['symbol_colour'] or d['expected']['colour']} "
+        f"{d['expected']['shape']}, seen {d['observed']['colour'] or 'nothing'} {d['observed']['shape'] or ''}"
+        .rstrip() + (f"; {d['off_colour']} of another colour than its symbols say" if d["off_colour"] else "") + ")"
         for d in off
     )
     evidence["suggested_kind"] = kind.value

@@ -8,7 +8,8 @@ by looking). Its ``symbolic_state`` observation wins over the ground-truth plugi
 called first), and the monitor adopts it as the new belief. Perceivable atoms, by predicate:
 
 * ``at(block, x, y)`` (a task frame in the grounding, e.g. the letters) -- the noisy top view shows a block
-  colour over every unit cell the block's believed shape covers there (grid-map occupancy,
+  colour (any colour the scene format defines, :mod:`bt_meta.perception.colours`, the frame's lighting balanced
+  against the table's colour) over every unit cell the block's believed shape covers there (grid-map occupancy,
   :mod:`bt_meta.perception.topview`: at least 3 of the 4 half-lb cells of each unit cell); a cell the robot's
   own body hides in part (its self-filter: the segmentation of its links) is not perceivable then
 * ``at(pose)`` -- the gripper's pose (proprioception) is within 2.5 cm of the pose the symbol grounds to, for
@@ -52,6 +53,8 @@ POSE_TOLERANCE = 0.025
 TABLE_TOLERANCE = 0.015
 UPRIGHT_TOLERANCE = math.radians(25.0)
 INSERTED_TOLERANCE = 0.015
+TABLE_COLOUR = (0.93, 0.9, 0.83, 1.0)
+"""The simulator's table (RGBA), the lighting is balanced against when the world does not say."""
 
 
 class PerceivedState:
@@ -77,7 +80,10 @@ class PerceivedState:
         return camera
 
     def look(self, world: Any) -> Any:
-        """One noisy top view, analysed (blocks with colour, shape, centroid)."""
+        """One noisy top view, analysed (blocks with colour, shape, centroid) with the thresholds of every colour the
+        scene format defines, on the table's colour: a green block at its cell is seen there, like a blue one. The
+        frame's lighting is first balanced against the table's declared colour (the greys are told by value)."""
+        from bt_meta.perception.colours import balance_to_background, scene_thresholds
         from bt_meta.perception.hsv import PlaneProjection
         from bt_meta.perception.topview import analyse
 
@@ -89,7 +95,9 @@ class PerceivedState:
         image = corrupt_image(image, self.noise, SensingNoise.rng(self.seed, 2, self.frames), self.calibration)
         self.frames += 1
         projection = PlaneProjection.from_image(image, world.sim.table.top_z)
-        view = analyse(image.rgb, projection, depth=image.depth)
+        table = getattr(world.sim.table, "colour", None) or TABLE_COLOUR
+        view = analyse(balance_to_background(image.rgb, table), projection, depth=image.depth,
+                       thresholds=scene_thresholds(table))
         view.robot_mask = robot  # type: ignore[attr-defined]
         view.camera = camera  # type: ignore[attr-defined]
         return view

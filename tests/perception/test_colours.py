@@ -89,3 +89,68 @@ def test_the_simulator_renders_every_declared_colour_and_perception_sees_it():
         near = [b for b in blocks if math.hypot(b.centroid[0] - x, b.centroid[1] - y) < 0.02]
         assert [(b.colour, b.shape) for b in near] == [(colour, "1x1")], (colour, [b.colour for b in blocks])
     assert len(blocks) == len(names), [(b.colour, b.shape, b.centroid) for b in blocks]
+
+
+def lit_and_noisy(colour: str, seed: int) -> np.ndarray:
+    """``scene_of(colour)`` as the perceived world's camera gives it: a frame's lighting gain and white balance
+    (the whole image, table included) and pixel noise, drawn by :func:`bt_meta.sensing.noise.corrupt_image`."""
+    from bt_meta.sensing.noise import SensingNoise, corrupt_image
+    from bt_meta.world.simulation.camera import CameraImage
+
+    image = CameraImage(scene_of(colour), None, None, None, np.eye(4))  # type: ignore[arg-type]
+    return corrupt_image(image, SensingNoise(), SensingNoise.rng(seed, 2, 0), np.eye(4)).rgb
+
+
+@pytest.mark.parametrize("colour", list(COLOURS))
+def test_every_declared_colour_is_seen_under_the_perceived_worlds_lighting_once_balanced(colour):
+    from bt_meta.perception.colours import balance_to_background
+
+    thresholds = scene_thresholds(TABLE)
+    judged = 0
+    for seed in range(8):
+        frame = lit_and_noisy(colour, seed)
+        if colour == "white" and np.median(frame.reshape(-1, 3), axis=0).max() >= 250:
+            continue  # over-exposed: the table clipped to the white block's 255, nothing can tell them apart
+        judged += 1
+        blocks = detect_blocks(balance_to_background(frame, TABLE), top_view_projection(), thresholds=thresholds)
+        assert sorted((b.colour, b.shape) for b in blocks) == [(colour, "1x1"), (colour, "1x2")], (seed, blocks)
+    assert judged >= 6
+
+
+def test_without_balancing_a_dim_frame_shows_a_grey_as_another_grey():
+    """The greys are told by value, which a lighting gain scales: why the perceived world balances each frame."""
+    from bt_meta.perception.colours import balance_to_background
+
+    thresholds = scene_thresholds(TABLE)
+    image = scene_of("white")
+    dim = (image.astype(float) * 0.75).astype(np.uint8)  # the whole frame, table included
+    assert {b.colour for b in detect_blocks(dim, top_view_projection(), thresholds=thresholds)} != {"white"}
+    balanced = balance_to_background(dim, TABLE)
+    assert {b.colour for b in detect_blocks(balanced, top_view_projection(), thresholds=thresholds)} == {"white"}
+
+
+def test_balancing_undoes_a_gain_and_refuses_what_is_not_an_image():
+    from bt_meta.perception.colours import balance_to_background
+
+    image = scene_of("blue")
+    warm = np.clip(image.astype(float) * np.array([1.1, 1.0, 0.8]), 0, 255).astype(np.uint8)
+    restored = balance_to_background(warm, TABLE)
+    assert np.abs(restored.astype(int) - image.astype(int)).max() <= 3
+    with pytest.raises(ValueError, match="uint8 RGB image"):
+        balance_to_background(image.astype(float), TABLE)
+
+
+@pytest.mark.parametrize("other", [c for c in COLOURS if c != "blue"])
+def test_a_block_touching_one_of_another_colour_stays_a_block_of_its_own(other):
+    """Touching blocks of different colours are two blobs with their own shape and centroid (one mask per colour);
+    the grid-map monitor labels its cells one colour at a time too."""
+    from bt_meta.world.simulation.objects import LB
+
+    projection = top_view_projection()
+    image = blank(projection)
+    draw_block(image, projection, 0.70, -0.20, 0.0, "1x1", "blue")
+    draw_block(image, projection, 0.70 + 1.5 * LB, -0.20, 0.0, "1x2", other)  # end to end, no gap
+    blocks = detect_blocks(image, projection, thresholds=scene_thresholds(TABLE))
+    assert sorted((b.colour, b.shape) for b in blocks) == sorted([("blue", "1x1"), (other, "1x2")])
+    blue = next(b for b in blocks if b.colour == "blue")
+    assert math.hypot(blue.centroid[0] - 0.70, blue.centroid[1] + 0.20) < 0.003

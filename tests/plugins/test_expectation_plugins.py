@@ -16,11 +16,13 @@ import bt_meta_plugins.gridmap_expectations as gridmap_plugin
 import bt_meta_plugins.keypoint_expectations as keypoint_plugin
 import numpy as np
 import pytest
+from bt_meta_plugins.camera_perception import TABLE_COLOUR
 
 from bt_meta.bt.context import RunContext
 from bt_meta.bt.expectations import Expectation, StepContext
 from bt_meta.htn import State as HtnState
 from bt_meta.memory import Episode, EpisodicMemory, GridMap, ObjectState, State, Step, Trace
+from bt_meta.perception.colours import scene_thresholds
 from bt_meta.perception.synthetic import blank, draw_block, top_view_projection
 from bt_meta.perception.topview import analyse
 from bt_meta.plugins import PluginHost
@@ -511,6 +513,54 @@ def test_gridmap_colour_is_ignored_unless_asked(letters_memory):
     assert not verdict.matched and verdict.evidence["cells"] == 8
 
 
+def _bar_observations(bar_colour: str) -> dict:
+    projection = top_view_projection()
+    image = blank(projection)
+    for name, x, y, shape, *_ in PLAN[:5]:
+        draw_block(image, projection, *cell(x, y), -math.pi / 2, shape, bar_colour if name == "b5" else "blue")
+    return {"image": analyse(image, projection, thresholds=scene_thresholds(TABLE_COLOUR))}
+
+
+@pytest.mark.parametrize(("seen", "symbol", "matched"), [
+    ("green", "blue", False),   # the symbols say blue: a green bar is the wrong entity
+    ("yellow", "blue", False),
+    ("blue", "blue", True),
+    ("green", "green", True),   # the symbols say green: as seen
+    ("green", None, True),      # no colour symbol: occupancy only, as the paper's
+])
+def test_gridmap_colour_matters_where_the_task_symbols_name_it(letters_memory, seen, symbol, matched):
+    state = HtnState([("shape", "b5", "1x2")] + ([("colour", "b5", symbol)] if symbol else []))
+    context = StepContext(action="place", args=("b5", "1.5", "1"), step=4, node_id="n24",
+                          run=letters_run(None), state_before=state)
+    plugin = gridmap_plugin.GridMapExpectations(letters_memory, symbol_colours=True)
+    expectation = plugin.bt_meta_expectations(context)[0]
+    assert expectation.data["colours"] == ({"b5": symbol} if symbol else {})
+    verdict = gridmap_plugin.compare(expectation, _bar_observations(seen))
+    assert verdict.matched is matched, verdict.evidence
+    if not matched:
+        assert verdict.expectation.failure_kind.value == "unknown_entity"
+        assert verdict.evidence["maps"][0]["off_colour"] == 8
+        assert f"b5: 8 cells differ (expected blue 1x2, seen {seen} 1x2; 8 of another colour" in verdict.message
+    # the other blocks' colour does not matter: only the step's arguments are looked at
+    leg = StepContext(action="place", args=("b3", "3", "1"), step=3, node_id="n23", run=letters_run(None),
+                      state_before=state)
+    assert plugin.bt_meta_expectations(leg)[0].data["colours"] == {}
+    # by default (the paper's occupancy, as the demo's red bar needs) no colour is compared
+    assert gridmap_plugin.GridMapExpectations(letters_memory).bt_meta_expectations(context)[0].data["colours"] == {}
+
+
+def test_gridmap_symbol_colours_from_the_environment(monkeypatch):
+    from bt_meta.errors import ConfigError
+
+    monkeypatch.setenv(gridmap_plugin.ENV_COLOURS, "symbols")
+    assert gridmap_plugin.GridMapExpectations().symbol_colours is True
+    monkeypatch.setenv(gridmap_plugin.ENV_COLOURS, "occupancy")
+    assert gridmap_plugin.GridMapExpectations().symbol_colours is False
+    monkeypatch.setenv(gridmap_plugin.ENV_COLOURS, "maybe")
+    with pytest.raises(ConfigError, match="BT_META_GRIDMAP_COLOURS must be 'symbols' or 'occupancy', got 'maybe'"):
+        gridmap_plugin.GridMapExpectations()
+
+
 def test_camera_perception_needs_a_camera():
     import bt_meta_plugins.camera_perception as camera_plugin
 
@@ -550,10 +600,13 @@ def test_a_shifted_nominal_equivalent_scene_raises_nothing_with_keypoint_monitor
 
 
 class WindowView:
-    """A top view that shows one fixed window (no single block found near the centroid: blobs merged)."""
+    """A top view that shows one fixed window (no single block found near the centroid: blobs merged). Letters
+    are colour codes: ``b`` and ``#`` the block's colour, ``g`` another one."""
+
+    CODES = {".": 0, "b": 1, "#": 1, "g": 2}
 
     def __init__(self, occupancy: list[str]) -> None:
-        self.occupancy = np.array([[0 if c == "." else 1 for c in row] for row in occupancy], dtype=np.uint8)
+        self.occupancy = np.array([[self.CODES[c] for c in row] for row in occupancy], dtype=np.uint8)
 
     def block_near(self, centroid: Any, radius: float) -> None:
         return None
@@ -567,7 +620,9 @@ EXPECTED_LEG = ["......", "......", "..bb..", "..bb..", "..bb..", "..bb.."]  # t
 
 @pytest.mark.parametrize(("observed", "matched"), [
     (["....##", ".....#", "..bb..", "..bb..", "..bb..", "..bb.."], True),   # a distractor in the window's corner
-    (["...###", "...###", "..bb..", "..bb..", "..bb..", "..bb.."], False),  # one touching the placed block
+    (["...###", "...###", "..bb..", "..bb..", "..bb..", "..bb.."], False),  # one of its colour touching it
+    (["...ggg", "...ggg", "..bb..", "..bb..", "..bb..", "..bb.."], True),   # one of another colour touching it
+    (["......", "gggg..", "gggg..", "..bb..", "..bb..", "..bb.."], False),  # one of another colour on its cells
     (["bb....", "bb....", "......", "......", "..bb..", "..bb.."], False),  # the block landed a cell away
     (["......", "......", "......", "......", "..bb..", "..bb.."], False),  # the block is not there
 ])

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 pytestmark = pytest.mark.slow
@@ -40,6 +42,39 @@ def test_a_block_at_its_cell_is_seen_and_a_moved_one_is_not(world, noisy):
     assert observed["perceived"]["contradicted"] == [list(placed)]
     assert placed in world.symbolic_state()  # the bookkept state still believes it
     world.apply_symbolic([], [placed])
+
+
+@pytest.mark.parametrize("colour", ["green", "yellow", "orange", "red", "grey"])
+def test_a_block_of_any_declared_colour_at_its_cell_is_seen_under_changing_light(world, colour):
+    """The perceived world's thresholds are those of every declared colour, its frames balanced against the table:
+    a green b0 at its cell is where the symbols say, in every frame (each with its own lighting gain)."""
+    import pybullet
+
+    from bt_meta.sensing.noise import SensingNoise
+    from bt_meta.sensing.perceived import PerceivedState
+    from bt_meta.world.simulation.objects import COLOURS
+
+    sim = world.sim
+    body = sim.body_id("b0")
+    x, y, yaw = world.ground_cell("letter", "0", "0")
+    sim.move_object("b0", (x, y, sim.object_pose("b0")[2], 0.0, 0.0, yaw))
+    sim.settle(60)
+    placed = ("at", "b0", "0", "0")
+    world.apply_symbolic([placed], [("available", "b0")])
+    try:
+        for link in range(-1, pybullet.getNumJoints(body, physicsClientId=sim.client)):
+            pybullet.changeVisualShape(body, link, rgbaColor=COLOURS[colour], physicsClientId=sim.client)
+        for seed in range(3):
+            plugin = PerceivedState(seed=seed, noise=SensingNoise())
+            for _ in range(2):
+                observed = plugin.bt_meta_observe(world, None)
+                assert observed["perceived"]["contradicted"] == [], (seed, observed["perceived"])
+                assert any(b["colour"] == colour and math.hypot(b["centroid"][0] - x, b["centroid"][1] - y) < 0.02
+                           for b in observed["perceived"]["blocks"]), (seed, observed["perceived"]["blocks"])
+    finally:
+        for link in range(-1, pybullet.getNumJoints(body, physicsClientId=sim.client)):
+            pybullet.changeVisualShape(body, link, rgbaColor=COLOURS["blue"], physicsClientId=sim.client)
+        world.apply_symbolic([("available", "b0")], [placed])
 
 
 def test_a_1x1_where_a_1x2_belongs_contradicts_the_bar(world):

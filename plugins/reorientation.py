@@ -27,6 +27,7 @@ Offers:
 * :class:`Reorientation` -- the plugin as an object (memory, traces used, score)
 * :func:`reorientation_tasks` -- the domain's re-orientation tasks
 * :func:`quarter_turns` -- how many runs of a turn bring a normal to the wanted one
+* :func:`part_properties_missing` -- a precondition failure's missing atoms that are properties of the part alone
 * :func:`bt_meta_propose_repairs` -- the module-level hook (the ``reorientation`` entry point)
 """
 
@@ -48,14 +49,15 @@ from bt_meta.perception.recall import memory_for, root_task
 from bt_meta.plugins import ConfiguredPlugin, hookimpl
 from bt_meta.world.simulation.objects import rpy_to_matrix
 
-__all__ = ["Reorientation", "bt_meta_propose_repairs", "configure", "quarter_turns", "reorientation_tasks"]
+__all__ = ["Reorientation", "bt_meta_propose_repairs", "configure", "part_properties_missing", "quarter_turns",
+           "reorientation_tasks"]
 
 log = logging.getLogger("bt_meta.meta.reorientation")
 
 STRATEGY = "reorientation"
 PREFIX = "Reorient"
 KINDS = (FailureKind.VERIFICATION, FailureKind.UNEXPECTED_CONFIGURATION, FailureKind.COLLISION,
-         FailureKind.REACHABILITY)
+         FailureKind.REACHABILITY, FailureKind.PRECONDITION)
 GROSS_ANGLE = math.radians(45.0)
 """A normal further than this from the demonstrated one is an orientation no pose sampled near it can fix."""
 ALIGNED_ANGLE = math.radians(30.0)
@@ -180,12 +182,20 @@ class Reorientation:
         ours = [a for a in history if ((a.get("proposal") or {}).get("evidence") or {}).get("strategy") == STRATEGY]
         if off <= GROSS_ANGLE and not ours:
             return None  # the orientation is as demonstrated: not a re-orientation's business
+        missing = part_properties_missing(failure, part)
+        if failure.kind is FailureKind.PRECONDITION and not missing:
+            log.info("reorientation: the precondition failure misses no property of %s alone", part)
+            return None  # a symbolic failure about something else (a pose, a feature): not an orientation's
         state = world.symbolic_state()
+        if missing:  # the world may still hold what sensing contradicted at the failed precondition
+            state = state.apply(add=(), delete=[_atom(text) for text in missing])
         held = (world.observe() or {}).get("held") or {}
         evidence: dict[str, Any] = {"strategy": STRATEGY, "part": part, "object": seen_name,
                                     "normal": [round(float(v), 4) for v in normal],
                                     "demonstrated_normal": [round(float(v), 4) for v in wanted],
                                     "off_degrees": round(math.degrees(off), 1)}
+        if missing:
+            evidence["missing"] = missing
         if held and seen_name not in held.values() and any(h is not None for h in held.values()):
             log.info("reorientation: the gripper holds %s, not %s", held, part)
             return None
@@ -293,6 +303,41 @@ class Reorientation:
         if result.status != "success" or result.tree is None:
             return None
         return result.tree
+
+
+def part_properties_missing(failure: Any, part: str) -> list[str]:
+    """The atoms of a precondition failure's condition that are properties of ``part`` alone (every argument is
+    the part, e.g. ``upright(housing)``) and are not in the failure's state: with a normal grossly off, the
+    missing fact is the part's orientation, which a re-orientation restores. Empty for other failures."""
+    from bt_meta.htn.conditions import AndExpr, AtomExpr, Var, parse_condition
+
+    evidence = failure.evidence or {}
+    text = evidence.get("condition")
+    if failure.kind is not FailureKind.PRECONDITION or not isinstance(text, str):
+        return []
+    try:
+        condition = parse_condition(text)
+    except Exception:  # a condition this module cannot read: no claim about it
+        return []
+    bindings = {str(k).lstrip("?"): str(v) for k, v in (evidence.get("bindings") or {}).items()}
+    state = {str(atom).replace(" ", "") for atom in evidence.get("state") or ()}
+    out = []
+    for child in (condition.children if isinstance(condition, AndExpr) else (condition,)):
+        if not isinstance(child, AtomExpr) or not child.args:
+            continue
+        args = [bindings.get(a.name) if isinstance(a, Var) else a for a in child.args]
+        if any(a != part for a in args):
+            continue
+        atom = f"{child.pred}({', '.join(args)})"
+        if atom.replace(" ", "") not in state:
+            out.append(atom)
+    return out
+
+
+def _atom(text: str) -> tuple[str, ...]:
+    """``"upright(housing)"`` -> ``("upright", "housing")``."""
+    pred, _, rest = text.partition("(")
+    return (pred, *(a.strip() for a in rest.rstrip(")").split(",") if a.strip()))
 
 
 def _tried_key(evidence: dict[str, Any]) -> tuple[str, int, bool]:

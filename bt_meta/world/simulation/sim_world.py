@@ -586,7 +586,9 @@ class SimWorld:
           whatever rests on it (grasp poses: a few millimetres);
         * ``above_feature: FEATURE, height: h`` -- the held object's lowest point ``h`` above the feature's point,
           its centroid over it (the gripper itself when nothing is held);
-        * ``anchor: NAME, offset: [dx, dy, dz]`` -- a scene anchor plus an offset.
+        * ``anchor: NAME, offset: [dx, dy, dz]`` -- a scene anchor plus an offset; with ``turn_up: OBJECT``
+          (and ``turn``, degrees, default 90) the gripper turned by at most that toward standing the object on
+          its base (:meth:`turn_up`): a re-orientation's turn for whichever way the part lies.
         """
         arm = arm or self.default_arm
         spec = self.pose_spec(symbol)
@@ -622,9 +624,34 @@ class SimWorld:
             position, _ = self.anchor(str(spec["anchor"]))
             offset = [float(v) for v in spec.get("offset", (0.0, 0.0, 0.0))]
             out[:3, 3] = np.asarray(position) + np.asarray(offset)
+            if "turn_up" in spec:
+                flip = [float(v) for v in spec.get("flip_axis", (1.0, 0.0, 0.0))]
+                out[:3, :3] = self.turn_up(str(spec["turn_up"]), math.radians(float(spec.get("turn", 90.0))),
+                                           out[:3, :3], arm, np.asarray(flip)) @ out[:3, :3]
             return out
         raise SkillAbort(FailureKind.INTERNAL,
                          f"pose {symbol!r} in {self.grounding.path}: give pose, above, above_feature or anchor")
+
+    def turn_up(self, symbol: str, most: float, grip: np.ndarray, arm: str, flip: np.ndarray) -> np.ndarray:
+        """The rotation (3x3, base frame) of a gripper held at orientation ``grip`` that turns object ``symbol``
+        by at most ``most`` toward standing on its base (its z axis up), about the horizontal axis that does it
+        soonest; upside down (more than 135 degrees off, where that axis is noise) about ``flip``. Measured from
+        how the gripper holds it (or, not held, how a grasp at ``grip`` would), so the pose stays the same while
+        the turn is under way."""
+        name = self.object_name(symbol)
+        if self.sim.held(arm) == name:
+            up = grip @ self.held_relative(arm)[:3, 2]
+        else:
+            up = self.sim.object_transform(name)[:3, 2]
+        vertical = np.array([0.0, 0.0, 1.0])
+        angle = math.acos(max(-1.0, min(1.0, float(up @ vertical))))
+        axis = np.cross(up, vertical)
+        if angle > math.radians(135.0) or float(np.linalg.norm(axis)) < 1e-6:
+            axis = flip - (flip @ vertical) * vertical
+        axis = axis / float(np.linalg.norm(axis))
+        angle = min(angle, most)
+        k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+        return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
 
     def anchor(self, name: str) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """A scene anchor's position (z on the table top when the file says ``table``) and rpy."""

@@ -129,10 +129,15 @@ class Reorientation:
         return None if norm < 1e-9 else mean / norm
 
     @staticmethod
-    def turn_of(world: Any, domain: Any, plan: Sequence[Sequence[str]]) -> np.ndarray:
-        """The rotation one re-orientation gives the held part: its set-down pose against the top-down grasp."""
+    def turn_of(world: Any, domain: Any, plan: Sequence[Sequence[str]], normal: Sequence[float] | None = None,
+                wanted: Sequence[float] | None = None) -> np.ndarray:
+        """The rotation one re-orientation gives the held part: its set-down pose against the top-down grasp; a
+        method without a ``MoveTo`` (one skill turns the part, the letters' ``turn_over``) turns it a quarter
+        toward ``wanted`` from ``normal`` (what such a skill does), when both are given."""
         ground = getattr(world, "ground_pose", None)
         moves = [step[1] for step in plan if step[0] == "MoveTo" and len(step) > 1]
+        if not moves and normal is not None and wanted is not None:
+            return _quarter_toward(np.asarray(normal, float), np.asarray(wanted, float))
         if ground is not None and moves:
             try:
                 rotation = np.asarray(ground(str(moves[-1])), float)[:3, :3]
@@ -154,34 +159,25 @@ class Reorientation:
         task = root_task(context)
         if domain is None or problem is None or world is None or task is None:
             return None
-        root = problem.tasks[0]
-        if len(root) < 2:
-            return None
-        part = str(root[1])
         names = reorientation_tasks(domain)
         if not names:
             return None
-        to_world = getattr(world, "object_name", None)
-        try:
-            seen_name = str(to_world(part)) if to_world is not None else part
-        except Exception:
-            seen_name = part
         memory = memory_for(context, self.memory)
         if memory is None:
             return None
-        wanted = self.demonstrated_normal(memory, task, seen_name)
-        observed = (world.observe() or {}).get("objects", {}).get(seen_name)
-        if wanted is None or observed is None:
-            return None
-        try:
-            normal = keypoints_of(observed)[1]
-        except KeypointError:
-            return None
-        off = _angle(normal, wanted)
         history = failure.evidence.get("repair_history") or []
         ours = [a for a in history if ((a.get("proposal") or {}).get("evidence") or {}).get("strategy") == STRATEGY]
-        if off <= GROSS_ANGLE and not ours:
-            return None  # the orientation is as demonstrated: not a re-orientation's business
+        earlier = {str(a["proposal"]["evidence"].get("part")) for a in ours}
+        found = None
+        for part in _candidate_parts(problem, failure):
+            seen = self._orientation(world, memory, task, part)
+            if seen is not None and (_angle(seen[2], seen[1]) > GROSS_ANGLE or part in earlier):
+                found = (part, *seen)
+                break
+        if found is None:
+            return None  # every part the task or the failed step names is as demonstrated: not a re-orientation's
+        part, seen_name, wanted, normal = found
+        off = _angle(normal, wanted)
         missing = part_properties_missing(failure, part)
         if failure.kind is FailureKind.PRECONDITION and not missing:
             log.info("reorientation: the precondition failure misses no property of %s alone", part)
@@ -219,7 +215,10 @@ class Reorientation:
                 log.info("reorientation: no number of %s brings the normal of %s to the demonstrated one", name, part)
                 continue
             now = self._plan(domain, problem, state, [(name, part)] * turns + [tuple(t) for t in problem.tasks], run)
-            if now is None:
+            if now is None:  # the task network cannot be planned again from here (its blocks are placed): the turns,
+                now = self._before_rest(domain, problem, state, name, part, turns, failure, start, run)
+            if now is None:  # then the rest of the plan as it was
+                log.info("reorientation: %d x %s of %s leaves no plan for %s", turns, name, part, task)
                 continue
             replay = None
             first = None if initial is None else self._turns(world, domain, problem, problem.state, name, part,
@@ -236,6 +235,45 @@ class Reorientation:
                 f"{math.degrees(off):.0f} deg from the demonstrations'), then {task} again",
                 changes={"start": start, "end": end, "actions": now}, evidence=evidence)]
         return None
+
+    def _before_rest(self, domain: Any, problem: Any, state: Any, name: str, part: str, turns: int, failure: Any,
+                     start: int, run: Any) -> list[list[str]] | None:
+        """``turns`` runs of ``name`` then the failed plan's steps from ``start`` on, when they still apply."""
+        turned = self._plan(domain, problem, state, [(name, part)] * turns, run)
+        rest = [[str(s["action"]), *map(str, s.get("args") or ())] for s in failure.evidence.get("plan") or ()
+                if int(s.get("step", -1)) >= start]
+        if turned is None or not rest:
+            return None
+        current = state
+        for step in turned + rest:
+            primitive = domain.primitives.get(step[0])
+            if primitive is None:
+                return None
+            try:
+                current = primitive.ground(step[1:]).apply(current)
+            except Exception as error:  # the rest does not apply after the turns
+                log.info("reorientation: %s does not apply after the turns: %s", step, error)
+                return None
+        return turned + rest
+
+    def _orientation(self, world: Any, memory: Any, task: str, part: str
+                     ) -> tuple[str, np.ndarray, np.ndarray] | None:
+        """(world name, demonstrated normal, observed normal) of ``part``, or ``None`` when one is not known."""
+        to_world = getattr(world, "object_name", None)
+        try:
+            seen_name = str(to_world(part)) if to_world is not None else part
+        except Exception:
+            seen_name = part
+        observed = (world.observe() or {}).get("objects", {}).get(seen_name)
+        if observed is None:
+            return None
+        wanted = self.demonstrated_normal(memory, task, seen_name)
+        if wanted is None:
+            return None
+        try:
+            return seen_name, wanted, keypoints_of(observed)[1]
+        except KeypointError:
+            return None
 
     @staticmethod
     def _initial_normal(run: Any, name: str) -> np.ndarray | None:
@@ -274,7 +312,7 @@ class Reorientation:
             current = np.asarray(normal, float)
             for root in tree.roots:
                 steps = [[n.task[0], *map(str, n.task[1:])] for n in tree.primitives(root)]
-                current = self.turn_of(world, domain, steps) @ current
+                current = self.turn_of(world, domain, steps, normal, wanted) @ current
             if _angle(current, wanted) <= ALIGNED_ANGLE:
                 return k
         return None
@@ -331,6 +369,29 @@ def part_properties_missing(failure: Any, part: str) -> list[str]:
         atom = f"{child.pred}({', '.join(args)})"
         if atom.replace(" ", "") not in state:
             out.append(atom)
+    return out
+
+
+def _quarter_toward(normal: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    """The rotation by at most a quarter turn that brings ``normal`` toward ``wanted`` (opposite: about x)."""
+    a, b = normal / np.linalg.norm(normal), wanted / np.linalg.norm(wanted)
+    axis = np.cross(a, b)
+    if float(np.linalg.norm(axis)) < 1e-6 or _angle(a, b) > math.radians(135.0):
+        axis = np.array([1.0, 0.0, 0.0]) - float(b[0]) * b
+    axis = axis / float(np.linalg.norm(axis))
+    angle = min(_angle(a, b), math.pi / 2.0)
+    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
+
+
+def _candidate_parts(problem: Any, failure: Any) -> list[str]:
+    """The parts a re-orientation may be for: the root task's first argument (``InsertPart(housing, ...)``),
+    then the failed step's arguments (``place(b3, 0, 1)``: the letters' root task names none)."""
+    out: list[str] = []
+    root = problem.tasks[0] if problem.tasks else ()
+    for arg in (*root[1:2], *(getattr(failure, "args", None) or ())):
+        if str(arg) not in out:
+            out.append(str(arg))
     return out
 
 

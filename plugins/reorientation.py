@@ -182,8 +182,11 @@ class Reorientation:
         if failure.kind is FailureKind.PRECONDITION and not missing:
             log.info("reorientation: the precondition failure misses no property of %s alone", part)
             return None  # a symbolic failure about something else (a pose, a feature): not an orientation's
+        # What sensing contradicted at this failed precondition (or at the one an earlier re-orientation of this
+        # run answered, while the part is still off): the world's bookkeeping may still hold it.
+        missing = missing or sorted({str(m) for a in ours for m in a["proposal"]["evidence"].get("missing") or ()})
         state = world.symbolic_state()
-        if missing:  # the world may still hold what sensing contradicted at the failed precondition
+        if missing:
             state = state.apply(add=(), delete=[_atom(text) for text in missing])
         held = (world.observe() or {}).get("held") or {}
         evidence: dict[str, Any] = {"strategy": STRATEGY, "part": part, "object": seen_name,

@@ -100,7 +100,7 @@ def attach_memory(tmp_path):
 def test_the_task_files_ship_reorientation_tasks(magnetic):
     assert reorientation.reorientation_tasks(magnetic.domain) == ["Reorient"]
     assert reorientation.reorientation_tasks(load_task_file(HOUSING).domain) == ["Reorient"]
-    assert reorientation.reorientation_tasks(load_task_file(trees_dir() / "letters.yaml").domain) == []
+    assert reorientation.reorientation_tasks(load_task_file(trees_dir() / "letters.yaml").domain) == ["Reorient"]
 
 
 def test_quarter_turns_about_x():

@@ -117,6 +117,13 @@ def _flush_c_stdout() -> None:
 # The grounding file
 
 
+def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rotation by ``angle`` about ``axis`` (Rodrigues)."""
+    a = np.asarray(axis, float) / float(np.linalg.norm(axis))
+    k = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
+
+
 @dataclass(frozen=True)
 class Grounding:
     """What a grounding file says (see the module docstring and ``trees/poses/*.yaml``)."""
@@ -635,9 +642,10 @@ class SimWorld:
     def turn_up(self, symbol: str, most: float, grip: np.ndarray, arm: str, flip: np.ndarray) -> np.ndarray:
         """The rotation (3x3, base frame) of a gripper held at orientation ``grip`` that turns object ``symbol``
         by at most ``most`` toward standing on its base (its z axis up), about the horizontal axis that does it
-        soonest; upside down (more than 135 degrees off, where that axis is noise) about ``flip``. Measured from
-        how the gripper holds it (or, not held, how a grasp at ``grip`` would), so the pose stays the same while
-        the turn is under way."""
+        soonest; upside down (more than 135 degrees off, where that axis is noise) about ``flip``; then about the
+        vertical so the gripper points as a turn about ``flip`` would point it. Measured from how the gripper
+        holds it (or, not held, how a grasp at ``grip`` would), so the pose stays the same while the turn is under
+        way."""
         name = self.object_name(symbol)
         if self.sim.held(arm) == name:
             up = grip @ self.held_relative(arm)[:3, 2]
@@ -648,10 +656,16 @@ class SimWorld:
         axis = np.cross(up, vertical)
         if angle > math.radians(135.0) or float(np.linalg.norm(axis)) < 1e-6:
             axis = flip - (flip @ vertical) * vertical
-        axis = axis / float(np.linalg.norm(axis))
-        angle = min(angle, most)
-        k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
-        return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
+        turn = _rotation(axis, min(angle, most))
+        # Then about the vertical (the part stays as turned) so the gripper points where the turn about ``flip``
+        # points it: one wrist pose however the part lies, the one a fixed turn (the grounding's) reaches.
+        flat = flip - (flip @ vertical) * vertical
+        wanted = (_rotation(flat, math.pi / 2.0) @ grip)[:2, 2]
+        pointing = (turn @ grip)[:2, 2]
+        if float(np.linalg.norm(wanted)) < 1e-6 or float(np.linalg.norm(pointing)) < 1e-6:
+            return turn
+        yaw = math.atan2(wanted[1], wanted[0]) - math.atan2(pointing[1], pointing[0])
+        return _rotation(vertical, yaw) @ turn
 
     def anchor(self, name: str) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """A scene anchor's position (z on the table top when the file says ``table``) and rpy."""

@@ -21,6 +21,7 @@ Offers:
 * :func:`top_down` -- a gripper pose pointing at the table at (x, y, z) with a yaw
 * :func:`symmetry` -- the yaw period of an object's shape (1x1 block: 90 degrees, 1x2: 180 degrees)
 * :func:`nearest_yaw` -- the yaw equivalent to one under a symmetry nearest to a preferred yaw
+* :func:`turned_pose` -- the gripper pose that turns a held block toward standing on its base (mode ``turn``)
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from bt_meta.world.skills.base import PhasedSkill, SkillAbort, rounded
 from bt_meta.world.skills.grasp import Grasp
 from bt_meta.world.skills.move_to import MoveTo
 
-__all__ = ["Place", "nearest_yaw", "symmetry", "top_down"]
+__all__ = ["Place", "nearest_yaw", "symmetry", "top_down", "turned_pose"]
 
 GRIPPER_YAW = math.pi
 """Preferred world yaw of a top-down gripper (near Baxter's home orientation)."""
@@ -68,6 +69,40 @@ def nearest_yaw(yaw: float, period: float, preferred: float) -> float:
 
 def object_yaw(transform: np.ndarray) -> float:
     return math.atan2(transform[1, 0], transform[0, 0])
+
+
+def turned_pose(world: Any, block: str, arm: str, gripper: np.ndarray, held: np.ndarray, drop: float = 0.03
+                ) -> tuple[np.ndarray, bool]:
+    """(pose, reachable): the gripper at ``gripper`` holding ``block`` at ``held`` (its pose in the gripper frame)
+    turned by at most a quarter toward standing the block on its base, over where the block is, its lowest point
+    ``drop`` over the table -- or higher, where the turned wrist does not reach that low; upside down (any
+    horizontal axis does) about the first axis of :data:`FLIP_AXES` the arm reaches. The place skill's turn and
+    the campaign labeller's check of it."""
+    sim = world.sim
+    first = None
+    for flip in FLIP_AXES:
+        turned = np.asarray(gripper, float).copy()
+        turned[:3, :3] = world.turn_up(block, math.pi / 2.0, gripper[:3, :3], arm,
+                                       np.asarray(flip, float)) @ gripper[:3, :3]
+        moved = turned @ held
+        turned[:2, 3] += sim.object_transform(block)[:2, 3] - moved[:2, 3]
+        points = sim.object_model(block).points() @ moved[:3, :3].T + moved[:3, 3]
+        turned[2, 3] += sim.table.top_z + drop - float(points[:, 2].min())
+        first = turned.copy() if first is None else first
+        for _ in range(round((MAX_DROP - drop) / DROP_STEP) + 1):
+            if _reachable(world, arm, turned):
+                return turned, True
+            turned[2, 3] += DROP_STEP
+    return first, False
+
+
+def _reachable(world: Any, arm: str, pose: np.ndarray) -> bool:
+    ik = getattr(world, "ik", None)
+    if ik is None:
+        return True
+    import pinocchio as pin
+
+    return bool(ik.solve(arm, pin.SE3(pose[:3, :3], pose[:3, 3]), world.current_q(), seed=0).success)
 
 
 class Place(PhasedSkill):
@@ -167,35 +202,9 @@ class Place(PhasedSkill):
         return pose
 
     def _turned(self) -> np.ndarray:
-        """The gripper turned (at most a quarter) toward standing the held block on its base, over where the
-        block is, its lowest point :attr:`drop` over the table -- or higher, where the turned wrist does not reach
-        that low; upside down (any horizontal axis does) the first axis of :data:`FLIP_AXES` the arm reaches."""
-        world, sim = self.world, self.world.sim
-        gripper = sim.link_transform(world.end_effector(self.arm)).copy()
-        held = world.held_relative(self.arm)
-        first = None
-        for flip in FLIP_AXES:
-            turned = gripper.copy()
-            turned[:3, :3] = world.turn_up(self.block, math.pi / 2.0, gripper[:3, :3], self.arm,
-                                           np.asarray(flip, float)) @ gripper[:3, :3]
-            block = turned @ held
-            turned[:2, 3] += sim.object_transform(self.block)[:2, 3] - block[:2, 3]
-            points = sim.object_model(self.block).points() @ block[:3, :3].T + block[:3, 3]
-            turned[2, 3] += sim.table.top_z + self.drop - float(points[:, 2].min())
-            first = turned if first is None else first
-            for _ in range(int(round((MAX_DROP - self.drop) / DROP_STEP)) + 1):
-                if self._reachable(turned):
-                    return turned
-                turned[2, 3] += DROP_STEP
-        return first
-
-    def _reachable(self, pose: np.ndarray) -> bool:
-        ik = getattr(self.world, "ik", None)
-        if ik is None:
-            return True
-        import pinocchio as pin
-
-        return bool(ik.solve(self.arm, pin.SE3(pose[:3, :3], pose[:3, 3]), self.world.current_q(), seed=0).success)
+        world = self.world
+        gripper = world.sim.link_transform(world.end_effector(self.arm)).copy()
+        return turned_pose(world, self.block, self.arm, gripper, world.held_relative(self.arm), self.drop)[0]
 
     def _goal_block(self) -> np.ndarray:
         """Where the block should end up: centroid at the goal, resting on the table, axes along the frame."""

@@ -287,3 +287,23 @@ def test_turn_up_poses_turn_a_lying_housing_toward_its_base_however_it_lies():
             assert up[2] > math.cos(math.radians(5.0)), (roll, yaw, up)
     finally:
         world.close()
+
+
+def test_a_letters_block_on_its_side_mid_letter_is_turned_before_the_rest_of_the_plan(tmp_path):
+    """draw_A() names no block: the part is the failed step's block, whose normal is 90 deg off. The letter cannot
+    be planned again mid-plan (its first blocks are placed), so the turn goes before the rest of the plan."""
+    letters = load_task_file(trees_dir() / "letters.yaml")
+    memory = demonstration_memory(tmp_path / "l.sqlite", "draw_A", "A", "b3")
+    try:
+        failure, context = failure_and_context(letters, "A", PartWorld("b3", SIDE, None, None, {}), memory, done=3,
+                                               kind=FailureKind.REACHABILITY)
+        rest = [" ".join(s.task) for s in PlanState(plan(letters.domain, letters.problem("A")).tree).steps()[3:]]
+        assert rest[0].startswith("place b3")
+        proposal = reorientation.Reorientation(memory).bt_meta_propose_repairs(failure, context)[0]
+        assert proposal.evidence["part"] == "b3" and proposal.evidence["turns"] == 1
+        assert [" ".join(a) for a in proposal.changes["actions"]] == ["turn_over b3", *rest]
+        failure, context = failure_and_context(letters, "A", PartWorld("b3", DOWN, None, None, {}), memory, done=3,
+                                               kind=FailureKind.REACHABILITY)
+        assert reorientation.Reorientation(memory).bt_meta_propose_repairs(failure, context) is None  # as shown
+    finally:
+        memory.close()

@@ -132,11 +132,12 @@ class Reorientation:
     def turn_of(world: Any, domain: Any, plan: Sequence[Sequence[str]], normal: Sequence[float] | None = None,
                 wanted: Sequence[float] | None = None) -> np.ndarray:
         """The rotation one re-orientation gives the held part: its set-down pose against the top-down grasp; a
-        method without a ``MoveTo`` (one skill turns the part, the letters' ``turn_over``) turns it a quarter
-        toward ``wanted`` from ``normal`` (what such a skill does), when both are given."""
+        method without a ``MoveTo`` (one skill turns the part, the letters' ``turn_over``) or whose set-down pose
+        is a ``turn_up`` pose (grounded from how the part lies *now*: no model of a turn from another normal, e.g.
+        the one the run started with) turns it a quarter toward ``wanted`` from ``normal``, when both are given."""
         ground = getattr(world, "ground_pose", None)
         moves = [step[1] for step in plan if step[0] == "MoveTo" and len(step) > 1]
-        if not moves and normal is not None and wanted is not None:
+        if normal is not None and wanted is not None and (not moves or _turns_up(world, str(moves[-1]))):
             return _quarter_toward(np.asarray(normal, float), np.asarray(wanted, float))
         if ground is not None and moves:
             try:
@@ -294,6 +295,9 @@ class Reorientation:
         if tree is None:
             return None
         steps = [[n.task[0], *map(str, n.task[1:])] for n in tree.primitives()]
+        moves = [step[1] for step in steps if step[0] == "MoveTo" and len(step) > 1]
+        if moves and _turns_up(world, str(moves[-1])):
+            return None  # a turn toward the part's base, whatever it grounds to now
         turn = self.turn_of(world, domain, steps)
         if _angle(turn @ np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, 1.0])) > ALIGNED_ANGLE / 3:
             return None
@@ -373,6 +377,15 @@ def part_properties_missing(failure: Any, part: str) -> list[str]:
         if atom.replace(" ", "") not in state:
             out.append(atom)
     return out
+
+
+def _turns_up(world: Any, symbol: str) -> bool:
+    """Whether pose ``symbol`` is grounded as a turn toward the part's base (``turn_up`` in the grounding)."""
+    spec = getattr(world, "pose_spec", None)
+    try:
+        return spec is not None and isinstance(spec(symbol), dict) and "turn_up" in spec(symbol)
+    except Exception:  # a world without that pose: not a turn_up pose
+        return False
 
 
 def _quarter_toward(normal: np.ndarray, wanted: np.ndarray) -> np.ndarray:

@@ -595,7 +595,9 @@ class SimWorld:
           its centroid over it (the gripper itself when nothing is held);
         * ``anchor: NAME, offset: [dx, dy, dz]`` -- a scene anchor plus an offset; with ``turn_up: OBJECT``
           (and ``turn``, degrees, default 90) the gripper turned by at most that toward standing the object on
-          its base (:meth:`turn_up`): a re-orientation's turn for whichever way the part lies.
+          its base (:meth:`turn_up`): a re-orientation's turn for whichever way the part lies; with ``lowest:
+          h``, while it is held, lowered so its lowest point is ``h`` over the anchor (up to the offset's height
+          where the arm does not reach that low).
         """
         arm = arm or self.default_arm
         spec = self.pose_spec(symbol)
@@ -635,9 +637,26 @@ class SimWorld:
                 flip = [float(v) for v in spec.get("flip_axis", (1.0, 0.0, 0.0))]
                 out[:3, :3] = self.turn_up(str(spec["turn_up"]), math.radians(float(spec.get("turn", 90.0))),
                                            out[:3, :3], arm, np.asarray(flip)) @ out[:3, :3]
+                if "lowest" in spec and self.sim.held(arm) == self.object_name(str(spec["turn_up"])):
+                    self._lowest_over(out, position, float(spec["lowest"]), float(offset[2]), arm)
             return out
         raise SkillAbort(FailureKind.INTERNAL,
                          f"pose {symbol!r} in {self.grounding.path}: give pose, above, above_feature or anchor")
+
+    def _lowest_over(self, pose: np.ndarray, point: Sequence[float], lowest: float, most: float, arm: str) -> None:
+        """Lower ``pose`` (turned, holding a part) so the held part's lowest point is ``lowest`` over ``point``
+        (a part let go low lands as turned, a top-heavy one does not topple) -- raised back, 1 cm at a time up to
+        ``most`` over it, where the turned wrist does not reach that low."""
+        import pinocchio as pin
+
+        t = pose @ self.held_relative(arm)
+        points = self.sim.object_model(self.sim.held(arm)).points() @ t[:3, :3].T + t[:3, 3]
+        pose[2, 3] += float(point[2]) + lowest - float(points[:, 2].min())
+        while pose[2, 3] < float(point[2]) + most:
+            solved = self.ik.solve(arm, pin.SE3(pose[:3, :3], pose[:3, 3]), self.current_q(), seed=self.seed)
+            if solved.success:
+                return
+            pose[2, 3] = min(pose[2, 3] + 0.01, float(point[2]) + most)
 
     def turn_up(self, symbol: str, most: float, grip: np.ndarray, arm: str, flip: np.ndarray) -> np.ndarray:
         """The rotation (3x3, base frame) of a gripper held at orientation ``grip`` that turns object ``symbol``

@@ -119,6 +119,7 @@ class Place(PhasedSkill):
         self.goal: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self.turn = False
         self.drop = 0.03
+        self._turned_pose = np.eye(4)
 
     def ground(self, args: tuple[str, ...]) -> None:
         if self.spec.get("mode", "place") == "turn":
@@ -164,7 +165,8 @@ class Place(PhasedSkill):
             return [
                 *pick,
                 ("lift", lambda: self._move(self._lifted(), "lift " + self.block)),
-                ("turn", lambda: self._move(self._turned(), "turn " + self.block)),
+                ("turn", lambda: self._move(self._turned(), "turn " + self.block)),  # high: the block clear
+                ("lower", lambda: self._move(self._turned_pose, "lower " + self.block)),  # of the table
                 ("release", lambda: Grasp(self.world, self.arm).begin(self.block, release=True)),
                 ("retreat", lambda: self._move(self._retreat(), "retreat")),
             ]
@@ -202,9 +204,15 @@ class Place(PhasedSkill):
         return pose
 
     def _turned(self) -> np.ndarray:
+        """The turn, made where the block was lifted to (turning low swept it into the table); the lower phase
+        then goes down to :func:`turned_pose`."""
         world = self.world
         gripper = world.sim.link_transform(world.end_effector(self.arm)).copy()
-        return turned_pose(world, self.block, self.arm, gripper, world.held_relative(self.arm), self.drop)[0]
+        self._turned_pose = turned_pose(world, self.block, self.arm, gripper, world.held_relative(self.arm),
+                                        self.drop)[0]
+        high = self._turned_pose.copy()
+        high[2, 3] = max(high[2, 3], gripper[2, 3])
+        return high
 
     def _goal_block(self) -> np.ndarray:
         """Where the block should end up: centroid at the goal, resting on the table, axes along the frame."""

@@ -6,8 +6,14 @@ plugin is the symbolic repair a low-level expectation triggers (the dual encodin
 attachment normal, as perceived now, is grossly off (more than :data:`GROSS_ANGLE`) from where the demonstrations
 had it at the start, it looks in the method library for a **re-orientation task** -- a task whose name starts with
 ``Reorient`` and whose first parameter is the part -- and proposes to run it as many times as needed, then the
-problem's own task network again, from where the run stands. The task files that need it ship the methods (a
-regrasp: set the part down on another face, pick it again; ``trees/magnetic_attach.yaml``).
+problem's own task network again, from where the run stands (else, mid-plan where the network cannot be planned
+again, the rest of the failed plan). The part is the root task's first argument, else the failed step's argument
+whose normal is off (the letters' ``draw_A()`` names no block). The task files that need it ship the methods (a
+regrasp: set the part down on another face, pick it again; ``trees/magnetic_attach.yaml``,
+``trees/housing_insertion.yaml``, ``trees/letters.yaml``). A ``precondition`` failure is answered only when an atom
+its condition misses is a property of the part alone (``upright(housing)``, which sensing dropped): a symbolic
+failure answered by a re-orientation, decided from the missing atoms and the low-level mismatch; those atoms are
+taken out of the state the repair plans from.
 
 How many times: each run of the task (planned one after the other: the method may differ, a held part is set
 down first) turns the part by the rotation between its last set-down pose and the top-down grasp (read from the

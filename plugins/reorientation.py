@@ -6,8 +6,14 @@ plugin is the symbolic repair a low-level expectation triggers (the dual encodin
 attachment normal, as perceived now, is grossly off (more than :data:`GROSS_ANGLE`) from where the demonstrations
 had it at the start, it looks in the method library for a **re-orientation task** -- a task whose name starts with
 ``Reorient`` and whose first parameter is the part -- and proposes to run it as many times as needed, then the
-problem's own task network again, from where the run stands. The task files that need it ship the methods (a
-regrasp: set the part down on another face, pick it again; ``trees/magnetic_attach.yaml``).
+problem's own task network again, from where the run stands (else, mid-plan where the network cannot be planned
+again, the rest of the failed plan). The part is the root task's first argument, else the failed step's argument
+whose normal is off (the letters' ``draw_A()`` names no block). The task files that need it ship the methods (a
+regrasp: set the part down on another face, pick it again; ``trees/magnetic_attach.yaml``,
+``trees/housing_insertion.yaml``, ``trees/letters.yaml``). A ``precondition`` failure is answered only when an atom
+its condition misses is a property of the part alone (``upright(housing)``, which sensing dropped): a symbolic
+failure answered by a re-orientation, decided from the missing atoms and the low-level mismatch; those atoms are
+taken out of the state the repair plans from.
 
 How many times: each run of the task (planned one after the other: the method may differ, a held part is set
 down first) turns the part by the rotation between its last set-down pose and the top-down grasp (read from the
@@ -27,6 +33,7 @@ Offers:
 * :class:`Reorientation` -- the plugin as an object (memory, traces used, score)
 * :func:`reorientation_tasks` -- the domain's re-orientation tasks
 * :func:`quarter_turns` -- how many runs of a turn bring a normal to the wanted one
+* :func:`part_properties_missing` -- a precondition failure's missing atoms that are properties of the part alone
 * :func:`bt_meta_propose_repairs` -- the module-level hook (the ``reorientation`` entry point)
 """
 
@@ -48,14 +55,15 @@ from bt_meta.perception.recall import memory_for, root_task
 from bt_meta.plugins import ConfiguredPlugin, hookimpl
 from bt_meta.world.simulation.objects import rpy_to_matrix
 
-__all__ = ["Reorientation", "bt_meta_propose_repairs", "configure", "quarter_turns", "reorientation_tasks"]
+__all__ = ["Reorientation", "bt_meta_propose_repairs", "configure", "part_properties_missing", "quarter_turns",
+           "reorientation_tasks"]
 
 log = logging.getLogger("bt_meta.meta.reorientation")
 
 STRATEGY = "reorientation"
 PREFIX = "Reorient"
 KINDS = (FailureKind.VERIFICATION, FailureKind.UNEXPECTED_CONFIGURATION, FailureKind.COLLISION,
-         FailureKind.REACHABILITY)
+         FailureKind.REACHABILITY, FailureKind.PRECONDITION)
 GROSS_ANGLE = math.radians(45.0)
 """A normal further than this from the demonstrated one is an orientation no pose sampled near it can fix."""
 ALIGNED_ANGLE = math.radians(30.0)
@@ -127,10 +135,16 @@ class Reorientation:
         return None if norm < 1e-9 else mean / norm
 
     @staticmethod
-    def turn_of(world: Any, domain: Any, plan: Sequence[Sequence[str]]) -> np.ndarray:
-        """The rotation one re-orientation gives the held part: its set-down pose against the top-down grasp."""
+    def turn_of(world: Any, domain: Any, plan: Sequence[Sequence[str]], normal: Sequence[float] | None = None,
+                wanted: Sequence[float] | None = None) -> np.ndarray:
+        """The rotation one re-orientation gives the held part: its set-down pose against the top-down grasp; a
+        method without a ``MoveTo`` (one skill turns the part, the letters' ``turn_over``) or whose set-down pose
+        is a ``turn_up`` pose (grounded from how the part lies *now*: no model of a turn from another normal, e.g.
+        the one the run started with) turns it a quarter toward ``wanted`` from ``normal``, when both are given."""
         ground = getattr(world, "ground_pose", None)
         moves = [step[1] for step in plan if step[0] == "MoveTo" and len(step) > 1]
+        if normal is not None and wanted is not None and (not moves or _turns_up(world, str(moves[-1]))):
+            return _quarter_toward(np.asarray(normal, float), np.asarray(wanted, float))
         if ground is not None and moves:
             try:
                 rotation = np.asarray(ground(str(moves[-1])), float)[:3, :3]
@@ -152,40 +166,42 @@ class Reorientation:
         task = root_task(context)
         if domain is None or problem is None or world is None or task is None:
             return None
-        root = problem.tasks[0]
-        if len(root) < 2:
-            return None
-        part = str(root[1])
         names = reorientation_tasks(domain)
         if not names:
             return None
-        to_world = getattr(world, "object_name", None)
-        try:
-            seen_name = str(to_world(part)) if to_world is not None else part
-        except Exception:
-            seen_name = part
         memory = memory_for(context, self.memory)
         if memory is None:
             return None
-        wanted = self.demonstrated_normal(memory, task, seen_name)
-        observed = (world.observe() or {}).get("objects", {}).get(seen_name)
-        if wanted is None or observed is None:
-            return None
-        try:
-            normal = keypoints_of(observed)[1]
-        except KeypointError:
-            return None
-        off = _angle(normal, wanted)
         history = failure.evidence.get("repair_history") or []
         ours = [a for a in history if ((a.get("proposal") or {}).get("evidence") or {}).get("strategy") == STRATEGY]
-        if off <= GROSS_ANGLE and not ours:
-            return None  # the orientation is as demonstrated: not a re-orientation's business
+        earlier = {str(a["proposal"]["evidence"].get("part")) for a in ours}
+        found = None
+        for part in _candidate_parts(problem, failure):
+            seen = self._orientation(world, memory, task, part)
+            if seen is not None and (_angle(seen[2], seen[1]) > GROSS_ANGLE or part in earlier):
+                found = (part, *seen)
+                break
+        if found is None:
+            return None  # every part the task or the failed step names is as demonstrated: not a re-orientation's
+        part, seen_name, wanted, normal = found
+        off = _angle(normal, wanted)
+        missing = part_properties_missing(failure, part)
+        if failure.kind is FailureKind.PRECONDITION and not missing:
+            log.info("reorientation: the precondition failure misses no property of %s alone", part)
+            return None  # a symbolic failure about something else (a pose, a feature): not an orientation's
+        # What sensing contradicted at this failed precondition (or at the one an earlier re-orientation of this
+        # run answered, while the part is still off): the world's bookkeeping may still hold it.
+        missing = missing or sorted({str(m) for a in ours for m in a["proposal"]["evidence"].get("missing") or ()})
         state = world.symbolic_state()
+        if missing:
+            state = state.apply(add=(), delete=[_atom(text) for text in missing])
         held = (world.observe() or {}).get("held") or {}
         evidence: dict[str, Any] = {"strategy": STRATEGY, "part": part, "object": seen_name,
                                     "normal": [round(float(v), 4) for v in normal],
                                     "demonstrated_normal": [round(float(v), 4) for v in wanted],
                                     "off_degrees": round(math.degrees(off), 1)}
+        if missing:
+            evidence["missing"] = missing
         if held and seen_name not in held.values() and any(h is not None for h in held.values()):
             log.info("reorientation: the gripper holds %s, not %s", held, part)
             return None
@@ -209,7 +225,10 @@ class Reorientation:
                 log.info("reorientation: no number of %s brings the normal of %s to the demonstrated one", name, part)
                 continue
             now = self._plan(domain, problem, state, [(name, part)] * turns + [tuple(t) for t in problem.tasks], run)
-            if now is None:
+            if now is None:  # the task network cannot be planned again from here (its blocks are placed): the turns,
+                now = self._before_rest(domain, problem, state, name, part, turns, failure, start, run)
+            if now is None:  # then the rest of the plan as it was
+                log.info("reorientation: %d x %s of %s leaves no plan for %s", turns, name, part, task)
                 continue
             replay = None
             first = None if initial is None else self._turns(world, domain, problem, problem.state, name, part,
@@ -227,6 +246,45 @@ class Reorientation:
                 changes={"start": start, "end": end, "actions": now}, evidence=evidence)]
         return None
 
+    def _before_rest(self, domain: Any, problem: Any, state: Any, name: str, part: str, turns: int, failure: Any,
+                     start: int, run: Any) -> list[list[str]] | None:
+        """``turns`` runs of ``name`` then the failed plan's steps from ``start`` on, when they still apply."""
+        turned = self._plan(domain, problem, state, [(name, part)] * turns, run)
+        rest = [[str(s["action"]), *map(str, s.get("args") or ())] for s in failure.evidence.get("plan") or ()
+                if int(s.get("step", -1)) >= start]
+        if turned is None or not rest:
+            return None
+        current = state
+        for step in turned + rest:
+            primitive = domain.primitives.get(step[0])
+            if primitive is None:
+                return None
+            try:
+                current = primitive.ground(step[1:]).apply(current)
+            except Exception as error:  # the rest does not apply after the turns
+                log.info("reorientation: %s does not apply after the turns: %s", step, error)
+                return None
+        return turned + rest
+
+    def _orientation(self, world: Any, memory: Any, task: str, part: str
+                     ) -> tuple[str, np.ndarray, np.ndarray] | None:
+        """(world name, demonstrated normal, observed normal) of ``part``, or ``None`` when one is not known."""
+        to_world = getattr(world, "object_name", None)
+        try:
+            seen_name = str(to_world(part)) if to_world is not None else part
+        except Exception:
+            seen_name = part
+        observed = (world.observe() or {}).get("objects", {}).get(seen_name)
+        if observed is None:
+            return None
+        wanted = self.demonstrated_normal(memory, task, seen_name)
+        if wanted is None:
+            return None
+        try:
+            return seen_name, wanted, keypoints_of(observed)[1]
+        except KeypointError:
+            return None
+
     @staticmethod
     def _initial_normal(run: Any, name: str) -> np.ndarray | None:
         """The part's normal when the run started (the executor keeps the first observation on the run)."""
@@ -243,6 +301,9 @@ class Reorientation:
         if tree is None:
             return None
         steps = [[n.task[0], *map(str, n.task[1:])] for n in tree.primitives()]
+        moves = [step[1] for step in steps if step[0] == "MoveTo" and len(step) > 1]
+        if moves and _turns_up(world, str(moves[-1])):
+            return None  # a turn toward the part's base, whatever it grounds to now
         turn = self.turn_of(world, domain, steps)
         if _angle(turn @ np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, 1.0])) > ALIGNED_ANGLE / 3:
             return None
@@ -264,7 +325,7 @@ class Reorientation:
             current = np.asarray(normal, float)
             for root in tree.roots:
                 steps = [[n.task[0], *map(str, n.task[1:])] for n in tree.primitives(root)]
-                current = self.turn_of(world, domain, steps) @ current
+                current = self.turn_of(world, domain, steps, normal, wanted) @ current
             if _angle(current, wanted) <= ALIGNED_ANGLE:
                 return k
         return None
@@ -293,6 +354,73 @@ class Reorientation:
         if result.status != "success" or result.tree is None:
             return None
         return result.tree
+
+
+def part_properties_missing(failure: Any, part: str) -> list[str]:
+    """The atoms of a precondition failure's condition that are properties of ``part`` alone (every argument is
+    the part, e.g. ``upright(housing)``) and are not in the failure's state: with a normal grossly off, the
+    missing fact is the part's orientation, which a re-orientation restores. Empty for other failures."""
+    from bt_meta.htn.conditions import AndExpr, AtomExpr, Var, parse_condition
+
+    evidence = failure.evidence or {}
+    text = evidence.get("condition")
+    if failure.kind is not FailureKind.PRECONDITION or not isinstance(text, str):
+        return []
+    try:
+        condition = parse_condition(text)
+    except Exception:  # a condition this module cannot read: no claim about it
+        return []
+    bindings = {str(k).lstrip("?"): str(v) for k, v in (evidence.get("bindings") or {}).items()}
+    state = {str(atom).replace(" ", "") for atom in evidence.get("state") or ()}
+    out = []
+    for child in (condition.children if isinstance(condition, AndExpr) else (condition,)):
+        if not isinstance(child, AtomExpr) or not child.args:
+            continue
+        args = [bindings.get(a.name) if isinstance(a, Var) else a for a in child.args]
+        if any(a != part for a in args):
+            continue
+        atom = f"{child.pred}({', '.join(args)})"
+        if atom.replace(" ", "") not in state:
+            out.append(atom)
+    return out
+
+
+def _turns_up(world: Any, symbol: str) -> bool:
+    """Whether pose ``symbol`` is grounded as a turn toward the part's base (``turn_up`` in the grounding)."""
+    spec = getattr(world, "pose_spec", None)
+    try:
+        return spec is not None and isinstance(spec(symbol), dict) and "turn_up" in spec(symbol)
+    except Exception:  # a world without that pose: not a turn_up pose
+        return False
+
+
+def _quarter_toward(normal: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    """The rotation by at most a quarter turn that brings ``normal`` toward ``wanted`` (opposite: about x)."""
+    a, b = normal / np.linalg.norm(normal), wanted / np.linalg.norm(wanted)
+    axis = np.cross(a, b)
+    if float(np.linalg.norm(axis)) < 1e-6 or _angle(a, b) > math.radians(135.0):
+        axis = np.array([1.0, 0.0, 0.0]) - float(b[0]) * b
+    axis = axis / float(np.linalg.norm(axis))
+    angle = min(_angle(a, b), math.pi / 2.0)
+    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
+
+
+def _candidate_parts(problem: Any, failure: Any) -> list[str]:
+    """The parts a re-orientation may be for: the root task's first argument (``InsertPart(housing, ...)``),
+    then the failed step's arguments (``place(b3, 0, 1)``: the letters' root task names none)."""
+    out: list[str] = []
+    root = problem.tasks[0] if problem.tasks else ()
+    for arg in (*root[1:2], *(getattr(failure, "args", None) or ())):
+        if str(arg) not in out:
+            out.append(str(arg))
+    return out
+
+
+def _atom(text: str) -> tuple[str, ...]:
+    """``"upright(housing)"`` -> ``("upright", "housing")``."""
+    pred, _, rest = text.partition("(")
+    return (pred, *(a.strip() for a in rest.rstrip(")").split(",") if a.strip()))
 
 
 def _tried_key(evidence: dict[str, Any]) -> tuple[str, int, bool]:

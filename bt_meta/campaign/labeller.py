@@ -11,7 +11,8 @@ The variant's scene is built in pybullet and settled; then, in this order (the f
 2. ``limit:reachability`` / ``limit:collision`` -- kinematics and collision checks on the true scene: for every
    object the robot must pick up (the needed ones, else spares that could stand in), mink IK to the top-down
    grasp pose the skills use, collision-checked against the robot and the scene (the hand may touch the object
-   grasped). A role no candidate can fill: the failed solve's kind (``reachability`` beats ``collision``). A place
+   grasped; a letters block on another face: also the turn the place skill's ``turn`` mode would make from that
+   grasp). A role no candidate can fill: the failed solve's kind (``reachability`` beats ``collision``). A place
    where the task puts something that an object the task does not name occupies: ``limit:collision``.
 3. ``repairable`` -- the goal can be reached but not by the nominal plan: a needed object is missing or of
    another type (substitution), has another colour where the task's symbols name colours (its initial facts),
@@ -307,6 +308,16 @@ class Labeller:
             if not result.success:
                 return False, result.kind, f"{name}: {result.message}"
             q = result.q
+        if self.family.truth == "letters" and _angle(_up(transform), np.array([0.0, 0.0, 1.0])) > UP_TOLERANCE:
+            # A block on another face is turned where it lies before it is placed (the place skill keeps the
+            # tilt in the gripper): the turn the skill would make from that grasp, lifted, must be reachable.
+            from bt_meta.world.skills.place import turned_pose
+
+            grasp = top_down(transform[0, 3], transform[1, 3], top + GRASP_HEIGHT, yaw)
+            lifted = grasp.copy()
+            lifted[2, 3] += APPROACH_HEIGHT
+            if not turned_pose(world, name, "right", lifted, np.linalg.inv(grasp) @ transform)[1]:
+                return False, "reachability", f"{name}: the turn that stands it on its base is out of reach"
         return True, None, ""
 
     # -- obstacles --------------------------------------------------------------------------------------------

@@ -13,7 +13,8 @@ called first), and the monitor adopts it as the new belief. Perceivable atoms, b
   :mod:`bt_meta.perception.topview`: at least 3 of the 4 half-lb cells of each unit cell); a cell the robot's
   own body hides in part (its self-filter: the segmentation of its links) is not perceivable then
 * ``at(pose)`` -- the gripper's pose (proprioception) is within 2.5 cm of the pose the symbol grounds to, for
-  absolute and anchored poses (a pose relative to an object moves with the object once it is held: not judged)
+  absolute and anchored poses (a pose relative to an object moves with the object once it is held, a ``turn_up``
+  pose is grounded from how the part is held: not judged)
 * ``holding(part)`` -- the gripper holds that part (gripper sensing: the grasp constraint / finger contact)
 * ``on_table(part)`` -- not held, and its sensed lowest point within 1.5 cm of the table top
 * ``upright(part)`` -- its sensed up axis within 25 degrees of the vertical
@@ -130,9 +131,10 @@ class PerceivedState:
                 return None if None in seen else all(seen)
             if name == "at" and len(args) == 1:
                 spec = world.pose_spec(args[0])
-                if not ("pose" in spec or "anchor" in spec):
-                    # a pose relative to an object (``above: part``) moves with it once it is held: where the
-                    # gripper went cannot be re-derived from where the object is now
+                if not ("pose" in spec or "anchor" in spec) or "turn_up" in spec:
+                    # a pose relative to an object (``above: part``) moves with it once it is held, and a turn
+                    # toward a part's base is grounded from how it is held: where the gripper went cannot be
+                    # re-derived from where the object is now
                     return None
                 target = world.ground_pose(args[0])
                 gripper = sim.link_transform(world.end_effector("right"))

@@ -65,7 +65,7 @@ def test_a_malformed_file_gets_one_located_line_and_exit_2(tmp_path, capsys):
 
 def test_validate_summarises_a_good_file(capsys):
     assert main(["validate", LETTERS]) == 0
-    assert capsys.readouterr().out == f"{LETTERS}: ok (1 primitives, 7 methods, 5 problems)\n"
+    assert capsys.readouterr().out == f"{LETTERS}: ok (2 primitives, 8 methods, 5 problems)\n"
 
 
 EXTERNAL_DOMAIN = """\

@@ -100,7 +100,7 @@ def attach_memory(tmp_path):
 def test_the_task_files_ship_reorientation_tasks(magnetic):
     assert reorientation.reorientation_tasks(magnetic.domain) == ["Reorient"]
     assert reorientation.reorientation_tasks(load_task_file(HOUSING).domain) == ["Reorient"]
-    assert reorientation.reorientation_tasks(load_task_file(trees_dir() / "letters.yaml").domain) == []
+    assert reorientation.reorientation_tasks(load_task_file(trees_dir() / "letters.yaml").domain) == ["Reorient"]
 
 
 def test_quarter_turns_about_x():
@@ -208,5 +208,102 @@ def test_a_settle_or_turn_the_run_already_tried_is_not_proposed_again(tmp_path):
             failure.evidence["repair_history"].append({"proposal": {"action": proposal.action,
                                                                     "evidence": proposal.evidence}})
         assert plugin.bt_meta_propose_repairs(failure, context) is None
+    finally:
+        memory.close()
+
+
+def precondition_failure(housing: Any, world: PartWorld, memory: Any) -> tuple[Failure, Any]:
+    """The perceived world's failure: the housing held over the board, sensing dropped ``upright(housing)``, the
+    insertion's precondition fails before it moves (0 attempts)."""
+    failure, context = failure_and_context(housing, "nominal", world, memory, done=5,
+                                           kind=FailureKind.PRECONDITION)
+    insert = housing.domain.primitives["Insert"]
+    state = world.state.apply(add=(), delete=[("upright", "housing")])
+    failure.evidence.update(condition=insert.precondition.source, bindings={"part": "housing", "f": "housing_hole"},
+                            state=sorted(f"{a[0]}({', '.join(a[1:])})" for a in state))
+    return failure, context
+
+
+def test_a_precondition_missing_the_parts_orientation_is_answered_by_turning_it_where_it_is_held(tmp_path):
+    """The missing atom upright(housing) is a property of the part alone and its normal is 90 deg off: the held
+    housing is carried over the set-down spot and turned at once (not let go above the board); only the last turn
+    claims it lands upright, so the symbolic expectation of an intermediate turn does not fail."""
+    housing = load_task_file(HOUSING)
+    memory = demonstration_memory(tmp_path / "h.sqlite", "InsertPart", "nominal", "housing")
+    try:
+        plugin = reorientation.Reorientation(memory)
+        failure, context = precondition_failure(housing, PartWorld("housing", SIDE, None, "housing", TURNED), memory)
+        proposal = plugin.bt_meta_propose_repairs(failure, context)[0]
+        assert proposal.evidence["missing"] == ["upright(housing)"] and proposal.evidence["turns"] == 1
+        actions = [" ".join(a) for a in proposal.changes["actions"]]
+        assert actions[:3] == ["MoveTo turn_high", "MoveTo turn_low", "SetDownUpright housing"]
+        assert actions[-3:] == ["Insert housing housing_hole", "OpenGripper housing", "MoveTo hole_above"]
+        assert proposal.evidence["replay_plan"][0] == ["MoveTo", "housing_above"]  # from the start, for the refinement
+        failure, context = precondition_failure(housing, PartWorld("housing", UP, None, "housing", TURNED), memory)
+        proposal = plugin.bt_meta_propose_repairs(failure, context)[0]
+        releases = [a[0] for a in proposal.changes["actions"] if a[0].startswith("SetDown")]
+        assert proposal.evidence["turns"] == 2 and releases == ["SetDown", "SetDownUpright"]
+    finally:
+        memory.close()
+
+
+def test_a_precondition_missing_no_property_of_the_part_is_not_a_reorientations_business(tmp_path):
+    housing = load_task_file(HOUSING)
+    memory = demonstration_memory(tmp_path / "h.sqlite", "InsertPart", "nominal", "housing")
+    try:
+        world = PartWorld("housing", SIDE, None, "housing", TURNED)
+        failure, context = precondition_failure(housing, world, memory)
+        failure.evidence["state"] = [*failure.evidence["state"], "upright(housing)"]
+        failure.evidence["state"].remove("at(hole_above)")  # the gripper is elsewhere: a pose, not an orientation
+        assert reorientation.part_properties_missing(failure, "housing") == []
+        assert reorientation.Reorientation(memory).bt_meta_propose_repairs(failure, context) is None
+        failure.evidence["state"].remove("upright(housing)")
+        assert reorientation.part_properties_missing(failure, "housing") == ["upright(housing)"]
+        assert reorientation.part_properties_missing(failure, "housing_hole") == []  # free(f) holds
+    finally:
+        memory.close()
+
+
+@pytest.mark.slow
+def test_turn_up_poses_turn_a_lying_housing_toward_its_base_however_it_lies():
+    """The grounding's turn poses (``turn_up``) rotate the gripper about the horizontal axis that stands the part
+    up soonest, measured from how it is (or would be) held: on its side along any direction, one quarter turn
+    stands it; upside down, two about the file's flip axis (real simulator)."""
+    from bt_meta.world.simulation.objects import rpy_to_matrix
+    from bt_meta.world.simulation.sim_world import SimWorld, quiet_stdout
+
+    with quiet_stdout():
+        world = SimWorld.from_task_file(HOUSING, "nominal", seed=0)
+    try:
+        top_down = rpy_to_matrix(math.pi, 0.0, math.pi)
+        x, y, z = world.sim.object_transform("housing")[:3, 3]
+        for roll, yaw, quarter_turns in ((90.0, 0.0, 1), (90.0, 60.0, 1), (-90.0, 135.0, 1), (180.0, 20.0, 2)):
+            world.sim.move_object("housing", (x, y, z, math.radians(roll), 0.0, math.radians(yaw)))
+            up = world.sim.object_transform("housing")[:3, 2]
+            turn = world.ground_pose("turn_low")[:3, :3] @ top_down.T
+            assert np.allclose(world.ground_pose("turn_high")[:3, :3], world.ground_pose("turn_low")[:3, :3])
+            for _ in range(quarter_turns):
+                up = turn @ up
+            assert up[2] > math.cos(math.radians(5.0)), (roll, yaw, up)
+    finally:
+        world.close()
+
+
+def test_a_letters_block_on_its_side_mid_letter_is_turned_before_the_rest_of_the_plan(tmp_path):
+    """draw_A() names no block: the part is the failed step's block, whose normal is 90 deg off. The letter cannot
+    be planned again mid-plan (its first blocks are placed), so the turn goes before the rest of the plan."""
+    letters = load_task_file(trees_dir() / "letters.yaml")
+    memory = demonstration_memory(tmp_path / "l.sqlite", "draw_A", "A", "b3")
+    try:
+        failure, context = failure_and_context(letters, "A", PartWorld("b3", SIDE, None, None, {}), memory, done=3,
+                                               kind=FailureKind.REACHABILITY)
+        rest = [" ".join(s.task) for s in PlanState(plan(letters.domain, letters.problem("A")).tree).steps()[3:]]
+        assert rest[0].startswith("place b3")
+        proposal = reorientation.Reorientation(memory).bt_meta_propose_repairs(failure, context)[0]
+        assert proposal.evidence["part"] == "b3" and proposal.evidence["turns"] == 1
+        assert [" ".join(a) for a in proposal.changes["actions"]] == ["turn_over b3", *rest]
+        failure, context = failure_and_context(letters, "A", PartWorld("b3", DOWN, None, None, {}), memory, done=3,
+                                               kind=FailureKind.REACHABILITY)
+        assert reorientation.Reorientation(memory).bt_meta_propose_repairs(failure, context) is None  # as shown
     finally:
         memory.close()

@@ -141,6 +141,13 @@ def _flush_c_stdout() -> None:
 # The grounding file
 
 
+def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rotation by ``angle`` about ``axis`` (Rodrigues)."""
+    a = np.asarray(axis, float) / float(np.linalg.norm(axis))
+    k = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
+
+
 @dataclass(frozen=True)
 class Grounding:
     """What a grounding file says (see the module docstring and ``trees/poses/*.yaml``)."""
@@ -661,7 +668,11 @@ class SimWorld:
           ``touch: true`` marks a grasp pose: a friction grasp goes as deep as :meth:`grasp_height` says);
         * ``above_feature: FEATURE, height: h`` -- the held object's lowest point ``h`` above the feature's point,
           its centroid over it (the gripper itself when nothing is held);
-        * ``anchor: NAME, offset: [dx, dy, dz]`` -- a scene anchor plus an offset.
+        * ``anchor: NAME, offset: [dx, dy, dz]`` -- a scene anchor plus an offset; with ``turn_up: OBJECT``
+          (and ``turn``, degrees, default 90) the gripper turned by at most that toward standing the object on
+          its base (:meth:`turn_up`): a re-orientation's turn for whichever way the part lies; with ``lowest:
+          h``, while it is held, lowered so its lowest point is ``h`` over the anchor (up to the offset's height
+          where the arm does not reach that low).
         """
         arm = arm or self.default_arm
         spec = self.pose_spec(symbol)
@@ -702,6 +713,12 @@ class SimWorld:
             position, _ = self.anchor(str(spec["anchor"]))
             offset = [float(v) for v in spec.get("offset", (0.0, 0.0, 0.0))]
             out[:3, 3] = np.asarray(position) + np.asarray(offset)
+            if "turn_up" in spec:
+                flip = [float(v) for v in spec.get("flip_axis", (1.0, 0.0, 0.0))]
+                out[:3, :3] = self.turn_up(str(spec["turn_up"]), math.radians(float(spec.get("turn", 90.0))),
+                                           out[:3, :3], arm, np.asarray(flip)) @ out[:3, :3]
+                if "lowest" in spec and self.sim.held(arm) == self.object_name(str(spec["turn_up"])):
+                    self._lowest_over(out, position, float(spec["lowest"]), float(offset[2]), arm)
             return out
         raise SkillAbort(FailureKind.INTERNAL,
                          f"pose {symbol!r} in {self.grounding.path}: give pose, above, above_feature or anchor")
@@ -716,6 +733,48 @@ class SimWorld:
         if held is None:
             return target
         return target @ np.linalg.inv(self.held_relative(arm))
+    def _lowest_over(self, pose: np.ndarray, point: Sequence[float], lowest: float, most: float, arm: str) -> None:
+        """Lower ``pose`` (turned, holding a part) so the held part's lowest point is ``lowest`` over ``point``
+        (a part let go low lands as turned, a top-heavy one does not topple) -- raised back, 1 cm at a time up to
+        ``most`` over it, where the turned wrist does not reach that low."""
+        import pinocchio as pin
+
+        t = pose @ self.held_relative(arm)
+        points = self.sim.object_model(self.sim.held(arm)).points() @ t[:3, :3].T + t[:3, 3]
+        pose[2, 3] += float(point[2]) + lowest - float(points[:, 2].min())
+        while pose[2, 3] < float(point[2]) + most:
+            solved = self.ik.solve(arm, pin.SE3(pose[:3, :3], pose[:3, 3]), self.current_q(), seed=self.seed)
+            if solved.success:
+                return
+            pose[2, 3] = min(pose[2, 3] + 0.01, float(point[2]) + most)
+
+    def turn_up(self, symbol: str, most: float, grip: np.ndarray, arm: str, flip: np.ndarray) -> np.ndarray:
+        """The rotation (3x3, base frame) of a gripper held at orientation ``grip`` that turns object ``symbol``
+        by at most ``most`` toward standing on its base (its z axis up), about the horizontal axis that does it
+        soonest; upside down (more than 135 degrees off, where that axis is noise) about ``flip``; then about the
+        vertical so the gripper points as a turn about ``flip`` would point it. Measured from how the gripper
+        holds it (or, not held, how a grasp at ``grip`` would), so the pose stays the same while the turn is under
+        way."""
+        name = self.object_name(symbol)
+        if self.sim.held(arm) == name:
+            up = grip @ self.held_relative(arm)[:3, 2]
+        else:
+            up = self.sim.object_transform(name)[:3, 2]
+        vertical = np.array([0.0, 0.0, 1.0])
+        angle = math.acos(max(-1.0, min(1.0, float(up @ vertical))))
+        axis = np.cross(up, vertical)
+        if angle > math.radians(135.0) or float(np.linalg.norm(axis)) < 1e-6:
+            axis = flip - (flip @ vertical) * vertical
+        turn = _rotation(axis, min(angle, most))
+        # Then about the vertical (the part stays as turned) so the gripper points where the turn about ``flip``
+        # points it: one wrist pose however the part lies, the one a fixed turn (the grounding's) reaches.
+        flat = flip - (flip @ vertical) * vertical
+        wanted = (_rotation(flat, math.pi / 2.0) @ grip)[:2, 2]
+        pointing = (turn @ grip)[:2, 2]
+        if float(np.linalg.norm(wanted)) < 1e-6 or float(np.linalg.norm(pointing)) < 1e-6:
+            return turn
+        yaw = math.atan2(wanted[1], wanted[0]) - math.atan2(pointing[1], pointing[0])
+        return _rotation(vertical, yaw) @ turn
 
     def anchor(self, name: str) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """A scene anchor's position (z on the table top when the file says ``table``) and rpy."""

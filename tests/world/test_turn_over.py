@@ -1,0 +1,57 @@
+"""The letters' re-orientation skill (the place skill in mode ``turn``) on the shipped letter scene, in the real
+simulator: a block on its side stands on its base after one turn where it lies, an upside-down one after two; the
+campaign labeller's check of that turn (``turned_pose``) agrees it is reachable (slow)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from bt_meta.htn import load_task_file
+from bt_meta.resources import trees_dir
+from bt_meta.world.base import RUNNING
+from bt_meta.world.simulation.sim_world import SimWorld, load_grounding, quiet_stdout
+from bt_meta.world.skills import Place
+from bt_meta.world.skills.place import top_down, turned_pose
+
+pytestmark = pytest.mark.slow
+
+
+def turn(world: SimWorld, block: str) -> str:
+    skill = Place(world)
+    skill.spec = {"mode": "turn"}
+    skill.start([block])
+    for _ in range(800):
+        status = skill.tick()
+        if status != RUNNING:
+            return status
+    raise AssertionError("turn_over still running")
+
+
+@pytest.mark.parametrize(("roll", "pitch", "turns"), [(90.0, 0.0, 1), (0.0, -90.0, 1), (180.0, 0.0, 2)])
+def test_a_block_on_another_face_stands_on_its_base_after_its_turns(roll, pitch, turns):
+    task_file = load_task_file(trees_dir() / "letters.yaml")
+    with quiet_stdout():
+        world = SimWorld(task_file.domain, task_file.problem("A"), load_grounding("letters"))
+    try:
+        sim = world.sim
+        x, y = sim.object_transform("b3")[:2, 3]
+        model = sim.object_model("b3")
+        sim.move_object("b3", sim.resting_pose(model, (x, y, 0.0, math.radians(roll), math.radians(pitch), 0.0)))
+        sim.settle(60)
+        world.sync_collision()
+        transform = sim.object_transform("b3")
+        grasp = top_down(transform[0, 3], transform[1, 3], world.object_top("b3") + 0.004, math.pi)
+        lifted = grasp.copy()
+        lifted[2, 3] += 0.08
+        assert turned_pose(world, "b3", "right", lifted, np.linalg.inv(grasp) @ transform)[1]
+        for k in range(turns):
+            assert sim.object_transform("b3")[2, 2] < math.cos(math.radians(20.0)), k  # not yet standing
+            assert turn(world, "b3") == "SUCCESS"
+            assert sim.held("right") is None
+        assert sim.object_transform("b3")[2, 2] > math.cos(math.radians(10.0))
+        assert np.linalg.norm(sim.object_transform("b3")[:2, 3] - (x, y)) < 0.05  # where it lay
+    finally:
+        world.close()

@@ -22,6 +22,7 @@ A monitored action reports its Monitor's status (what the tree sees); pass ``raw
 
 from __future__ import annotations
 
+import random
 import re
 import shutil
 import socket
@@ -303,18 +304,31 @@ if pytest is not None:
         return make
 
 
+def _ephemeral_port_range() -> tuple[int, int]:
+    """The kernel's range for outgoing connections' local ports (Linux; the IANA range elsewhere)."""
+    try:
+        low, high = Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()
+        return int(low), int(high)
+    except (OSError, ValueError):
+        return 49152, 65535
+
+
 def free_groot2_port() -> int:
-    """A port P with P and P+1 free on 127.0.0.1 right now (a Groot2 server binds both); free, not reserved."""
+    """A port P with P and P+1 free on 127.0.0.1 right now (a Groot2 server binds both); free, not reserved.
+
+    Drawn at random from below the kernel's ephemeral range: a port the kernel handed out for a probe is the kind it
+    hands out next to an outgoing connection (every ZeroMQ client's local end), which then takes the port before the
+    server binds it ("Address already in use" in a long sweep, or with other test runs on the machine)."""
+    low, _ = _ephemeral_port_range()
+    top = max(low, 12000) - 2
+    draw = random.SystemRandom()
     for _ in range(200):
-        with socket.socket() as probe:
-            probe.bind(("127.0.0.1", 0))
-            port = probe.getsockname()[1]
-        if port >= 65000:
-            continue
-        with socket.socket() as second:
-            try:
+        port = draw.randrange(10000, top)
+        try:
+            with socket.socket() as first, socket.socket() as second:
+                first.bind(("127.0.0.1", port))
                 second.bind(("127.0.0.1", port + 1))
-            except OSError:
-                continue
+        except OSError:
+            continue
         return port
     raise RuntimeError("no free port pair on 127.0.0.1")

@@ -625,6 +625,14 @@ EXPECTED_LEG = ["......", "......", "..bb..", "..bb..", "..bb..", "..bb.."]  # t
     (["......", "gggg..", "gggg..", "..bb..", "..bb..", "..bb.."], False),  # one of another colour on its cells
     (["bb....", "bb....", "......", "......", "..bb..", "..bb.."], False),  # the block landed a cell away
     (["......", "......", "......", "......", "..bb..", "..bb.."], False),  # the block is not there
+    # a distractor against the leg below (over one of its cells) and out into the window's corner: not the step's
+    (["......", "......", "..bb..", "..bb..", "..bggg", "..bggg"], True),
+    (["......", "......", "..bb..", "..bb..", "..bbgg", "..bggg"], True),
+    # ... but the leg below knocked away, or the step's block one cell off, is still seen
+    (["......", "......", "..bb..", "..bb..", "....gg", "....gg"], False),
+    (["......", "......", "...bb.", "...bb.", "..bb..", "..bb.."], False),  # one cell to the side
+    (["......", "..bb..", "..bb..", "......", "..bb..", "..bb.."], False),  # one cell towards the far edge
+    (["......", "......", "...bbg", "...bbg", "..bbgg", "..bggg"], False),  # one cell off, a distractor by it
 ])
 def test_gridmap_counts_only_blobs_that_meet_what_memory_expected(observed, matched):
     expected = GridMap(WindowView(EXPECTED_LEG).occupancy, object_name="b5", colour="blue", shape="1x1",

@@ -642,3 +642,25 @@ def test_gridmap_counts_only_blobs_that_meet_what_memory_expected(observed, matc
         "rotations": False, "recentre_radius": 0.25 * LB, "parent_task": "draw_tall_leg", "task_end": True})
     comparison = gridmap_plugin.compare(expectation, {"image": WindowView(observed)})
     assert comparison.matched is matched, comparison.evidence
+
+
+EXPECTED_BAR = ["......", "......", ".bbbb.", ".bbbb.", "g....g", "g....g"]  # a 1x2 bar over legs of another colour
+
+
+@pytest.mark.parametrize(("observed", "matched"), [
+    (EXPECTED_BAR, True),
+    (["......", "......", ".bbbb.", ".bbbb.", "g..ggg", "g..ggg"], True),  # a distractor against a leg, into the corner
+    (["......", "......", "..bbbb", "..bbbb", "g....g", "g....g"], False),  # the bar one cell off
+    (["......", ".bbbb.", ".bbbb.", "......", "g....g", "g....g"], False),  # the bar one cell towards the far edge
+    (["......", "......", ".bbbb.", ".bbbb.", "......", "......"], False),  # the legs knocked away
+])
+def test_gridmap_compares_the_cells_the_steps_block_can_cover(observed, matched):
+    """A blob that meets only a neighbour's remembered cells (not the cells the step's 1x2 can cover) counts there
+    only; the bar itself off by a cell still differs."""
+    expected = GridMap(WindowView(EXPECTED_BAR).occupancy, object_name="b5", colour="blue", shape="1x2",
+                       centroid=(0.611, -0.008))
+    expectation = Expectation(kind=gridmap_plugin.KIND, description="grid-maps after place(b5, 1.5, 1)", data={
+        "traces": [{"episode": 1, "maps": [expected]}], "max_cells": 2, "compare_colour": False,
+        "rotations": False, "recentre_radius": 0.25 * LB, "parent_task": "draw_A_bar", "task_end": True})
+    comparison = gridmap_plugin.compare(expectation, {"image": WindowView(observed)})
+    assert comparison.matched is matched, comparison.evidence

@@ -10,7 +10,11 @@ into one blob) the remembered window itself is cropped. A trace matches when eve
 differs from the observation by at most ``max_cells`` cells; the step matches when any of the N traces does
 (nearest neighbour). Observed blobs that share no cell with the remembered map are left out of the count
 (another object in the window, e.g. a distractor a few centimetres off, is not what the step did; blobs are
-taken one colour at a time, so a distractor of another colour touching the block is left out too). With
+taken one colour at a time, so a distractor of another colour touching the block is left out too). What is
+compared is what the step could have changed: a blob that meets only other cells memory expected (a leg below,
+a block remembered in the window's corner) and none the step's block can cover (within half its longest side of
+the window's centre) counts only on those cells, so a distractor lying against a neighbour and out into the
+corner is not counted either; a block one cell off, or a neighbour knocked away, still differs. With
 ``symbol_colours`` (``BT_META_GRIDMAP_COLOURS=symbols``), colour matters where the task's symbols say it does: a
 block the step moves with a ``colour(b, c)`` fact must cover its cells in colour ``c`` -- each cell of another
 colour differs (the blue bar the symbols name, seen green); for the other blocks, and by default for all,
@@ -42,7 +46,7 @@ import numpy as np
 from bt_meta.bt.expectations import Comparison, Expectation
 from bt_meta.bt.failures import FailureKind
 from bt_meta.errors import ConfigError
-from bt_meta.perception.gridmap import grid_difference, render
+from bt_meta.perception.gridmap import DEFAULT_SPEC, grid_difference, render
 from bt_meta.perception.recall import memory_for, remember
 from bt_meta.plugins import ConfiguredPlugin, hookimpl
 from bt_meta.world.simulation.objects import LB
@@ -131,19 +135,55 @@ def _blobs(grid: np.ndarray) -> tuple[np.ndarray, int]:
     return labels, count
 
 
+def _centre_blobs(labels: np.ndarray) -> np.ndarray:
+    """Cells of the blobs over the window's centre: the step's block (the crop is centred on it), with whatever of
+    its colour touches it."""
+    rows, columns = labels.shape
+    centre = labels[rows // 2 - 1:rows // 2 + 1, columns // 2 - 1:columns // 2 + 1]
+    return np.isin(labels, [k for k in np.unique(centre) if k != 0])
+
+
+def _reach(expected: Any) -> np.ndarray:
+    """Cells the step's block can cover in its own window, which is centred on it: those within half its longest
+    side of the centre, however it is turned (``AxB`` in block units; the whole window for another shape). Leg
+    blocks of its colour that memory saw merged with it are outside."""
+    cells = np.asarray(expected.occupancy).shape
+    inside = np.ones(cells, dtype=bool)
+    try:
+        longest = max(float(side) for side in str(expected.shape).split("x"))
+    except ValueError:
+        return inside
+    reach = int(np.ceil(longest * LB / DEFAULT_SPEC.cell_size / 2.0))
+    rows, columns = np.indices(cells)
+    return ((np.abs(rows - (cells[0] - 1) / 2.0) < reach) & (np.abs(columns - (cells[1] - 1) / 2.0) < reach))
+
+
 def _touching(expected: Any, observed: Any) -> Any:
-    """``observed`` without the blobs that share no cell with what memory expected: another object in the window
-    (a distractor a few centimetres from the cell, or touching the placed block but of another colour) is not what
-    the step did. A block that landed elsewhere still differs: the cells expected occupied are then empty."""
+    """``observed`` reduced to what the step could have changed. Blobs that share no cell with what memory expected
+    are left out: another object in the window (a distractor a few centimetres from the cell, or touching the
+    placed block but of another colour) is not what the step did. A blob that meets only the *other* cells memory
+    expected (a neighbour block, or a corner of the window) and not the step's block keeps only those cells: a
+    distractor lying against the leg below and out into the window's corner is not the step's doing either, while
+    the neighbour's cells are still compared (one knocked away is still missed). A block that landed elsewhere still
+    differs: the cells expected occupied are then empty, and a blob over the step's block counts whole."""
     seen = np.asarray(observed.occupancy)
     labels, count = _blobs(seen)
     if count == 0:
         return observed
     wanted = np.asarray(expected.occupancy) != 0
-    keep = [k for k in range(1, count + 1) if np.any(wanted & (labels == k))]
-    if len(keep) == count:
+    step = wanted & _centre_blobs(_blobs(np.asarray(expected.occupancy))[0]) & _reach(expected)
+    if not step.any():
+        step = wanted  # nothing remembered over the centre: every expected cell may be the step's
+    kept = np.zeros(seen.shape, dtype=bool)
+    for k in range(1, count + 1):
+        blob = labels == k
+        if np.any(step & blob):
+            kept |= blob
+        elif np.any(wanted & blob):
+            kept |= blob & wanted
+    if np.all(kept == (seen != 0)):
         return observed
-    return replace(observed, occupancy=np.where(np.isin(labels, keep), seen, 0).astype(np.uint8))
+    return replace(observed, occupancy=np.where(kept, seen, 0).astype(np.uint8))
 
 
 def _distance(expected: Any, observed: Any, colour: bool, rotations: bool) -> int:
@@ -161,10 +201,7 @@ def _off_colour(expected: Any, observed: Any, code: int) -> int:
     that memory expected occupied and that show another colour than ``code``, the one the task's symbols give the
     block. The other blocks in the window (the legs below a bar) keep whatever colour they have."""
     seen = np.asarray(observed.occupancy)
-    labels, _ = _blobs(seen)
-    rows, columns = seen.shape
-    centre = labels[rows // 2 - 1:rows // 2 + 1, columns // 2 - 1:columns // 2 + 1]
-    moved = np.isin(labels, [k for k in np.unique(centre) if k != 0])
+    moved = _centre_blobs(_blobs(seen)[0])
     wanted = np.asarray(expected.occupancy) != 0
     return int(np.count_nonzero(moved & wanted & (seen != code)))
 

@@ -625,6 +625,14 @@ EXPECTED_LEG = ["......", "......", "..bb..", "..bb..", "..bb..", "..bb.."]  # t
     (["......", "gggg..", "gggg..", "..bb..", "..bb..", "..bb.."], False),  # one of another colour on its cells
     (["bb....", "bb....", "......", "......", "..bb..", "..bb.."], False),  # the block landed a cell away
     (["......", "......", "......", "......", "..bb..", "..bb.."], False),  # the block is not there
+    # a distractor against the leg below (over one of its cells) and out into the window's corner: not the step's
+    (["......", "......", "..bb..", "..bb..", "..bggg", "..bggg"], True),
+    (["......", "......", "..bb..", "..bb..", "..bbgg", "..bggg"], True),
+    # ... but the leg below knocked away, or the step's block one cell off, is still seen
+    (["......", "......", "..bb..", "..bb..", "....gg", "....gg"], False),
+    (["......", "......", "...bb.", "...bb.", "..bb..", "..bb.."], False),  # one cell to the side
+    (["......", "..bb..", "..bb..", "......", "..bb..", "..bb.."], False),  # one cell towards the far edge
+    (["......", "......", "...bbg", "...bbg", "..bbgg", "..bggg"], False),  # one cell off, a distractor by it
 ])
 def test_gridmap_counts_only_blobs_that_meet_what_memory_expected(observed, matched):
     expected = GridMap(WindowView(EXPECTED_LEG).occupancy, object_name="b5", colour="blue", shape="1x1",
@@ -632,5 +640,27 @@ def test_gridmap_counts_only_blobs_that_meet_what_memory_expected(observed, matc
     expectation = Expectation(kind=gridmap_plugin.KIND, description="grid-maps after place(b5, 3, 2)", data={
         "traces": [{"episode": 1, "maps": [expected]}], "max_cells": 2, "compare_colour": False,
         "rotations": False, "recentre_radius": 0.25 * LB, "parent_task": "draw_tall_leg", "task_end": True})
+    comparison = gridmap_plugin.compare(expectation, {"image": WindowView(observed)})
+    assert comparison.matched is matched, comparison.evidence
+
+
+EXPECTED_BAR = ["......", "......", ".bbbb.", ".bbbb.", "g....g", "g....g"]  # a 1x2 bar over legs of another colour
+
+
+@pytest.mark.parametrize(("observed", "matched"), [
+    (EXPECTED_BAR, True),
+    (["......", "......", ".bbbb.", ".bbbb.", "g..ggg", "g..ggg"], True),  # a distractor against a leg, into the corner
+    (["......", "......", "..bbbb", "..bbbb", "g....g", "g....g"], False),  # the bar one cell off
+    (["......", ".bbbb.", ".bbbb.", "......", "g....g", "g....g"], False),  # the bar one cell towards the far edge
+    (["......", "......", ".bbbb.", ".bbbb.", "......", "......"], False),  # the legs knocked away
+])
+def test_gridmap_compares_the_cells_the_steps_block_can_cover(observed, matched):
+    """A blob that meets only a neighbour's remembered cells (not the cells the step's 1x2 can cover) counts there
+    only; the bar itself off by a cell still differs."""
+    expected = GridMap(WindowView(EXPECTED_BAR).occupancy, object_name="b5", colour="blue", shape="1x2",
+                       centroid=(0.611, -0.008))
+    expectation = Expectation(kind=gridmap_plugin.KIND, description="grid-maps after place(b5, 1.5, 1)", data={
+        "traces": [{"episode": 1, "maps": [expected]}], "max_cells": 2, "compare_colour": False,
+        "rotations": False, "recentre_radius": 0.25 * LB, "parent_task": "draw_A_bar", "task_end": True})
     comparison = gridmap_plugin.compare(expectation, {"image": WindowView(observed)})
     assert comparison.matched is matched, comparison.evidence

@@ -68,6 +68,8 @@ KINDS = (FailureKind.VERIFICATION, FailureKind.UNEXPECTED_CONFIGURATION, Failure
 GROSS_ANGLE = math.radians(45.0)
 """A normal further than this from the demonstrated one is an orientation no pose sampled near it can fix."""
 ALIGNED_ANGLE = math.radians(30.0)
+UPSIDE_DOWN = math.radians(135.0)
+"""Further off than this a part is upside down (the turn's axis is then the flip axis, not the shortest way)."""
 MAX_TURNS = 3
 TOP_DOWN = rpy_to_matrix(math.pi, 0.0, math.pi)
 """The shipped groundings' grasp orientation (rpy 180, 0, 180): the turn is measured from it."""
@@ -429,16 +431,19 @@ def _back_out(domain: Any, state: Any) -> list[list[str]]:
 
 def _held_turned(failure: Any, name: str, wanted: np.ndarray) -> bool:
     """Whether the failed step measured the part it handled (``end_normal`` of an insertion: its insertable end)
-    more than :data:`GROSS_ANGLE` from the demonstrated normal: held turned, not jammed (a jammed part faces
-    the hole and fails as ``physical``)."""
+    more than :data:`GROSS_ANGLE` (and at most :data:`UPSIDE_DOWN`) from the demonstrated normal: held turned on
+    its side, not jammed (a jammed part faces the hole and fails as ``physical``)."""
     evidence = failure.evidence or {}
     measured = evidence.get("end_normal")
     if measured is None or str(evidence.get("part", name)) not in (name, *map(str, failure.args or ())):
         return False
     try:
-        return _angle(np.asarray(measured, float), np.asarray(wanted, float)) > GROSS_ANGLE
+        off = _angle(np.asarray(measured, float), np.asarray(wanted, float))
     except (TypeError, ValueError):
         return False
+    # Upside down (past UPSIDE_DOWN) it is let go first and the turns counted from how it lands: measured, two
+    # flips in a hand the insertion had pressed it into landed it 31 deg off (a third turn, no refinement kept).
+    return GROSS_ANGLE < off <= UPSIDE_DOWN
 
 
 def _turns_up(world: Any, symbol: str) -> bool:

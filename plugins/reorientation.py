@@ -34,6 +34,7 @@ Offers:
 * :func:`reorientation_tasks` -- the domain's re-orientation tasks
 * :func:`quarter_turns` -- how many runs of a turn bring a normal to the wanted one
 * :func:`part_properties_missing` -- a precondition failure's missing atoms that are properties of the part alone
+* :func:`turned_facts_held` -- the bookkept facts about the part a re-orientation method needs false
 * :func:`bt_meta_propose_repairs` -- the module-level hook (the ``reorientation`` entry point)
 """
 
@@ -56,7 +57,7 @@ from bt_meta.plugins import ConfiguredPlugin, hookimpl
 from bt_meta.world.simulation.objects import rpy_to_matrix
 
 __all__ = ["Reorientation", "bt_meta_propose_repairs", "configure", "part_properties_missing", "quarter_turns",
-           "reorientation_tasks"]
+           "reorientation_tasks", "turned_facts_held"]
 
 log = logging.getLogger("bt_meta.meta.reorientation")
 
@@ -67,6 +68,8 @@ KINDS = (FailureKind.VERIFICATION, FailureKind.UNEXPECTED_CONFIGURATION, Failure
 GROSS_ANGLE = math.radians(45.0)
 """A normal further than this from the demonstrated one is an orientation no pose sampled near it can fix."""
 ALIGNED_ANGLE = math.radians(30.0)
+UPSIDE_DOWN = math.radians(135.0)
+"""Further off than this a part is upside down (the turn's axis is then the flip axis, not the shortest way)."""
 MAX_TURNS = 3
 TOP_DOWN = rpy_to_matrix(math.pi, 0.0, math.pi)
 """The shipped groundings' grasp orientation (rpy 180, 0, 180): the turn is measured from it."""
@@ -193,6 +196,14 @@ class Reorientation:
         # run answered, while the part is still off): the world's bookkeeping may still hold it.
         missing = missing or sorted({str(m) for a in ours for m in a["proposal"]["evidence"].get("missing") or ()})
         state = world.symbolic_state()
+        back: list[list[str]] = []
+        if not missing and _held_turned(failure, seen_name, wanted):
+            # The failed step measured the held part grossly off (the insertion's end normal): it is held turned,
+            # not jammed. The orientation facts the re-orientation methods need false are contradicted; the
+            # gripper first backs out to where the failed step started (it stopped pressing the part on the
+            # target: dragged sideways from there, the grasp slips).
+            missing = turned_facts_held(domain, names, part, state)
+            back = _back_out(domain, state)
         if missing:
             state = state.apply(add=(), delete=[_atom(text) for text in missing])
         held = (world.observe() or {}).get("held") or {}
@@ -240,6 +251,8 @@ class Reorientation:
                 log.info("reorientation: %d x %s of %s was tried and failed: not again", turns, name, part)
                 continue
             evidence.update(method_task=name, turns=turns, replay_plan=replay)
+            if back and now[:1] != back:
+                now = back + now
             return [RepairProposal(
                 SPLICE, self.score, f"re-orient {part} by {turns} x {name} (its normal is "
                 f"{math.degrees(off):.0f} deg from the demonstrations'), then {task} again",
@@ -383,6 +396,54 @@ def part_properties_missing(failure: Any, part: str) -> list[str]:
         if atom.replace(" ", "") not in state:
             out.append(atom)
     return out
+
+
+def turned_facts_held(domain: Any, names: Sequence[str], part: str, state: Any) -> list[str]:
+    """The atoms of ``state`` that a re-orientation method of ``names`` needs false of ``part`` alone (``not
+    upright(?part)``): what a part measured turned contradicts in the bookkept state."""
+    from bt_meta.htn.conditions import AndExpr, AtomExpr, NotExpr, term_text
+
+    held = {tuple(map(str, atom)) for atom in state}
+    out: set[str] = set()
+    for method in domain.methods:
+        if method.task_name not in names or not method.task_args:
+            continue
+        first = term_text(method.task_args[0])
+        expr = method.precondition.expr
+        for child in (expr.children if isinstance(expr, AndExpr) else (expr,)):
+            atom = child.child if isinstance(child, NotExpr) else None
+            if not isinstance(atom, AtomExpr) or not atom.args or any(term_text(a) != first for a in atom.args):
+                continue
+            if (atom.pred, *[part] * len(atom.args)) in held:
+                out.add(f"{atom.pred}({', '.join([part] * len(atom.args))})")
+    return sorted(out)
+
+
+def _back_out(domain: Any, state: Any) -> list[list[str]]:
+    """``MoveTo`` the pose the state says the gripper is at (a no-op symbolically: the failed step did not get
+    to change it), when the domain has that one-pose primitive; else nothing."""
+    primitive = domain.primitives.get("MoveTo")
+    if primitive is None or len(primitive.parameters) != 1:
+        return []
+    poses = sorted(str(atom[1]) for atom in state if len(atom) == 2 and atom[0] == "at")
+    return [["MoveTo", poses[0]]] if len(poses) == 1 else []
+
+
+def _held_turned(failure: Any, name: str, wanted: np.ndarray) -> bool:
+    """Whether the failed step measured the part it handled (``end_normal`` of an insertion: its insertable end)
+    more than :data:`GROSS_ANGLE` (and at most :data:`UPSIDE_DOWN`) from the demonstrated normal: held turned on
+    its side, not jammed (a jammed part faces the hole and fails as ``physical``)."""
+    evidence = failure.evidence or {}
+    measured = evidence.get("end_normal")
+    if measured is None or str(evidence.get("part", name)) not in (name, *map(str, failure.args or ())):
+        return False
+    try:
+        off = _angle(np.asarray(measured, float), np.asarray(wanted, float))
+    except (TypeError, ValueError):
+        return False
+    # Upside down (past UPSIDE_DOWN) it is let go first and the turns counted from how it lands: measured, two
+    # flips in a hand the insertion had pressed it into landed it 31 deg off (a third turn, no refinement kept).
+    return GROSS_ANGLE < off <= UPSIDE_DOWN
 
 
 def _turns_up(world: Any, symbol: str) -> bool:

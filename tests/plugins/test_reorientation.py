@@ -158,6 +158,37 @@ def test_a_jammed_held_housing_is_set_down_first_and_the_goal_kept(tmp_path):
         memory.close()
 
 
+def test_a_housing_the_failed_insertion_measured_on_its_side_is_turned_in_the_hand_not_re_picked(tmp_path):
+    """Bookkept state (perfect sensing) keeps upright(housing); the insertion's end normal, 90 deg off the
+    demonstrated one, says the part is held turned, not jammed: back out, turn it once, insert again."""
+    housing = load_task_file(HOUSING)
+    memory = demonstration_memory(tmp_path / "h.sqlite", "InsertPart", "nominal", "housing")
+    try:
+        world = PartWorld("housing", SIDE, None, "housing", TURNED)
+        failure, context = failure_and_context(housing, "nominal", world, memory, done=5,
+                                               kind=FailureKind.UNEXPECTED_CONFIGURATION)
+        assert ("upright", "housing") in world.state  # the bookkeeping still says upright
+        failure.evidence.update(part="housing", end_normal=list(SIDE))
+        proposal = reorientation.Reorientation(memory).bt_meta_propose_repairs(failure, context)[0]
+        assert not proposal.evidence.get("settle") and proposal.evidence["turns"] == 1
+        assert proposal.evidence["missing"] == ["upright(housing)"]
+        actions = [" ".join(a) for a in proposal.changes["actions"]]
+        assert actions[:4] == ["MoveTo hole_above", "MoveTo turn_high", "MoveTo turn_low", "SetDownUpright housing"]
+        assert "SetDown housing" not in actions and actions.count("Insert housing housing_hole") == 1
+        failure.evidence["end_normal"] = list(DOWN)  # measured as demonstrated: no claim it is held turned
+        assert reorientation.Reorientation(memory).bt_meta_propose_repairs(failure, context)[0].evidence["settle"]
+    finally:
+        memory.close()
+
+
+def test_turned_facts_held_are_the_part_facts_a_reorient_method_needs_false():
+    housing = load_task_file(HOUSING)
+    state = housing.problem("nominal").state
+    assert reorientation.turned_facts_held(housing.domain, ["Reorient"], "housing", state) == ["upright(housing)"]
+    assert reorientation.turned_facts_held(housing.domain, ["Reorient"], "board", state) == []
+    assert reorientation.turned_facts_held(housing.domain, ["Other"], "housing", state) == []
+
+
 @pytest.mark.slow
 def test_upside_down_parts_are_repaired_by_reorientation_and_replayed_with_zero_attempts(tmp_path):
     from bt_meta.demo.capture import Progress

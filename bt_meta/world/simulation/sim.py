@@ -799,7 +799,7 @@ class Simulation:
         self._hand_collisions(body.body_id, self._hand_links[arm], False)
         self._pending_collision = [p for p in self._pending_collision if p[1] != name]
         cid = _fix(self.robot_id, end, body.body_id, rel, c)
-        self._grasps[arm] = _Grasp(arm, name, cid)
+        self._grasps[arm] = _Grasp(arm, name, cid, relative=rel)
         return True
 
     def grasps_by_friction(self, name: str, arm: str = "right") -> bool:
@@ -920,6 +920,17 @@ class Simulation:
     def held(self, arm: str = "right") -> str | None:
         grasp = self._grasps.get(arm)
         return grasp.object_name if grasp else None
+
+    def grasped_relative(self, arm: str = "right") -> np.ndarray | None:
+        """4x4 pose of the held object in the end-effector's URDF frame that the grasp holds it to (where it
+        was grasped; contact can press it out of that for a while); ``None`` if nothing is held."""
+        grasp = self._grasps.get(arm)
+        if grasp is None or grasp.relative is None:
+            return None
+        link = self.robot.arm(arm).end_effector
+        state = pybullet.getLinkState(self.robot_id, self.link_index(link), computeForwardKinematics=True,
+                                      physicsClientId=self.client)
+        return np.linalg.inv(self.link_transform(link)) @ _transform(state[0], state[1]) @ grasp.relative
 
     def holds_by_friction(self, arm: str = "right") -> bool:
         """Whether the arm holds something by its fingers' friction (it may turn or slide in them)."""

@@ -671,8 +671,8 @@ class SimWorld:
         * ``anchor: NAME, offset: [dx, dy, dz]`` -- a scene anchor plus an offset; with ``turn_up: OBJECT``
           (and ``turn``, degrees, default 90) the gripper turned by at most that toward standing the object on
           its base (:meth:`turn_up`): a re-orientation's turn for whichever way the part lies; with ``lowest:
-          h``, while it is held, lowered so its lowest point is ``h`` over the anchor (up to the offset's height
-          where the arm does not reach that low).
+          h``, while it (without ``turn_up``: anything) is held, lowered so its lowest point is ``h`` over the
+          anchor (up to the offset's height where the arm does not reach that low).
         """
         arm = arm or self.default_arm
         spec = self.pose_spec(symbol)
@@ -719,6 +719,8 @@ class SimWorld:
                                            out[:3, :3], arm, np.asarray(flip)) @ out[:3, :3]
                 if "lowest" in spec and self.sim.held(arm) == self.object_name(str(spec["turn_up"])):
                     self._lowest_over(out, position, float(spec["lowest"]), float(offset[2]), arm)
+            elif "lowest" in spec and self.sim.held(arm) is not None:  # not turned: by whatever is held, as it lies
+                self._lowest_over(out, position, float(spec["lowest"]), float(offset[2]), arm)
             return out
         raise SkillAbort(FailureKind.INTERNAL,
                          f"pose {symbol!r} in {self.grounding.path}: give pose, above, above_feature or anchor")

@@ -250,6 +250,9 @@ class MoveTo(SimSkill):
             held = world.sim.held(self.arm)
             drift = math.inf if held is None else float(
                 np.linalg.norm(world.held_relative(self.arm)[:3, 3] - self._held_rel[:3, 3]))
+            grasped = None if held is None else getattr(world.sim, "grasped_relative", lambda _arm: None)(self.arm)
+            if grasped is not None:  # pressed out of place at the start (a failed insertion), back in the grasp now
+                drift = min(drift, float(np.linalg.norm(world.held_relative(self.arm)[:3, 3] - grasped[:3, 3])))
             if drift > 0.01:
                 raise SkillAbort(FailureKind.PHYSICAL, f"move_to {self.label}: the held object was lost on the way",
                                  {"held": held, "drift": None if math.isinf(drift) else drift})

@@ -12,7 +12,6 @@ Offers:
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -20,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from bt_meta.perception.keypoints import KeypointError, keypoints_of
+from bt_meta.world.poses import axis_angle_matrix
 from bt_meta.world.simulation.objects import pose_to_matrix
 
 __all__ = ["Candidate", "good_object_poses", "gripper_pose_for", "local_keypoints", "matrix_of", "state_pose"]
@@ -34,13 +34,6 @@ def _state_pose(state: Any) -> np.ndarray:
     if pose is None or len(pose) != 6:
         raise KeypointError(f"object state {state!r} has no 6-number pose")
     return _matrix(pose)
-
-
-def _axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rodrigues: the rotation by ``angle`` about the unit ``axis``."""
-    x, y, z = axis / np.linalg.norm(axis)
-    k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
 
 
 def gripper_pose_for(object_pose: np.ndarray, grasp: np.ndarray) -> np.ndarray:
@@ -100,7 +93,7 @@ def good_object_poses(
         base_rotation = ref_now[:3, :3] @ relative[:3, :3]
         target_an = base_rotation @ an_local
         for turn in turns:
-            rotation = _axis_rotation(target_an, turn) @ base_rotation
+            rotation = axis_angle_matrix(target_an, turn) @ base_rotation
             pose = np.eye(4)
             pose[:3, :3] = rotation
             pose[:3, 3] = target_ap - rotation @ ap_local

@@ -36,6 +36,8 @@ from typing import Any
 
 import numpy as np
 
+from bt_meta.world.poses import axis_angle_matrix
+
 __all__ = ["SensingNoise", "corrupt_image", "depth_sigma", "pose_error", "sense_pose"]
 
 
@@ -78,17 +80,10 @@ def depth_sigma(noise: SensingNoise, z: np.ndarray | float) -> np.ndarray | floa
     return noise.depth_a + noise.depth_b * (np.asarray(z) - noise.depth_z0) ** 2
 
 
-def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
-    axis = axis / (np.linalg.norm(axis) or 1.0)
-    x, y, z = axis
-    k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
-
-
 def pose_error(rng: np.random.Generator, translation_sigma: float, rotation_sigma_deg: float) -> np.ndarray:
     """A rigid transform with Gaussian translation (per axis) and a rotation of Gaussian angle about a random axis."""
     out = np.eye(4)
-    out[:3, :3] = _rotation(rng.normal(size=3), math.radians(float(rng.normal(0.0, rotation_sigma_deg))))
+    out[:3, :3] = axis_angle_matrix(rng.normal(size=3), math.radians(float(rng.normal(0.0, rotation_sigma_deg))))
     out[:3, 3] = rng.normal(0.0, translation_sigma, size=3)
     return out
 
@@ -116,6 +111,7 @@ def sense_pose(transform: np.ndarray, noise: SensingNoise, rng: np.random.Genera
     out = calibration @ np.asarray(transform, dtype=float)
     out[2, 3] += float(rng.normal(0.0, float(depth_sigma(noise, distance))))
     if noise.pose_rotation_sigma_deg > 0.0:
-        out[:3, :3] = _rotation(rng.normal(size=3), math.radians(float(rng.normal(0.0, noise.pose_rotation_sigma_deg)))
-                                ) @ out[:3, :3]
+        axis = rng.normal(size=3)  # drawn before the angle, as ever: the seeded noise streams stay the same
+        angle = math.radians(float(rng.normal(0.0, noise.pose_rotation_sigma_deg)))
+        out[:3, :3] = axis_angle_matrix(axis, angle) @ out[:3, :3]
     return out

@@ -19,7 +19,7 @@ import numpy as np
 
 from bt_meta.errors import BtMetaError
 
-__all__ = ["Pose6", "PoseError", "matrix_to_pose", "pose_to_matrix", "rpy_to_matrix"]
+__all__ = ["Pose6", "PoseError", "axis_angle_matrix", "matrix_to_pose", "pose_to_matrix", "rpy_to_matrix"]
 
 Pose6 = tuple[float, float, float, float, float, float]
 
@@ -40,6 +40,14 @@ def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
             [-sp, cp * sr, cp * cr],
         ]
     )
+
+
+def axis_angle_matrix(axis: Sequence[float] | np.ndarray, angle: float) -> np.ndarray:
+    """Rotation by ``angle`` (radians) about ``axis`` (any length; a zero axis gives the identity), by Rodrigues."""
+    a = np.asarray(axis, float)
+    x, y, z = a / (float(np.linalg.norm(a)) or 1.0)
+    k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
 
 
 def pose_to_matrix(pose: Sequence[float]) -> np.ndarray:

@@ -49,6 +49,7 @@ from bt_meta.hookspecs import hookimpl
 from bt_meta.htn.state import State
 from bt_meta.resources import trees_dir
 from bt_meta.world.base import FAILURE, SUCCESS, Atom, SkillFailure, ground_effects
+from bt_meta.world.poses import axis_angle_matrix
 from bt_meta.world.simulation.objects import Box, Cylinder, Mesh, ObjectModel, pose_to_matrix, rpy_to_matrix
 from bt_meta.world.skills import SKILLS
 from bt_meta.world.skills.base import SimSkill, SkillAbort
@@ -139,13 +140,6 @@ def _flush_c_stdout() -> None:
 
 # --------------------------------------------------------------------------------------------------------------
 # The grounding file
-
-
-def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rotation by ``angle`` about ``axis`` (Rodrigues)."""
-    a = np.asarray(axis, float) / float(np.linalg.norm(axis))
-    k = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
-    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
 
 
 @dataclass(frozen=True)
@@ -767,16 +761,16 @@ class SimWorld:
         axis = np.cross(up, vertical)
         if angle > math.radians(135.0) or float(np.linalg.norm(axis)) < 1e-6:
             axis = flip - (flip @ vertical) * vertical
-        turn = _rotation(axis, min(angle, most))
+        turn = axis_angle_matrix(axis, min(angle, most))
         # Then about the vertical (the part stays as turned) so the gripper points where the turn about ``flip``
         # points it: one wrist pose however the part lies, the one a fixed turn (the grounding's) reaches.
         flat = flip - (flip @ vertical) * vertical
-        wanted = (_rotation(flat, math.pi / 2.0) @ grip)[:2, 2]
+        wanted = (axis_angle_matrix(flat, math.pi / 2.0) @ grip)[:2, 2]
         pointing = (turn @ grip)[:2, 2]
         if float(np.linalg.norm(wanted)) < 1e-6 or float(np.linalg.norm(pointing)) < 1e-6:
             return turn
         yaw = math.atan2(wanted[1], wanted[0]) - math.atan2(pointing[1], pointing[0])
-        return _rotation(vertical, yaw) @ turn
+        return axis_angle_matrix(vertical, yaw) @ turn
 
     def anchor(self, name: str) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """A scene anchor's position (z on the table top when the file says ``table``) and rpy."""

@@ -30,6 +30,7 @@ __all__ = ["MAX_ATTEMPTS", "episode_task", "run_episode", "variant_world"]
 
 MAX_ATTEMPTS = 6
 MAX_SECONDS = 90.0
+"""An episode's time budget, in CPU seconds of its process: a loaded machine does not change the outcome."""
 
 
 def episode_task(folder: str | Path, manifest: dict[str, Any], variant: dict[str, Any], configuration: str,
@@ -83,7 +84,7 @@ def _one_run(task: dict[str, Any], memory_path: Path, *, save: bool) -> dict[str
             host = plugin_host(task_path, memory, configuration=task["configuration"], seed=int(task["seed"]),
                                extra=extra)
             executor = MetaExecutor(task_file.domain, problem, world, host,
-                                    limits=Limits(max_attempts=MAX_ATTEMPTS, max_seconds=MAX_SECONDS),
+                                    limits=Limits(max_attempts=MAX_ATTEMPTS, max_seconds=MAX_SECONDS, clock="cpu"),
                                     refinements=refinements, save_refinements=save, task_file=task_file,
                                     variant=task.get("scene_variant", VARIANT_NAME), memory=memory)
             report = executor.run().to_dict()

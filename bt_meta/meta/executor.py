@@ -167,7 +167,8 @@ class MetaExecutor:
     def run(self) -> RunReport:
         from bt_meta.htn import plan
 
-        started = time.perf_counter()
+        started = self.limits.now()  # the budget clock (wall or CPU time); report.seconds is wall time
+        wall_started = time.perf_counter()
         name = getattr(self.problem, "name", None)
         report = RunReport(status="failed", problem=name)
         domain = self.base_domain
@@ -199,7 +200,7 @@ class MetaExecutor:
         if result.status != "success" or result.tree is None:
             report.status, report.message = "no_plan", f"{result.status}: {result.message}"
             report.stop_reason = "no plan for the problem"
-            return self._finish(report, run, started)
+            return self._finish(report, run, wall_started)
         plan_state = PlanState(result.tree, rebound=dict(report.rebound))
         report.refinements_used = [n.method for n in result.tree.walk() if n.method in added]
         report.initial_plan = [[a, *args] for a, args in plan_state.full_plan()]
@@ -285,7 +286,7 @@ class MetaExecutor:
                 report.refinement_saved = self._save_refinement(domain, _replayed(report), start_objects, facts,
                                                                 list(getattr(run.problem, "goal", None) or []),
                                                                 report.rebound)
-        return self._finish(report, run, started)
+        return self._finish(report, run, wall_started)
 
     def _perceive(self, domain: Any, refinements: list[Any], problem: Any, run: RunContext,
                   anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]],
@@ -354,7 +355,7 @@ class MetaExecutor:
         deadline = started + self.limits.max_seconds
         ticks_left = self.limits.max_ticks - report.ticks
         status = Status.RUNNING
-        while status is Status.RUNNING and len(harness.history) < ticks_left and time.perf_counter() < deadline:
+        while status is Status.RUNNING and len(harness.history) < ticks_left and self.limits.now() < deadline:
             status = harness.tick()
         report.ticks += len(harness.history)
         if status is Status.RUNNING:  # a budget ran out mid-step: cancel the running skill, say which budget
@@ -362,7 +363,8 @@ class MetaExecutor:
                             and b.status is Status.RUNNING), None)
             root.stop(Status.INVALID)
             budget = "tick" if len(harness.history) >= ticks_left else "time"
-            limit = (f"{self.limits.max_ticks} ticks" if budget == "tick" else f"{self.limits.max_seconds} s")
+            limit = (f"{self.limits.max_ticks} ticks" if budget == "tick"
+                     else f"{self.limits.max_seconds} s {self.limits.clock} time")
             run.record_failure(Failure(
                 kind=FailureKind.INTERNAL, message=f"{budget} budget spent ({limit}) while ticking",
                 step=None if running is None else running.step, node_id=None if running is None else running.node_id,
@@ -396,7 +398,7 @@ class MetaExecutor:
             key = self.reasoner.key(proposal, diagnosis)
             tried.add(key)
             attempt_started = time.perf_counter()
-            remaining = max(self.limits.max_seconds - (attempt_started - started), 0.001)
+            remaining = max(self.limits.max_seconds - (self.limits.now() - started), 0.001)
             try:
                 new_state, change = apply_proposal(
                     proposal, plan_state, failed_step=diagnosis.step, failed_node=diagnosis.node_id,
@@ -444,9 +446,9 @@ class MetaExecutor:
             return {"saved": False, "reason": str(error)}
         return None if saved is None else saved.to_dict()
 
-    def _finish(self, report: RunReport, run: RunContext, started: float) -> RunReport:
+    def _finish(self, report: RunReport, run: RunContext, wall_started: float) -> RunReport:
         report.failures = [f.to_dict() for f in run.failures]
-        report.seconds = time.perf_counter() - started
+        report.seconds = time.perf_counter() - wall_started
         run.emit("run_end", status=report.status, ticks=report.ticks)
         log.info("meta: run %s %s after %d attempt(s) in %.3f s%s", report.problem, report.status,
                  len(report.attempts), report.seconds, f" ({report.stop_reason})" if report.stop_reason else "")

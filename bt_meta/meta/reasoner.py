@@ -50,21 +50,36 @@ __all__ = ["Attempt", "Decision", "Diagnosis", "Limits", "MetaReasoner", "Reason
 
 log = logging.getLogger("bt_meta.meta")
 
+CLOCKS = {"wall": time.perf_counter, "cpu": time.process_time}
+"""What a :class:`Limits` time budget can count."""
+
 BLIND = frozenset({RETRY, REPLAN, REPLAN_SCRATCH})
 """Proposals that re-run the plan's own motions: useless against a motion limit a plugin found."""
 
 
 @dataclass
 class Limits:
-    """Budgets of one repaired run: applied repairs, wall time (planning and replanning included), ticks."""
+    """Budgets of one repaired run: applied repairs, time (planning and replanning included), ticks.
+
+    ``clock`` says what the time budget counts: ``"wall"`` (the default: what an operator waits) or ``"cpu"`` (this
+    process's CPU time, which a loaded machine does not eat; campaigns use it so an episode's outcome does not depend
+    on how many other episodes share the cores).
+    """
 
     max_attempts: int = 5
     max_seconds: float = 60.0
     max_ticks: int = 100_000
+    clock: str = "wall"
 
     def __post_init__(self) -> None:
         if self.max_attempts < 0 or self.max_seconds <= 0 or self.max_ticks <= 0:
             raise BtMetaError(f"bad repair limits: {self}; attempts >= 0, seconds > 0 and ticks > 0 required")
+        if self.clock not in CLOCKS:
+            raise BtMetaError(f"bad repair limits: clock {self.clock!r}; one of {', '.join(sorted(CLOCKS))}")
+
+    def now(self) -> float:
+        """The budget clock's reading, in seconds (only differences mean anything)."""
+        return CLOCKS[self.clock]()
 
 
 @dataclass
@@ -269,9 +284,10 @@ class MetaReasoner:
         """Ranked proposals to try, or a stop with its reason (budgets, a recurring motion limit, nothing left)."""
         if len(history) >= self.limits.max_attempts:
             return self._stop(diagnosis, f"attempt budget spent ({self.limits.max_attempts} repair attempt(s))")
-        elapsed = time.perf_counter() - started
+        elapsed = self.limits.now() - started
         if elapsed >= self.limits.max_seconds:
-            return self._stop(diagnosis, f"time budget spent ({elapsed:.2f} s of {self.limits.max_seconds} s)")
+            return self._stop(diagnosis, f"time budget spent ({elapsed:.2f} s of {self.limits.max_seconds} s "
+                                         f"{self.limits.clock} time)")
         if diagnosis.kind in MOTION_LIMITS and any(
                 a.kind == diagnosis.kind.value and a.step == diagnosis.step for a in history):
             return self._stop(diagnosis, f"{diagnosis.kind.value} again at step {diagnosis.step} after a repair: "

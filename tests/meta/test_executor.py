@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import time
 from typing import Any
 
 import pytest
@@ -139,14 +140,28 @@ def test_wall_time_is_bounded_while_ticking(blocks):
     world = FakeWorld(blocks.domain, problem, ticks_per_skill={"pick": 10**9})
     report = MetaExecutor(blocks.domain, problem, world, make_host(), limits=Limits(max_seconds=0.2)).run()
     assert report.status == "failed" and report.attempts == []
-    assert report.failures[0]["message"] == "time budget spent (0.2 s) while ticking"
+    assert report.failures[0]["message"] == "time budget spent (0.2 s wall time) while ticking"
     assert report.stop_reason.startswith("time budget spent")
     assert world.executed[0].cancelled
+
+
+def test_cpu_time_budget_bounds_ticking_and_ignores_waiting(blocks):
+    problem = blocks.problem("two")
+    world = FakeWorld(blocks.domain, problem, ticks_per_skill={"pick": 10**9})
+    report = MetaExecutor(blocks.domain, problem, world, make_host(),
+                          limits=Limits(max_seconds=0.2, clock="cpu")).run()
+    assert report.failures[0]["message"] == "time budget spent (0.2 s cpu time) while ticking"
+    limits = Limits(clock="cpu")
+    before = limits.now()
+    time.sleep(0.3)  # a loaded machine: the process waits, its CPU clock does not run
+    assert limits.now() - before < 0.1
 
 
 def test_bad_limits_are_refused():
     with pytest.raises(BtMetaError, match="bad repair limits"):
         Limits(max_attempts=-1)
+    with pytest.raises(BtMetaError, match="clock 'sundial'"):
+        Limits(clock="sundial")
 
 
 class StubbornRetry:

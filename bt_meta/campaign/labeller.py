@@ -443,7 +443,7 @@ class Labeller:
                 return f"grasping {name}: {why}"
             parts = [p for p in world.collision.objects if world.contact_object(p) == name]
             saved = {p: world.collision.pose(p) for p in parts}
-            hand = getattr(world, "_hand_links", {}).get("right", [])
+            hand = world.hand_links("right")
             for part in parts:
                 world.collision.attach(part, world.end_effector("right"), q2, allow=hand)
             try:

@@ -23,6 +23,9 @@ from __future__ import annotations
 
 import copy
 import math
+import os
+import shutil
+import socket
 import tempfile
 import xml.etree.ElementTree as ElementTree
 from collections.abc import Iterable, Mapping, Sequence
@@ -165,6 +168,31 @@ def _tuple3(v: Iterable[float]) -> tuple[float, float, float]:
 
 
 _URDF_FOLDER: tempfile.TemporaryDirectory[str] | None = None
+_URDF_PREFIX = "bt_meta_sim_"
+
+
+def _folder_prefix(pid: int) -> str:
+    return f"{_URDF_PREFIX}{socket.gethostname()}_{pid}_"
+
+
+def _remove_orphaned_urdf_folders(root: Path) -> list[Path]:
+    """Remove the URDF folders of this host's bt-meta processes that are gone (a SIGKILLed campaign worker cannot
+    remove its own). A folder is removed only when its name carries this host and the PID of no living process."""
+    removed = []
+    mine = f"{_URDF_PREFIX}{socket.gethostname()}_"
+    for folder in root.glob(f"{_URDF_PREFIX}*"):
+        rest = folder.name[len(mine):] if folder.name.startswith(mine) else None
+        pid_text = None if rest is None else rest.split("_", 1)[0]
+        if not folder.is_dir() or pid_text is None or not pid_text.isdigit():
+            continue
+        try:
+            os.kill(int(pid_text), 0)
+        except ProcessLookupError:
+            shutil.rmtree(folder, ignore_errors=True)
+            removed.append(folder)
+        except PermissionError:  # alive, another user's
+            continue
+    return removed
 
 
 def _robot_urdf_file(robot: RobotDescription, visuals: str) -> Path:
@@ -172,7 +200,8 @@ def _robot_urdf_file(robot: RobotDescription, visuals: str) -> Path:
     removed when the process ends: a worker serving many episodes does not rewrite it for each world."""
     global _URDF_FOLDER
     if _URDF_FOLDER is None:
-        _URDF_FOLDER = tempfile.TemporaryDirectory(prefix="bt_meta_sim_")
+        _remove_orphaned_urdf_folders(Path(tempfile.gettempdir()))
+        _URDF_FOLDER = tempfile.TemporaryDirectory(prefix=_folder_prefix(os.getpid()))
     folder = Path(_URDF_FOLDER.name)
     key = ("pybullet urdf", visuals, file_signature(robot.urdf_path), tuple(str(p) for p in robot.package_dirs))
     write = _light_urdf if visuals == "light" else _full_urdf

@@ -459,6 +459,10 @@ class SimWorld:
     def end_effector(self, arm: str) -> str:
         return self.sim.robot.arm(arm).end_effector
 
+    def hand_links(self, arm: str) -> list[str]:
+        """The robot links moved by ``arm``'s last joint: what a held object may touch without a collision."""
+        return list(self._hand_links[arm])
+
     def current_q(self) -> np.ndarray:
         return self.kin.q_from_dict(self.sim.joint_positions(), self.kin.home)
 

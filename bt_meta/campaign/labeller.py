@@ -13,7 +13,8 @@ The variant's scene is built in pybullet and settled; then, in this order (the f
    grasp pose the skills use, collision-checked against the robot and the scene (the hand may touch the object
    grasped; a letters block on another face: also the turn the place skill's ``turn`` mode would make from that
    grasp). A role no candidate can fill: the failed solve's kind (``reachability`` beats ``collision``). A place
-   where the task puts something that an object the task does not name occupies: ``limit:collision``.
+   where the task puts something that an object the task does not name occupies (its centre near; for a letter
+   cell, any part of it inside the cell's footprint): ``limit:collision``.
 3. ``repairable`` -- the goal can be reached but not by the nominal plan: a needed object is missing or of
    another type (substitution), has another colour where the task's symbols name colours (its initial facts),
    is turned off its nominal up axis by more than 20 degrees (re-orientation / pose repair), or a fixture the
@@ -56,6 +57,11 @@ PATH_STEPS = 24
 """Waypoints checked on a joint-space line (move_to checks one per tick: about as many for these motions)."""
 CANDIDATES = 3
 """Objects tried per place before it counts as blocked (the nominal one first)."""
+PLACE_OVERLAP = 0.0005
+"""A letter cell is occupied when an object reaches this deep (m) into its footprint (blocks are exactly LB wide:
+a neighbour that only touches the cell's edge does not count)."""
+PROBE_HEIGHT = 0.02
+"""Height (m) of the footprint probe above a letter cell, from just above the table: anything resting there."""
 
 
 @dataclass(frozen=True)
@@ -181,6 +187,36 @@ class Labeller:
             out.append((float(point[0]), float(point[1]), float(point[2])))
         return out
 
+    def _occupied_cell(self, world: Any, names: Sequence[str]) -> Label | None:
+        """``limit:collision`` when an object reaches into a letter cell's footprint (deeper than
+        :data:`PLACE_OVERLAP`): with its centre further than :data:`BLOCKING_RADIUS` away, a block turned or longer
+        than a cell still takes room the placed block needs. Ground truth: the simulator's closest points."""
+        from bt_meta.world.simulation.objects import LB
+
+        frame = next((spec.get("frame") for spec in self.grounding.skills.values() if spec.get("frame")), None)
+        if frame is None:
+            return None
+        sim = world.sim
+        for action in self.plan:
+            if action.name != "place":
+                continue
+            shape = self.shapes.get(action.args[0])
+            x, y = float(action.args[1]), float(action.args[2])
+            for dx in ((-0.5, 0.5) if shape == "1x2" else (0.0,)):
+                gx, gy, yaw = world.ground_cell(str(frame), str(x + dx), str(y))
+                pose = np.eye(4)
+                c, s_ = math.cos(yaw), math.sin(yaw)
+                pose[:2, :2] = [[c, -s_], [s_, c]]
+                pose[:3, 3] = (gx, gy, sim.table.top_z + 0.002 + PROBE_HEIGHT / 2.0)
+                near = {n: d for n, d in sim.box_clearances((LB, LB, PROBE_HEIGHT), pose, names, 0.0).items()
+                        if d < -PLACE_OVERLAP}
+                if near:
+                    name, gap = min(near.items(), key=lambda item: item[1])
+                    return Label("limit:collision", f"{name} reaches into the cell ({x + dx:g}, {y:g}) where the "
+                                 f"task puts {action.args[0]} ({-gap * 1000:.1f} mm into its footprint)",
+                                 {"object": name, "target": [round(gx, 4), round(gy, 4)], "gap": round(gap, 5)})
+        return None
+
     def _jobs(self, world: Any) -> list[tuple[str | None, tuple[float, float, float]]]:
         """(the object the nominal plan puts there, where): each letter ``place`` at its centre; for the other
         families each grasped object to each of :attr:`targets`."""
@@ -227,6 +263,9 @@ class Labeller:
                 if math.hypot(xy[0] - tx, xy[1] - ty) < BLOCKING_RADIUS * LB:
                     return Label("limit:collision", f"{name} occupies a place the task puts something "
                                  f"({tx:.3f}, {ty:.3f})", {"object": name, "target": [tx, ty]})
+        occupied = self._occupied_cell(world, [n for n in present if n not in fixtures])
+        if occupied is not None:
+            return occupied
         if sim.obstacles():
             blocked = self._obstacle_label(world, roles, feasible, present)
             if blocked is not None:

@@ -53,6 +53,9 @@ LETTER_CASES = {
                                      "type: megablok_1x1, colour: blue, pose: [0.72, -0.52, table, 0, 0, 0]}]"),
     "cell_blocked": ("limit:collision",
                      "add: [{name: d, type: megablok_1x1, colour: green, pose: [0.55, 0.10, table, 0, 0, 0]}]"),
+    # Its centre is 55 mm from the nearest cell's (further than BLOCKING_RADIUS), its long side 6 mm into it.
+    "bar_reaching_into_a_cell": ("limit:collision", "add: [{name: d, type: megablok_1x2, colour: green, "
+                                 "pose: [0.55, 0.155, table, 0, 0, 0]}]"),
 }
 
 
@@ -92,6 +95,8 @@ def test_letters_labels(letters_labeller, tmp_path, case):
     path.write_text(NOMINAL_A + f"    {change}\n", encoding="utf-8")
     label = letters_labeller.label(path, "perturbed")
     assert label.expected == expected, label.reason
+    if case == "bar_reaching_into_a_cell":
+        assert "reaches into the cell (0, 0)" in label.reason and label.evidence["gap"] < -0.004
 
 
 @pytest.mark.slow

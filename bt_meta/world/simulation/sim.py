@@ -730,6 +730,27 @@ class Simulation:
     def body_id(self, name: str) -> int:
         return self._body(name).body_id
 
+    def box_clearances(self, size: Sequence[float], pose: np.ndarray, names: Iterable[str],
+                       within: float) -> dict[str, float]:
+        """Ground-truth distance (m, negative: overlap) from a box of full ``size`` at the 4x4 ``pose`` to each named
+        object closer than ``within``: would something put there touch them? The box is a probe, never simulated
+        (made and removed here, no step in between)."""
+        half = [float(v) / 2.0 for v in size]
+        shape = pybullet.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half, physicsClientId=self.client)
+        pose = np.asarray(pose, dtype=float)
+        probe = pybullet.createMultiBody(0.0, shape, -1, pose[:3, 3].tolist(), _quat(pose[:3, :3]),
+                                         physicsClientId=self.client)
+        try:
+            out = {}
+            for name in names:
+                points = pybullet.getClosestPoints(probe, self._body(name).body_id, float(within),
+                                                   physicsClientId=self.client)
+                if points:
+                    out[name] = min(float(point[8]) for point in points)
+            return out
+        finally:
+            pybullet.removeBody(probe, physicsClientId=self.client)  # its shape goes with it (pybullet frees it)
+
     def object_name_of(self, body_id: int) -> str | None:
         """The object name of a pybullet body id (e.g. from a segmentation mask), ``None`` for robot/table."""
         return self._by_id.get(body_id)

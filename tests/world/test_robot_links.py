@@ -57,7 +57,7 @@ def test_a_merged_link_below_a_moving_joint_is_not_accepted(tmp_path):
 def test_the_merged_baxter_has_the_frames_and_hand_of_the_unmerged_one():
     with quiet_stdout():
         split = Simulation(seed=0, merge_fixed_links=False)
-        merged = Simulation(seed=0)
+        merged = Simulation(seed=0, merge_fixed_links=True)
     try:
         assert pybullet.getNumJoints(merged.robot_id, physicsClientId=merged.client) < pybullet.getNumJoints(
             split.robot_id, physicsClientId=split.client)
@@ -80,3 +80,15 @@ def test_the_merged_baxter_has_the_frames_and_hand_of_the_unmerged_one():
     finally:
         split.close()
         merged.close()
+
+
+def test_merging_is_chosen_by_the_environment(monkeypatch):
+    for value, expected in (("1", True), ("0", False)):
+        monkeypatch.setenv("BT_META_MERGE_FIXED_LINKS", value)
+        with quiet_stdout():
+            sim = Simulation(seed=0)
+        try:
+            assert sim.merge_fixed_links is expected
+            assert (pybullet.getNumJoints(sim.robot_id, physicsClientId=sim.client) < 56) is expected
+        finally:
+            sim.close()

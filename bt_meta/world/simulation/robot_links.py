@@ -1,4 +1,4 @@
-"""The robot's links as pybullet simulates them: fixed links merged into the moving link they hang from.
+"""The robot's links as pybullet simulates them when fixed links are merged into the moving link they hang from.
 
 pybullet's ``URDF_MERGE_FIXED_LINKS`` folds every link attached by a fixed joint (the Baxter's frames, cameras,
 sensors, finger tips, the torso into the base: 56 links become 19) into its parent, so each physics step

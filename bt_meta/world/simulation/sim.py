@@ -14,6 +14,11 @@ Offers:
 * :class:`Table` -- where the table is (defaults: top 0.2 m below the base frame, front edge 0.45 m ahead)
 * :class:`SimulationError` -- unknown object or link names, duplicate names, impossible requests
 
+``BT_META_MERGE_FIXED_LINKS=1`` (or ``merge_fixed_links=True``) loads the robot with its fixed links merged into
+the moving links they hang from (the Baxter: 19 links instead of 56), every link name still resolving to its
+frame (:mod:`bt_meta.world.simulation.robot_links`): faster physics, but not bitwise the same dynamics, so it is
+off by default (docs/benchmarks.md, "Episode throughput").
+
 Why the robot's visuals are its collision geometry by default (headless): the original DAE meshes take ~1.8 s
 (CPU) to load and ~90 ms per 320x240 TinyRenderer frame; the collision shapes load in ~0.14 s and the eye-in-hand
 frame costs ~16-20 ms. ``visuals="full"`` keeps the meshes; it is the default with ``gui=True``.
@@ -23,6 +28,7 @@ from __future__ import annotations
 
 import copy
 import math
+import os
 import tempfile
 import xml.etree.ElementTree as ElementTree
 from collections.abc import Iterable, Mapping, Sequence
@@ -165,6 +171,13 @@ def _tuple3(v: Iterable[float]) -> tuple[float, float, float]:
     return (a, b, c)
 
 
+def _merge_by_default() -> bool:
+    """``BT_META_MERGE_FIXED_LINKS=1``: load the robot with its fixed links merged (faster physics, see
+    :mod:`bt_meta.world.simulation.robot_links`). Off by default: the merged assembly is the same rigid body, but
+    its dynamics differ numerically, and a few friction-grasped insertions (housing) end differently."""
+    return os.environ.get("BT_META_MERGE_FIXED_LINKS", "0") not in ("", "0")
+
+
 _URDF_FOLDER: tempfile.TemporaryDirectory[str] | None = None
 
 
@@ -255,7 +268,7 @@ class Simulation:
         visuals: str | None = None,
         attach_position_tolerance: float = 0.01,
         attach_angle_tolerance: float = math.radians(15.0),
-        merge_fixed_links: bool = True,
+        merge_fixed_links: bool | None = None,
     ) -> None:
         visuals = visuals or ("full" if gui else "light")  # a person at a screen gets the real meshes
         if visuals not in ("light", "full"):
@@ -268,7 +281,7 @@ class Simulation:
         self.attach_position_tolerance = attach_position_tolerance
         self.attach_angle_tolerance = attach_angle_tolerance
         self.steps = 0
-        self.merge_fixed_links = merge_fixed_links
+        self.merge_fixed_links = merge_fixed_links if merge_fixed_links is not None else _merge_by_default()
         self.client = pybullet.connect(pybullet.GUI if gui else pybullet.DIRECT)
         if self.client < 0:
             raise SimulationError("pybullet could not connect (is another GUI window open?)")

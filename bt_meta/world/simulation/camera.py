@@ -153,13 +153,17 @@ class Camera:
         sim = self.sim
         if not hasattr(self, "_robot_colours"):
             data = pybullet.getVisualShapeData(sim.robot_id, physicsClientId=sim.client)
-            colours: dict[int, list[float]] = {}
+            # Per shape: a link with fixed links merged into it carries several shapes of different colours.
+            colours: dict[tuple[int, int], list[float]] = {}
+            shapes: dict[int, int] = {}
             for entry in data:
-                colours.setdefault(entry[1], list(entry[7]))
+                shape = shapes[entry[1]] = shapes.get(entry[1], -1) + 1
+                colours[(entry[1], shape)] = list(entry[7])
             self._robot_colours = colours
-        for link, colour in self._robot_colours.items():
+        for (link, shape), colour in self._robot_colours.items():
             rgba = colour if alpha is None else [colour[0], colour[1], colour[2], alpha]
-            pybullet.changeVisualShape(sim.robot_id, link, rgbaColor=rgba, physicsClientId=sim.client)
+            pybullet.changeVisualShape(sim.robot_id, link, shapeIndex=shape, rgbaColor=rgba,
+                                       physicsClientId=sim.client)
 
     # -- geometry --------------------------------------------------------------------------------------------
 

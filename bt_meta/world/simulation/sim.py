@@ -14,6 +14,11 @@ Offers:
 * :class:`Table` -- where the table is (defaults: top 0.2 m below the base frame, front edge 0.45 m ahead)
 * :class:`SimulationError` -- unknown object or link names, duplicate names, impossible requests
 
+``BT_META_MERGE_FIXED_LINKS=1`` (or ``merge_fixed_links=True``) loads the robot with its fixed links merged into
+the moving links they hang from (the Baxter: 19 links instead of 56), every link name still resolving to its
+frame (:mod:`bt_meta.world.simulation.robot_links`): faster physics, but not bitwise the same dynamics, so it is
+off by default (docs/benchmarks.md, "Episode throughput").
+
 Why the robot's visuals are its collision geometry by default (headless): the original DAE meshes take ~1.8 s
 (CPU) to load and ~90 ms per 320x240 TinyRenderer frame; the collision shapes load in ~0.14 s and the eye-in-hand
 frame costs ~16-20 ms. ``visuals="full"`` keeps the meshes; it is the default with ``gui=True``.
@@ -50,6 +55,7 @@ from bt_meta.world.simulation.objects import (
     attachment_relation,
     matrix_to_pose,
 )
+from bt_meta.world.simulation.robot_links import merged_frames, read_joints, subtree
 
 __all__ = ["SimObjectState", "Simulation", "SimulationError", "Table"]
 
@@ -165,6 +171,13 @@ _LOST_AFTER = 2
 def _tuple3(v: Iterable[float]) -> tuple[float, float, float]:
     a, b, c = (float(x) for x in v)
     return (a, b, c)
+
+
+def _merge_by_default() -> bool:
+    """``BT_META_MERGE_FIXED_LINKS=1``: load the robot with its fixed links merged (faster physics, see
+    :mod:`bt_meta.world.simulation.robot_links`). Off by default: the merged assembly is the same rigid body, but
+    its dynamics differ numerically, and a few friction-grasped insertions (housing) end differently."""
+    return os.environ.get("BT_META_MERGE_FIXED_LINKS", "0") not in ("", "0")
 
 
 _URDF_FOLDER: tempfile.TemporaryDirectory[str] | None = None
@@ -283,6 +296,7 @@ class Simulation:
         visuals: str | None = None,
         attach_position_tolerance: float = 0.01,
         attach_angle_tolerance: float = math.radians(15.0),
+        merge_fixed_links: bool | None = None,
     ) -> None:
         visuals = visuals or ("full" if gui else "light")  # a person at a screen gets the real meshes
         if visuals not in ("light", "full"):
@@ -295,6 +309,7 @@ class Simulation:
         self.attach_position_tolerance = attach_position_tolerance
         self.attach_angle_tolerance = attach_angle_tolerance
         self.steps = 0
+        self.merge_fixed_links = merge_fixed_links if merge_fixed_links is not None else _merge_by_default()
         self.client = pybullet.connect(pybullet.GUI if gui else pybullet.DIRECT)
         if self.client < 0:
             raise SimulationError("pybullet could not connect (is another GUI window open?)")
@@ -323,21 +338,33 @@ class Simulation:
         )
         pybullet.setGravity(0.0, 0.0, -9.81, physicsClientId=c)
         urdf = _robot_urdf_file(self.robot, visuals)
+        # Fixed links merged into the moving link they hang from (robot_links): 19 bodies to integrate, not 56.
         self.robot_id = pybullet.loadURDF(
-            str(urdf), [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0], useFixedBase=True, physicsClientId=c
+            str(urdf), [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0], useFixedBase=True,
+            flags=pybullet.URDF_MERGE_FIXED_LINKS if self.merge_fixed_links else 0, physicsClientId=c
         )
         self._joint_index: dict[str, int] = {}
         self._link_index: dict[str, int] = {pybullet.getBodyInfo(self.robot_id, physicsClientId=c)[0].decode(): -1}
-        self._parent: dict[int, int] = {}
         self._limits: dict[str, tuple[float, float]] = {}
         for j in range(pybullet.getNumJoints(self.robot_id, physicsClientId=c)):
             info = pybullet.getJointInfo(self.robot_id, j, physicsClientId=c)
             self._link_index[info[12].decode()] = j
-            self._parent[j] = info[16]
             if info[2] != pybullet.JOINT_FIXED:
                 name = info[1].decode()
                 self._joint_index[name] = j
                 self._limits[name] = (info[8], info[9])
+        self._link_name: dict[int, str] = {index: name for name, index in self._link_index.items()}
+        """pybullet link index -> the link's name in pybullet (a merged link's survivor)."""
+        self._urdf_joints = read_joints(self.robot.urdf_path)
+        self._link_offset: dict[str, np.ndarray] = {}
+        """A merged link's fixed pose in the URDF frame of the link it was merged into."""
+        for name, (kept, offset) in merged_frames(self._urdf_joints, self._link_index).items():
+            self._link_index[name] = self._link_index[kept]
+            self._link_offset[name] = offset
+        dynamics = pybullet.getDynamicsInfo(self.robot_id, -1, physicsClientId=c)
+        # pybullet reports the base's pose at its centre of mass, which merging moves: keep the inverse of that
+        # inertial frame to recover the URDF base frame.
+        self._base_from_inertial = np.linalg.inv(_transform(dynamics[3], dynamics[4]))
         self.movable_joints: tuple[str, ...] = tuple(self._joint_index)
         self._targets: dict[str, float] = {}
         self._bodies: dict[str, _Body] = {}
@@ -352,7 +379,7 @@ class Simulation:
         self.set_joint_positions(self.robot.home)
         self.table_id = self._make_table()
         self._hand_links: dict[str, tuple[int, ...]] = {
-            arm: self._descendants(self.link_index(self._hand_root(arm))) for arm in self.robot.arms
+            arm: self._hand_link_indices(arm) for arm in self.robot.arms
         }
         for arm, description in self.robot.arms.items():
             gripper = description.gripper
@@ -376,25 +403,20 @@ class Simulation:
                                           physicsClientId=self.client)
 
     def _hand_root(self, arm: str) -> str:
-        """The wrist-side link of the hand: everything below it may touch a held object."""
-        end = self.robot.arm(arm).end_effector
-        j = self.link_index(end)
+        """The wrist-side link of the hand (URDF name): everything below it may touch a held object."""
+        joints = self._urdf_joints
+        wrist = next((j.child for j in joints.values() if j.name == self.robot.arm(arm).joints[-1]), None)
+        link = self.robot.arm(arm).end_effector
         # Walk up from the gripper frame to the link whose parent moves with the last arm joint.
-        last_joint = self._joint_index[self.robot.arm(arm).joints[-1]]
-        while self._parent[j] != last_joint and self._parent[j] != -1:
-            j = self._parent[j]
-        return pybullet.getJointInfo(self.robot_id, j, physicsClientId=self.client)[12].decode()
+        while link in joints and joints[link].parent != wrist:
+            link = joints[link].parent
+        return link
 
-    def _descendants(self, link: int) -> tuple[int, ...]:
-        out = {link}
-        changed = True
-        while changed:
-            changed = False
-            for child, parent in self._parent.items():
-                if parent in out and child not in out:
-                    out.add(child)
-                    changed = True
-        return tuple(sorted(out))
+    def _hand_link_indices(self, arm: str) -> tuple[int, ...]:
+        """The pybullet links of the hand: with fixed links merged the hand's base lives on the wrist link, so
+        the wrist's own shapes count as the hand's."""
+        names = subtree(self._urdf_joints, self._hand_root(arm))
+        return tuple(sorted({self._link_index[n] for n in names if n in self._link_index}))
 
     def _make_table(self) -> int:
         t, c = self.table, self.client
@@ -536,12 +558,14 @@ class Simulation:
         index = self.link_index(link)
         if index == -1:
             pos, quat = pybullet.getBasePositionAndOrientation(self.robot_id, physicsClientId=self.client)
+            frame = _transform(pos, quat) @ self._base_from_inertial
         else:
             state = pybullet.getLinkState(
                 self.robot_id, index, computeForwardKinematics=True, physicsClientId=self.client
             )
-            pos, quat = state[4], state[5]
-        return _transform(pos, quat)
+            frame = _transform(state[4], state[5])
+        offset = self._link_offset.get(link)
+        return frame if offset is None else frame @ offset
 
     def link_pose(self, link: str) -> Pose6:
         return matrix_to_pose(self.link_transform(link))
@@ -837,7 +861,7 @@ class Simulation:
         if any(g.object_name == name for g in self._grasps.values()):
             return False
         end = self.link_index(self.robot.arm(arm).end_effector)
-        if self._distance_to_gripper(body.body_id, end) > max_distance:
+        if self._distance_to_gripper(body.body_id, self.robot.arm(arm).end_effector) > max_distance:
             return False
         if self.grasps_by_friction(name, arm):
             return self._close_on(name, arm)
@@ -999,7 +1023,7 @@ class Simulation:
 
     def robot_contacts(self) -> list[tuple[str, str]]:
         """(robot link, object name or ``"table"``) for every contact of the robot with the world, sorted."""
-        names = {index: name for name, index in self._link_index.items()}
+        names = self._link_name
         out: set[tuple[str, str]] = set()
         for contact in pybullet.getContactPoints(bodyA=self.robot_id, physicsClientId=self.client):
             other = contact[2]
@@ -1010,10 +1034,8 @@ class Simulation:
                 out.add((names.get(contact[3], str(contact[3])), what))
         return sorted(out)
 
-    def _distance_to_gripper(self, body: int, end_link: int) -> float:
-        pos = pybullet.getLinkState(
-            self.robot_id, end_link, computeForwardKinematics=True, physicsClientId=self.client
-        )[4]
+    def _distance_to_gripper(self, body: int, end_link: str) -> float:
+        pos = self.link_transform(end_link)[:3, 3]
         probe = pybullet.createCollisionShape(pybullet.GEOM_SPHERE, radius=1e-4, physicsClientId=self.client)
         probe_body = pybullet.createMultiBody(0.0, probe, -1, list(pos), physicsClientId=self.client)
         try:

@@ -51,7 +51,8 @@ def variant_world(task_path: Path, problem_name: str, scene: str | Path, variant
     task_file = load_task_file(task_path)
     problem = task_file.problem(problem_name)
     grounding = load_grounding(task_file.domain.name, task_path)
-    grounding = dataclasses.replace(grounding, problems={**grounding.problems, problem.name: {"scene": str(scene)}})
+    grounding = dataclasses.replace(grounding, problems={**grounding.problems,
+                                                      problem.name: {"scene": str(Path(scene).resolve())}})
     with quiet_stdout():
         world = SimWorld(task_file.domain, problem, grounding, variant=variant, seed=seed)
     try:

@@ -157,7 +157,8 @@ class Labeller:
     def _world(self, scene_path: str | Path, variant: str | None) -> Any:
         from bt_meta.world.simulation.sim_world import SimWorld, quiet_stdout
 
-        setup = {"scene": str(scene_path)}
+        # Absolute: the grounding resolves a relative scene path against its own folder, not the caller's.
+        setup = {"scene": str(Path(scene_path).resolve())}
         grounding = dataclasses.replace(self.grounding, problems={**self.grounding.problems,
                                                                   self.problem.name: setup})
         with quiet_stdout():

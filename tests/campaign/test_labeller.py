@@ -170,3 +170,27 @@ def test_generate_with_a_users_scene_and_spec_writes_labelled_scene_files(tmp_pa
         active = next(o for o in loaded.objects_for("perturbed") if o.name == "active")
         assert abs(abs(active.rpy[0]) - 3.14159) < 1e-3
     assert main(["campaign", "generate", "magnetic", "--n", "1", "-o", str(out)]) == 2  # already a campaign
+
+
+@pytest.mark.slow
+def test_a_campaign_folder_given_relative_to_the_working_directory_is_found(tmp_path, monkeypatch, capsys):
+    """The grounding resolves relative scene paths against its own folder; a path typed on the command line is the
+    user's, relative to where they stand."""
+    import json
+
+    from bt_meta.campaign.episode import variant_world
+    from bt_meta.campaign.families import family
+    from bt_meta.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["campaign", "generate", "letters_A", "--n", "1", "--seed", "3", "-o", "C", "--json"]) == 0
+    manifest = json.loads(capsys.readouterr().out)
+    variant = manifest["variants"][0]
+    assert (tmp_path / "C" / variant["file"]).is_file() and variant["expected"]
+    chosen = family("letters_A")
+    _, _, world = variant_world(chosen.task_path(), chosen.problem, f"C/{variant['file']}",
+                                "perturbed", 0)
+    try:
+        assert world.sim.object_names()
+    finally:
+        world.close()

@@ -14,6 +14,11 @@ bound by its methods; perception does not rebind them: a grid-map compares occup
 colour does. The result is a ``splice`` of the remaining steps, in the
 order the plan would have reached the tiles' cells.
 
+Blocks already lying on cells the tiling fills -- above all the block the failed step itself put down, a 1x2 where
+a 1x1 was planned -- are in the way of whatever goes there next: the splice moves each such block before any
+block is placed on a cell it covers (read from the world's object poses in the placements' frame), and a tile
+takes such a block in preference to one that is not in the way, so nothing is left lying on the letter.
+
 This finds what A's letter needs when one 1x2 stands where two 1x1 blocks that are not side by side were planned:
 the two 1x2 blocks laid across the tops of the legs and the bar cells, the 1x1 blocks at the feet and the apex.
 
@@ -22,15 +27,19 @@ Offers:
 * :func:`footprint` -- the cells a block of a shape covers when placed at (x, y)
 * :func:`tile` -- a tiling of cells with blocks of given shapes (``None`` when none exists)
 * :func:`tiling_proposals` -- the ``splice`` proposal for a failure, when a tiling differs from the plan
+* :func:`cells_in_the_way` -- the cells of a frame each object's current pose covers in part
 * :func:`covers_the_same_cells` -- whether a splice's placements cover the cells of the steps it replaces (a
   remembered decomposition that draws another part of the letter does not)
 """
 
 from __future__ import annotations
 
+import math
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
+
+import numpy as np
 
 from bt_meta.bt.failures import RepairProposal
 from bt_meta.meta.proposals import SPLICE
@@ -45,7 +54,11 @@ MAX_NODES = 20000
 _SHAPE = re.compile(r"^(\d+)x(\d+)$")
 Cell = tuple[float, float]
 
-__all__ = ["covers_the_same_cells", "footprint", "tile", "tiling_proposals"]
+IN_THE_WAY = 0.9
+"""lb: a block unit whose centre is nearer than this to a cell's centre along both of the frame's axes overlaps the
+cell (touching is 1.0; 0.9 leaves 6 mm of the cell covered)."""
+
+__all__ = ["cells_in_the_way", "covers_the_same_cells", "footprint", "tile", "tiling_proposals"]
 
 
 def _width(shape: str | None) -> int | None:
@@ -137,6 +150,83 @@ def covers_the_same_cells(proposal: RepairProposal, plan: Sequence[Mapping[str, 
     return sorted(before) == sorted(after)
 
 
+def _frame_inverse(world: Any, frame: str) -> Callable[[float, float], Cell] | None:
+    """Table (X, Y) -> the frame's (x, y), from the world's own mapping of three frame points; ``None`` when the
+    world does not ground the frame."""
+    ground = getattr(world, "ground_cell", None)
+    frames = getattr(getattr(world, "grounding", None), "frames", None) or {}
+    if ground is None or frame not in frames:
+        return None
+    try:
+        origin = np.array(ground(frame, "0", "0")[:2], dtype=float)
+        ex = np.array(ground(frame, "1", "0")[:2], dtype=float) - origin
+        ey = np.array(ground(frame, "0", "1")[:2], dtype=float) - origin
+        inverse = np.linalg.inv(np.column_stack([ex, ey]))
+    except np.linalg.LinAlgError:  # a degenerate frame (unit 0): nothing is known to be in the way
+        return None
+
+    def to_frame(x: float, y: float) -> Cell:
+        u, v = inverse @ (np.array([x, y], dtype=float) - origin)
+        return float(u), float(v)
+
+    return to_frame
+
+
+def _unit_centres(state: Mapping[str, Any], to_frame: Callable[[float, float], Cell]) -> list[Cell]:
+    """The frame coordinates of the unit centres of a one-row block lying with ``state["pose"]``: along its long
+    axis as the table sees it (a block standing on its end is one unit over its centre)."""
+    pose = [float(v) for v in state.get("pose") or []]
+    width = _width(state.get("shape")) or 1
+    if len(pose) < 6:
+        return []
+    from bt_meta.world.poses import rpy_to_matrix
+
+    axis = np.asarray(rpy_to_matrix(pose[3], pose[4], pose[5]))[:, 0]
+    centre = np.array(to_frame(pose[0], pose[1]))
+    tip = np.array(to_frame(pose[0] + float(axis[0]), pose[1] + float(axis[1]))) - centre
+    length = float(np.hypot(*tip))
+    if width == 1 or length < 0.5 * math.hypot(*to_frame(1.0, 0.0)):  # nearly vertical: over its centre
+        return [(float(centre[0]), float(centre[1]))]
+    step = tip / length
+    return [tuple(float(c) for c in centre + (k - (width - 1) / 2.0) * step) for k in range(width)]
+
+
+def cells_in_the_way(world: Any, frame: str, objects: Mapping[str, Mapping[str, Any]], cells: Sequence[Cell]
+                     ) -> dict[str, set[Cell]]:
+    """Object name -> the ``cells`` (of ``frame``) its current pose covers in part; objects held or covering
+    none are left out."""
+    to_frame = _frame_inverse(world, frame)
+    if to_frame is None:
+        return {}
+    out: dict[str, set[Cell]] = {}
+    for name, state in objects.items():
+        if state.get("held_by"):
+            continue
+        units = _unit_centres(state, to_frame)
+        hit = {c for c in cells for u in units if abs(u[0] - c[0]) < IN_THE_WAY and abs(u[1] - c[1]) < IN_THE_WAY}
+        if hit:
+            out[name] = hit
+    return out
+
+
+def _in_order(tiles: list[tuple[int, str, list[Cell]]], in_the_way: Mapping[str, set[Cell]]) -> list[int]:
+    """Indices of ``tiles`` (first step, block, cells) in the order to place them: by first step, except that a
+    block lying on another tile's cells is moved before that tile (a cycle of such blocks keeps the step order)."""
+    after: dict[int, set[int]] = {i: set() for i in range(len(tiles))}
+    for i, (_, block, cells) in enumerate(tiles):
+        for j, (_, other, _) in enumerate(tiles):
+            if j != i and other != block and in_the_way.get(other, set()) & set(cells):
+                after[i].add(j)
+    order: list[int] = []
+    left = set(after)
+    while left:
+        ready = [i for i in left if not after[i] & left] or list(left)  # a cycle: fall back to the step order
+        first = min(ready, key=lambda i: (tiles[i][0], i))
+        order.append(first)
+        left.remove(first)
+    return order
+
+
 def _number(value: Any) -> float | None:
     try:
         return float(value)
@@ -157,6 +247,12 @@ def tiling_proposals(vector: Any, failure: Any, context: Any) -> list[RepairProp
     facts = list(getattr(problem, "init", None) or getattr(problem, "state", None) or ())
     assumed = {str(f[1]): str(f[2]) for f in facts if len(f) == 3 and f[0] == "shape"}
     colours = {str(f[1]): str(f[2]) for f in facts if len(f) == 3 and f[0] == "colour"}
+    seen = {str(k): dict(v) for k, v in ((observe() or {}).get("objects") or {}).items()
+            if isinstance(v, Mapping) and v.get("shape")}
+    for name, state in seen.items():  # a stand-in the problem does not describe (a spare) is planned as it is seen
+        assumed.setdefault(name, str(state["shape"]))
+        if state.get("colour"):
+            colours.setdefault(name, str(state["colour"]))
     todo = [p for p in plan if not p.get("done")]
     placements = []
     for record in todo:
@@ -169,8 +265,6 @@ def tiling_proposals(vector: Any, failure: Any, context: Any) -> list[RepairProp
     if not placements or len({p[1] for p in placements}) != 1:
         return []
     action = placements[0][1]
-    seen = {str(k): dict(v) for k, v in ((observe() or {}).get("objects") or {}).items()
-            if isinstance(v, Mapping) and v.get("shape")}
     placed = {str(a) for p in plan if p.get("done") for a in (p.get("args") or [])[:1]}
     plan_blocks = [p[2] for p in placements]
     colour = None
@@ -192,16 +286,22 @@ def tiling_proposals(vector: Any, failure: Any, context: Any) -> list[RepairProp
     tiles = tile(cells, counts, prefer)
     if tiles is None:
         return []
+    frame = _action_frame(world, action)
+    in_the_way = cells_in_the_way(world, frame, {n: seen[n] for n in on_hand}, cells) if frame else {}
     free = list(on_hand)
-    calls: list[tuple[int, list[str]]] = []
+    bound: list[tuple[int, str, list[Cell]]] = []
+    centres: dict[str, Cell] = {}
     for shape, centre in sorted(tiles, key=lambda t: min(step_of[c] for c in footprint(t[0], *t[1]) or [])):
         cover = footprint(shape, *centre) or []
         fitting = [n for n in free if str(seen[n]["shape"]) == shape]
         mine = [n for n in fitting if n in {owner[c] for c in cover}]
-        block = (mine or fitting)[0]
+        lying = [n for n in fitting if n in in_the_way]  # to be moved anyway, or it stays in the way
+        block = (mine or lying or fitting)[0]
         free.remove(block)
-        calls.append((min(step_of[c] for c in cover), [action, block, _text(centre[0]), _text(centre[1])]))
-    actions = [call for _, call in calls]
+        bound.append((min(step_of[c] for c in cover), block, cover))
+        centres[block] = centre
+    actions = [[action, block, _text(centres[block][0]), _text(centres[block][1])]
+               for block in (bound[i][1] for i in _in_order(bound, in_the_way))]
     old = [[str(r["action"]), *map(str, r["args"])] for r in todo]
     if actions == old:
         return []
@@ -212,7 +312,15 @@ def tiling_proposals(vector: Any, failure: Any, context: Any) -> list[RepairProp
         f"table: {shown}", changes={"start": start, "end": end, "actions": actions},
         evidence={"matcher": "tiling", "vector": vector.to_dict() if hasattr(vector, "to_dict") else None,
                   "cells": [list(c) for c in cells], "blocks": {n: seen[n].get("shape") for n in on_hand},
+                  "in_the_way": {n: sorted(list(c) for c in v) for n, v in in_the_way.items()},
                   "colour_required": colour})]
+
+
+def _action_frame(world: Any, action: str) -> str | None:
+    """The task frame the world grounds ``action``'s coordinates in (the grounding's ``frame:`` of its skill)."""
+    skills = getattr(getattr(world, "grounding", None), "skills", None) or {}
+    spec = skills.get(action) or {}
+    return str(spec["frame"]) if isinstance(spec, Mapping) and spec.get("frame") else None
 
 
 def _text(value: float) -> str:

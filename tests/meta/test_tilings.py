@@ -4,13 +4,17 @@ scene (fake world) where one 1x2 stands where two 1x1 blocks that are not side b
 
 from __future__ import annotations
 
-import pytest
-from bt_meta_plugins._tilings import covers_the_same_cells, footprint, tile
+import math
+from types import SimpleNamespace
 
-from bt_meta.bt.failures import RepairProposal
+import pytest
+from bt_meta_plugins._tilings import cells_in_the_way, covers_the_same_cells, footprint, tile, tiling_proposals
+
+from bt_meta.bt.failures import Failure, FailureKind, RepairProposal
 from bt_meta.htn import load_task_file
 from bt_meta.resources import trees_dir
 
+from .test_object_substitution import A_STEPS
 from .test_spare_substitution import NOMINAL_A, _run
 
 A_CELLS = [(0.0, 0.0), (0.0, 1.0), (3.0, 0.0), (3.0, 1.0), (1.0, 1.0), (2.0, 1.0), (1.5, 2.0)]
@@ -83,3 +87,70 @@ def test_colour_counts_where_the_plan_s_blocks_share_one(letters):
     tilings = [a for a in report.attempts if (a.proposal.get("evidence") or {}).get("matcher") == "tiling"]
     assert report.ok and len(tilings) == 1, report.stop_reason
     assert "spare" in {a[1] for a in tilings[0].proposal["changes"]["actions"]}
+
+
+class _LetterGrounding:
+    frames = {"letter": {"anchor": "letter_origin", "unit": 0.061}}
+    skills = {"place": {"skill": "place", "frame": "letter"}}
+
+
+class LetterTable:
+    """The world as the tilings read it: blocks with table poses, and the letter frame (origin (0.6, -0.2), turned
+    90 degrees on the table, 0.061 m a cell) as :meth:`SimWorld.ground_cell` maps it."""
+
+    grounding = _LetterGrounding()
+    ORIGIN, YAW, UNIT = (0.6, -0.2), math.pi / 2, 0.061
+
+    def __init__(self, objects: dict[str, dict]) -> None:
+        self.objects = objects
+
+    def ground_cell(self, frame: str, x: str, y: str) -> tuple[float, float, float]:
+        u, v = float(x), float(y)
+        c, s = math.cos(self.YAW), math.sin(self.YAW)
+        return (self.ORIGIN[0] + self.UNIT * (c * u - s * v), self.ORIGIN[1] + self.UNIT * (s * u + c * v), self.YAW)
+
+    def at(self, shape: str, x: float, y: float, along: str = "x", pitch: float = 0.0) -> dict:
+        """A blue block of ``shape`` lying centred on letter point (x, y), its long axis along the letter's x or y."""
+        tx, ty, yaw = self.ground_cell("letter", str(x), str(y))
+        return {"shape": shape, "colour": "blue", "pose": [tx, ty, 0.8, 0.0, pitch, yaw + (math.pi / 2 if along == "y"
+                                                                                              else 0.0)]}
+
+    def observe(self) -> dict:
+        return {"objects": self.objects}
+
+
+def test_the_cells_a_block_lies_on_are_read_in_the_letter_s_frame():
+    table = LetterTable({})
+    objects = {"across": table.at("1x2", 0, 0), "up": table.at("1x2", 3, 0.5, along="y"),
+               "away": table.at("1x1", 8, 8), "on_end": table.at("1x2", 1.5, 2, pitch=math.pi / 2),
+               "held": {**table.at("1x1", 1, 1), "held_by": "right"}}
+    hit = cells_in_the_way(table, "letter", objects, A_CELLS)
+    assert hit == {"across": {(0.0, 0.0)}, "up": {(3.0, 0.0), (3.0, 1.0)}, "on_end": {(1.5, 2.0)}}
+    assert cells_in_the_way(table, "elsewhere", objects, A_CELLS) == {}  # a frame the world does not ground
+
+
+def test_a_block_the_failed_placement_left_on_the_letter_is_moved_before_its_cell_is_filled(letters):
+    """Two 1x1 of A's first leg replaced by one 1x2 (b0; no b1): placing b0 where a 1x1 goes left it lying across
+    cell (0, 0). The tiling lays b0 across a leg top and fills (0, 0) only after b0 has been moved."""
+    problem = letters.problem("A")
+    table = LetterTable({})
+    table.objects["b0"] = table.at("1x2", 0, 0)
+    for i, name in enumerate(["b2", "b3", "b4"]):
+        table.objects[name] = table.at("1x1", 8 + i, 6)
+    table.objects["b5"] = table.at("1x2", 8, 8)
+    plan = [{"step": i, "action": "place", "args": [b, x, y], "done": False}
+            for i, (b, x, y, *_) in enumerate(A_STEPS)]
+    failure = Failure(kind=FailureKind.COLLISION, message="place b0", step=0, action="place",
+                      evidence={"plan": plan})
+    context = SimpleNamespace(world=table, run=SimpleNamespace(problem=problem))
+    vector = SimpleNamespace(to_dict=lambda: {})
+    (proposal,) = tiling_proposals(vector, failure, context)
+    actions = proposal.changes["actions"]
+    order = [a[1] for a in actions]
+    cell_of = {a[1]: (float(a[2]), float(a[3])) for a in actions}
+    assert proposal.evidence["in_the_way"] == {"b0": [[0.0, 0.0]]}
+    assert cell_of["b0"] in {(0.5, 1.0), (2.5, 1.0)}  # the 1x2 goes across a leg top and a bar cell
+    filler = next(b for b, c in cell_of.items() if c == (0.0, 0.0))
+    assert order.index("b0") < order.index(filler)
+    cells = sorted(c for _, b, x, y in actions for c in footprint(table.objects[b]["shape"], float(x), float(y)))
+    assert cells == sorted(A_CELLS)

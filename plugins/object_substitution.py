@@ -105,6 +105,9 @@ MATCHERS = ("gridmap", "symbolic")
 LEVELS = ("task", "step")
 ENV_MATCHER = "BT_META_SUBSTITUTION_MATCHER"
 _KINDS = (FailureKind.UNKNOWN_ENTITY, FailureKind.UNEXPECTED_CONFIGURATION)
+DEMOTED = 0.9
+"""A proposal that leaves the failed step's missing entity as it was is scored at most this fraction of the
+lowest-scored one that changes it."""
 _STEP_KINDS = (FailureKind.COLLISION, FailureKind.PHYSICAL, FailureKind.PRECONDITION, FailureKind.REACHABILITY)
 """Failures answered only when the failed step itself names a missing entity: a 1x2 block where a 1x1 was
 planned collides at its placement; a block that is not there cannot be grasped."""
@@ -183,8 +186,48 @@ def _without_placed(vector: MismatchVector, plan: Sequence[Mapping[str, Any]]) -
 
 
 def _names_missing(failure: Any, vector: MismatchVector) -> bool:
-    """Whether the failed step's arguments name an entity the world does not show as the plan assumes it."""
-    return bool({e.name for e in vector.missing} & {str(a) for a in getattr(failure, "args", ()) or ()})
+    """Whether the failed step's arguments -- or, for a method's guard that no longer holds, the entities the
+    method bound -- name an entity the world does not show as the plan assumes it (a leg method's 1x1 seen as a
+    1x2 after the step that put it down)."""
+    named = {str(a) for a in getattr(failure, "args", ()) or ()}
+    bindings = (getattr(failure, "evidence", None) or {}).get("bindings")
+    if isinstance(bindings, Mapping):
+        named |= {str(v) for v in bindings.values()}
+    return bool({e.name for e in vector.missing} & named)
+
+
+def _mends_the_failed_step(proposal: RepairProposal, failure: Any, vector: MismatchVector) -> bool:
+    """Whether ``proposal`` changes what the failed step does with a missing entity it names: a substitution of
+    another missing block (b5 -> a spare) leaves a 1x2 placed where a 1x1 was planned failing as before, so it is
+    tried after those that do, whatever its score. True when the failed step names no missing entity."""
+    named = _failed_missing(failure, vector)
+    step = getattr(failure, "step", None)
+    if not named or step is None:
+        return True
+    if proposal.action == SUBSTITUTE:
+        return bool(named & set(proposal.changes.get("mapping") or {}))
+    if proposal.action == SPLICE:
+        start, end = proposal.changes.get("start"), proposal.changes.get("end")
+        return isinstance(start, int) and isinstance(end, int) and start <= step < end
+    return True
+
+
+def _mending_first(proposals: list[RepairProposal], failure: Any, vector: MismatchVector) -> list[RepairProposal]:
+    """``proposals`` by score, those that do not mend the failed step scored below every one that does (the
+    reasoner ranks all plugins' proposals by score): each keeps a note of why in its evidence."""
+    mending = [p.score for p in proposals if _mends_the_failed_step(p, failure, vector)]
+    if mending and len(mending) < len(proposals):
+        below = min(mending) * DEMOTED
+        proposals = [p if _mends_the_failed_step(p, failure, vector) else replace(
+            p, score=round(min(p.score, below), 4),
+            evidence={**p.evidence, "demoted": f"does not change what failed step {failure.step} does with "
+                                              f"{', '.join(sorted(_failed_missing(failure, vector)))}"})
+            for p in proposals]
+    return sorted(proposals, key=lambda p: -p.score)
+
+
+def _failed_missing(failure: Any, vector: MismatchVector) -> set[str]:
+    return {e.name for e in vector.missing} & {str(a) for a in getattr(failure, "args", ()) or ()}
 
 
 def _call(action: str, args: Sequence[Any]) -> str:
@@ -400,7 +443,8 @@ class ObjectSubstitution:
                         proposals: Sequence[RepairProposal]) -> None:
         """Give the unknown entities the proposals use their perceived facts in the world's symbolic state: the
         missing entity's initial unary facts (type, availability), their own shape and colour; the failed step's
-        effects on an entity it moved are undone (the repair moves it again)."""
+        effects on an entity it moved are undone (the repair moves it again). A block seen only in another colour
+        than the problem says keeps its facts: it still fills its own role."""
         world = getattr(context, "world", None)
         apply = getattr(world, "apply_symbolic", None)
         state = getattr(world, "symbolic_state", None)
@@ -416,9 +460,13 @@ class ObjectSubstitution:
         effects = getattr(context, "effects", None) or _applied_effects(context, current)
         add: list[tuple[str, ...]] = []
         delete: list[tuple[str, ...]] = []
+        planned = {e.name: e for e in vector.missing}
         for entity in vector.unknown:
             if entity.name not in used:
                 continue
+            if entity.name in planned and planned[entity.name].shape == entity.shape:
+                continue  # only its colour differs: it keeps its role and the facts its methods chose (grid-maps
+                # compare form; anchoring the colour would fail the guards of the steps still to run)
             delete += [f for f in current if len(f) == 3 and f[0] in ("shape", "colour") and f[1] == entity.name]
             add += [(name, entity.name) for name in template]
             add += [("shape", entity.name, str(entity.shape)), ("colour", entity.name, str(entity.colour))]
@@ -456,7 +504,7 @@ class ObjectSubstitution:
             proposals = self._same_cells(proposals, plan, context)
             known = [p.changes.get("actions") for p in proposals if p.action == SPLICE]
             proposals += [p for p in tiling_proposals(vector, failure, context) if p.changes["actions"] not in known]
-        proposals.sort(key=lambda p: -p.score)
+        proposals = _mending_first(proposals, failure, vector)
         if proposals and self.anchor:
             self.anchor_entities(vector, failure, context, proposals)
         return proposals or None

@@ -14,7 +14,9 @@ taken one colour at a time, so a distractor of another colour touching the block
 compared is what the step could have changed: a blob that meets only other cells memory expected (a leg below,
 a block remembered in the window's corner) and none the step's block can cover (within half its longest side of
 the window's centre) counts only on those cells, so a distractor lying against a neighbour and out into the
-corner is not counted either; a block one cell off, or a neighbour knocked away, still differs. With
+corner is not counted either; nor is the part of a neighbour merged into the step's blob that reaches beyond
+the cells memory expected it on (a 1x2 a repair laid against the leg); a block one cell off, or a neighbour
+knocked away, still differs. With
 ``symbol_colours`` (``BT_META_GRIDMAP_COLOURS=symbols``), colour matters where the task's symbols say it does: a
 block the step moves with a ``colour(b, c)`` fact must cover its cells in colour ``c`` -- each cell of another
 colour differs (the blue bar the symbols name, seen green); for the other blocks, and by default for all,
@@ -78,6 +80,7 @@ class GridMapExpectations:
         self.rotations = rotations
         self.recentre_radius = recentre_radius
         self.symbol_colours = colours_from_environment() if symbol_colours is None else symbol_colours
+        self._views: dict[int, Any] = {}
 
     @hookimpl
     def bt_meta_expectations(self, context: Any) -> list[Expectation] | None:
@@ -118,7 +121,12 @@ class GridMapExpectations:
     @hookimpl
     def bt_meta_compare(self, expectation: Expectation, observations: dict[str, Any], context: Any
                         ) -> Comparison | None:
-        return compare(expectation, observations)
+        run = getattr(context, "run", None)
+        before = self._views.get(id(run)) if run is not None else None
+        result = compare(expectation, observations, before=before)
+        if run is not None and observations.get("image") is not None:
+            self._views = {id(run): observations["image"]}  # the view the next step starts from (this run only)
+        return result
 
 
 def _blobs(grid: np.ndarray) -> tuple[np.ndarray, int]:
@@ -175,15 +183,56 @@ def _touching(expected: Any, observed: Any) -> Any:
     if not step.any():
         step = wanted  # nothing remembered over the centre: every expected cell may be the step's
     kept = np.zeros(seen.shape, dtype=bool)
+    near = _beside(_reach(expected))
     for k in range(1, count + 1):
         blob = labels == k
         if np.any(step & blob):
-            kept |= blob
+            kept |= _without_neighbours_reach(blob, near, wanted)
         elif np.any(wanted & blob):
             kept |= blob & wanted
     if np.all(kept == (seen != 0)):
         return observed
     return replace(observed, occupancy=np.where(kept, seen, 0).astype(np.uint8))
+
+
+def _without_neighbours_reach(blob: np.ndarray, near: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    """The cells of the blob over the step's block that count: beyond ``near`` (where that block can show), a part
+    of the blob that holds cells memory expected occupied is a neighbour merged with it, and only those cells count
+    (a 1x2 a repair laid against the leg reaches out along it: not the step's doing); a part that holds none
+    counts whole (something of its colour against the block)."""
+    from scipy import ndimage
+
+    kept = blob & near
+    parts, count = ndimage.label(blob & ~near)
+    for k in range(1, count + 1):
+        part = parts == k
+        kept |= (part & wanted) if np.any(part & wanted) else part
+    return kept
+
+
+def _without_earlier(expected: Any, observed: Any, earlier: Any) -> Any:
+    """``observed`` without the cells memory expected empty that ``earlier`` (the same window before the step)
+    already showed occupied: a block an earlier step of this run put there (a repair may place the blocks in
+    another order than the demonstrations: H's bar-right cell covered before the bar-left block comes)."""
+    seen = np.asarray(observed.occupancy)
+    old = np.asarray(earlier.occupancy)
+    if old.shape != seen.shape:
+        return observed
+    stale = (old != 0) & (seen != 0) & (np.asarray(expected.occupancy) == 0)
+    if not stale.any():
+        return observed
+    return replace(observed, occupancy=np.where(stale, 0, seen).astype(np.uint8))
+
+
+def _beside(zone: np.ndarray) -> np.ndarray:
+    """``zone`` and the cells sharing a side with it: where the step's block can show, however it landed a little
+    off."""
+    grown = zone.copy()
+    grown[1:, :] |= zone[:-1, :]
+    grown[:-1, :] |= zone[1:, :]
+    grown[:, 1:] |= zone[:, :-1]
+    grown[:, :-1] |= zone[:, 1:]
+    return grown
 
 
 def _distance(expected: Any, observed: Any, colour: bool, rotations: bool) -> int:
@@ -230,8 +279,10 @@ def symbol_colours(context: Any) -> dict[str, str]:
             if len(f) == 3 and f[0] == "colour" and str(f[1]) in names}
 
 
-def compare(expectation: Expectation, observations: dict[str, Any]) -> Comparison | None:
-    """Compare a ``"gridmap"`` expectation with the top view in ``observations["image"]`` (``None`` without)."""
+def compare(expectation: Expectation, observations: dict[str, Any], before: Any = None) -> Comparison | None:
+    """Compare a ``"gridmap"`` expectation with the top view in ``observations["image"]`` (``None`` without);
+    ``before``, the top view the previous step left, when known: a cell memory expected empty that was occupied
+    then and still is holds a block an earlier step put there, not the step's doing."""
     if expectation.kind != KIND:
         return None
     view = observations.get("image")
@@ -249,6 +300,9 @@ def compare(expectation: Expectation, observations: dict[str, Any]) -> Compariso
                 observed = view.grid_map_at(block.centroid, z=block.top_z, colour=block.colour, shape=block.shape)
             else:
                 observed = view.grid_map_at(expected.centroid)
+            if before is not None and hasattr(before, "grid_map_at") and not data["rotations"]:
+                observed = _without_earlier(expected, observed, before.grid_map_at(
+                    observed.centroid, z=None if block is None else block.top_z))
             cells = _distance(expected, observed, data["compare_colour"], data["rotations"])
             wanted = (data.get("colours") or {}).get(str(expected.object_name))
             off_colour = 0

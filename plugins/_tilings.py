@@ -28,6 +28,7 @@ Offers:
 * :func:`tile` -- a tiling of cells with blocks of given shapes (``None`` when none exists)
 * :func:`tiling_proposals` -- the ``splice`` proposal for a failure, when a tiling differs from the plan
 * :func:`cells_in_the_way` -- the cells of a frame each object's current pose covers in part
+* :func:`lands_on_a_block` -- whether a failed placement run again with stand-ins would put its block on another
 * :func:`covers_the_same_cells` -- whether a splice's placements cover the cells of the steps it replaces (a
   remembered decomposition that draws another part of the letter does not)
 """
@@ -58,7 +59,7 @@ IN_THE_WAY = 0.9
 """lb: a block unit whose centre is nearer than this to a cell's centre along both of the frame's axes overlaps the
 cell (touching is 1.0; 0.9 leaves 6 mm of the cell covered)."""
 
-__all__ = ["cells_in_the_way", "covers_the_same_cells", "footprint", "tile", "tiling_proposals"]
+__all__ = ["cells_in_the_way", "covers_the_same_cells", "footprint", "lands_on_a_block", "tile", "tiling_proposals"]
 
 
 def _width(shape: str | None) -> int | None:
@@ -314,6 +315,25 @@ def tiling_proposals(vector: Any, failure: Any, context: Any) -> list[RepairProp
                   "cells": [list(c) for c in cells], "blocks": {n: seen[n].get("shape") for n in on_hand},
                   "in_the_way": {n: sorted(list(c) for c in v) for n, v in in_the_way.items()},
                   "colour_required": colour})]
+
+
+def lands_on_a_block(failure: Any, mapping: Mapping[str, str], context: Any) -> bool:
+    """Whether the failed placement, run again with ``mapping``'s stand-ins, would put its block down on cells
+    another block lies on (the 1x2 the failed step left across the cell a 1x1 was planned on)."""
+    args = [str(a) for a in getattr(failure, "args", ()) or ()]
+    world = getattr(context, "world", None)
+    observe = getattr(world, "observe", None)
+    action = getattr(failure, "action", None)
+    if len(args) != 3 or observe is None or action is None:
+        return False
+    x, y = _number(args[1]), _number(args[2])
+    frame = _action_frame(world, str(action))
+    seen = {str(k): dict(v) for k, v in ((observe() or {}).get("objects") or {}).items() if isinstance(v, Mapping)}
+    block = str(mapping.get(args[0], args[0]))
+    cells = footprint((seen.get(block) or {}).get("shape"), x, y) if x is not None and y is not None else None
+    if not cells or frame is None:
+        return False
+    return bool(cells_in_the_way(world, frame, {n: v for n, v in seen.items() if n != block}, cells))
 
 
 def _action_frame(world: Any, action: str) -> str | None:

@@ -79,11 +79,11 @@ from bt_meta_plugins._decompositions import Decomposition, Library, bind, why_no
 from bt_meta_plugins._grounding_spares import rebind_proposals
 from bt_meta_plugins._mismatch import Entity, MismatchVector, mismatch_vector
 from bt_meta_plugins._spares import spare_proposals
-from bt_meta_plugins._tilings import covers_the_same_cells, tiling_proposals
+from bt_meta_plugins._tilings import covers_the_same_cells, lands_on_a_block, tiling_proposals
 
 from bt_meta.bt.failures import FailureKind, RepairProposal
 from bt_meta.errors import ConfigError
-from bt_meta.meta.proposals import SPLICE, SUBSTITUTE
+from bt_meta.meta.proposals import REBIND, SPLICE, SUBSTITUTE
 from bt_meta.perception.recall import memory_for, root_task
 from bt_meta.plugins import hookimpl
 
@@ -196,29 +196,35 @@ def _names_missing(failure: Any, vector: MismatchVector) -> bool:
     return bool({e.name for e in vector.missing} & named)
 
 
-def _mends_the_failed_step(proposal: RepairProposal, failure: Any, vector: MismatchVector) -> bool:
-    """Whether ``proposal`` changes what the failed step does with a missing entity it names: a substitution of
-    another missing block (b5 -> a spare) leaves a 1x2 placed where a 1x1 was planned failing as before, so it is
-    tried after those that do, whatever its score. True when the failed step names no missing entity."""
+def _mends_the_failed_step(proposal: RepairProposal, failure: Any, vector: MismatchVector, context: Any) -> bool:
+    """Whether ``proposal`` changes what the failed step does with a missing entity it names: a substitution or a
+    rebinding of another missing block (b5 -> a spare) leaves a 1x2 placed where a 1x1 was planned failing as
+    before, and a stand-in put down on the cell the 1x2 still lies on collides with it, so these are tried after
+    the proposals that do, whatever their score. True when the failed step names no missing entity."""
     named = _failed_missing(failure, vector)
     step = getattr(failure, "step", None)
     if not named or step is None:
         return True
     if proposal.action == SUBSTITUTE:
-        return bool(named & set(proposal.changes.get("mapping") or {}))
+        mapping = proposal.changes.get("mapping") or {}
+        return bool(named & set(mapping)) and not lands_on_a_block(failure, mapping, context)
+    if proposal.action == REBIND:
+        return bool(named & set(proposal.changes.get("symbols") or {}))
     if proposal.action == SPLICE:
         start, end = proposal.changes.get("start"), proposal.changes.get("end")
         return isinstance(start, int) and isinstance(end, int) and start <= step < end
     return True
 
 
-def _mending_first(proposals: list[RepairProposal], failure: Any, vector: MismatchVector) -> list[RepairProposal]:
+def _mending_first(proposals: list[RepairProposal], failure: Any, vector: MismatchVector, context: Any
+                   ) -> list[RepairProposal]:
     """``proposals`` by score, those that do not mend the failed step scored below every one that does (the
     reasoner ranks all plugins' proposals by score): each keeps a note of why in its evidence."""
-    mending = [p.score for p in proposals if _mends_the_failed_step(p, failure, vector)]
+    mends = {id(p): _mends_the_failed_step(p, failure, vector, context) for p in proposals}
+    mending = [p.score for p in proposals if mends[id(p)]]
     if mending and len(mending) < len(proposals):
         below = min(mending) * DEMOTED
-        proposals = [p if _mends_the_failed_step(p, failure, vector) else replace(
+        proposals = [p if mends[id(p)] else replace(
             p, score=round(min(p.score, below), 4),
             evidence={**p.evidence, "demoted": f"does not change what failed step {failure.step} does with "
                                               f"{', '.join(sorted(_failed_missing(failure, vector)))}"})
@@ -504,7 +510,7 @@ class ObjectSubstitution:
             proposals = self._same_cells(proposals, plan, context)
             known = [p.changes.get("actions") for p in proposals if p.action == SPLICE]
             proposals += [p for p in tiling_proposals(vector, failure, context) if p.changes["actions"] not in known]
-        proposals = _mending_first(proposals, failure, vector)
+        proposals = _mending_first(proposals, failure, vector, context)
         if proposals and self.anchor:
             self.anchor_entities(vector, failure, context, proposals)
         return proposals or None

@@ -31,8 +31,8 @@ def test_a_method_guard_names_the_blocks_its_method_bound():
 
 
 def test_a_proposal_that_leaves_the_failed_step_as_it_was_ranks_below_those_that_change_it():
-    """place(b0, 0, 0) failed because b0 is a 1x2; b5 is missing too. Substituting b5's spare (scored higher) would
-    run the same failing placement again, so the tiling that moves b0 comes first."""
+    """place(b0, 0, 0) failed because b0 is a 1x2; b5 is missing too. Substituting b5's spare or rebinding b5
+    (scored higher) would run the same failing placement again, so the tiling that moves b0 comes first."""
     failure = Failure(kind=FailureKind.UNKNOWN_ENTITY, message="b0 seen as a 1x2", step=0, action="place",
                       args=("b0", "0", "0"))
     vector = MismatchVector(0, (Entity("b0", "1x1", "blue"), Entity("b5", "1x2", "blue")),
@@ -41,12 +41,13 @@ def test_a_proposal_that_leaves_the_failed_step_as_it_was_ranks_below_those_that
     tiling = RepairProposal("splice", 0.6, changes={"start": 0, "end": 6, "actions": [["place", "b0", "0.5", "1"]]})
     later = RepairProposal("splice", 0.7,
                            changes={"start": 4, "end": 6, "actions": [["place", "spare_b5", "1.5", "1"]]})
-    ranked = substitution._mending_first([spare, later, tiling], failure, vector)
+    rebind = RepairProposal("rebind", 0.86, changes={"symbols": {"b5": "spare_b5"}, "from_step": 0})
+    ranked = substitution._mending_first([spare, rebind, later, tiling], failure, vector, SimpleNamespace(world=None))
     assert ranked[0] is tiling
     assert all(p.score < tiling.score and "does not change what failed step 0 does with b0" in p.evidence["demoted"]
                for p in ranked[1:])
     # nothing mends it: the scores stand
-    assert [p.score for p in substitution._mending_first([spare, later], failure, vector)] == [0.85, 0.7]
+    assert [p.score for p in substitution._mending_first([spare, later], failure, vector, None)] == [0.85, 0.7]
 
 
 class _Beliefs:

@@ -8,7 +8,14 @@ import math
 from types import SimpleNamespace
 
 import pytest
-from bt_meta_plugins._tilings import cells_in_the_way, covers_the_same_cells, footprint, tile, tiling_proposals
+from bt_meta_plugins._tilings import (
+    cells_in_the_way,
+    covers_the_same_cells,
+    footprint,
+    lands_on_a_block,
+    tile,
+    tiling_proposals,
+)
 
 from bt_meta.bt.failures import Failure, FailureKind, RepairProposal
 from bt_meta.htn import load_task_file
@@ -154,3 +161,15 @@ def test_a_block_the_failed_placement_left_on_the_letter_is_moved_before_its_cel
     assert order.index("b0") < order.index(filler)
     cells = sorted(c for _, b, x, y in actions for c in footprint(table.objects[b]["shape"], float(x), float(y)))
     assert cells == sorted(A_CELLS)
+
+
+def test_a_stand_in_put_down_where_the_failed_block_still_lies_would_land_on_it():
+    table = LetterTable({})
+    table.objects.update(b0=table.at("1x2", 0, 0), spare=table.at("1x1", 8, 8), far=table.at("1x1", 3, 0))
+    context = SimpleNamespace(world=table)
+    failure = Failure(kind=FailureKind.UNKNOWN_ENTITY, message="b0 is a 1x2", step=0, action="place",
+                      args=("b0", "0", "0"))
+    assert lands_on_a_block(failure, {"b0": "spare"}, context)
+    moved = Failure(kind=FailureKind.UNKNOWN_ENTITY, message="b1 missing", step=1, action="place",
+                    args=("b1", "0", "1"))
+    assert not lands_on_a_block(moved, {"b1": "spare"}, context)  # (0, 1) is free

@@ -8,7 +8,9 @@ had it at the start, it looks in the method library for a **re-orientation task*
 ``Reorient`` and whose first parameter is the part -- and proposes to run it as many times as needed, then the
 problem's own task network again, from where the run stands (else, mid-plan where the network cannot be planned
 again, the rest of the failed plan). The part is the root task's first argument, else the failed step's argument
-whose normal is off (the letters' ``draw_A()`` names no block). The task files that need it ship the methods (a
+whose normal is off (the letters' ``draw_A()`` names no block). A held part that started grossly off but shows the
+demonstrated normal (a letters block picked on its side and carried upright by a tilted wrist) is judged by the
+normal it would have under a top-down grasp. The task files that need it ship the methods (a
 regrasp: set the part down on another face, pick it again; ``trees/magnetic_attach.yaml``,
 ``trees/housing_insertion.yaml``, ``trees/letters.yaml``). A ``precondition`` failure is answered only when an atom
 its condition misses is a property of the part alone (``upright(housing)``, which sensing dropped): a symbolic
@@ -181,6 +183,9 @@ class Reorientation:
         found = None
         for part in _candidate_parts(problem, failure):
             seen = self._orientation(world, memory, task, part)
+            if seen is not None and _angle(seen[2], seen[1]) <= GROSS_ANGLE:
+                tilted = _held_tilted(world, run, seen[0], seen[1])
+                seen = seen if tilted is None else (seen[0], seen[1], tilted)
             if seen is not None and (_angle(seen[2], seen[1]) > GROSS_ANGLE or part in earlier):
                 found = (part, *seen)
                 break
@@ -444,6 +449,27 @@ def _held_turned(failure: Any, name: str, wanted: np.ndarray) -> bool:
     # Upside down (past UPSIDE_DOWN) it is let go first and the turns counted from how it lands: measured, two
     # flips in a hand the insertion had pressed it into landed it 31 deg off (a third turn, no refinement kept).
     return GROSS_ANGLE < off <= UPSIDE_DOWN
+
+
+def _held_tilted(world: Any, run: Any, name: str, wanted: np.ndarray) -> np.ndarray | None:
+    """The normal a part that started grossly off and is held now would have under a top-down grasp (the
+    skills' grasp, :data:`TOP_DOWN`), when that is grossly off too; else ``None``. A block picked on its side is
+    carried upright with the wrist tilted (the letters' place keeps its tilt in the gripper): its normal as the
+    table sees it is the demonstrated one, but no wrist reaches down at the cell so held."""
+    start = Reorientation._initial_normal(run, name)
+    if start is None or _angle(start, wanted) <= GROSS_ANGLE:
+        return None
+    seen = world.observe() or {}
+    arm = next((a for a, held in (seen.get("held") or {}).items() if held == name), None)
+    pose = (seen.get("gripper") or {}).get(arm) if arm is not None else None
+    observed = (seen.get("objects") or {}).get(name)
+    if pose is None or len(pose) != 6 or observed is None:
+        return None
+    try:
+        normal = TOP_DOWN @ rpy_to_matrix(*pose[3:]).T @ keypoints_of(observed)[1]
+    except KeypointError:
+        return None
+    return normal if _angle(normal, wanted) > GROSS_ANGLE else None
 
 
 def _turns_up(world: Any, symbol: str) -> bool:

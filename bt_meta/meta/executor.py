@@ -481,10 +481,14 @@ def _rebind(world: Any, before: dict[str, str], after: dict[str, str]) -> None:
 def _replayed(report: RunReport) -> RunReport:
     """``report`` with the plan a refinement should replay: the last (repairing) attempt's ``replay_plan`` when its
     plugin planned the repair from the initial state (a re-orientation: not the failed attach, its release and the
-    re-pick), else the plan as run."""
+    re-pick), else the plan as run. Not when another plugin's attempt came earlier: the replay plan, planned from
+    the problem's initial state, knows nothing of what that changed (a letters block turned after a tiling replaced
+    two 1x1 by a 1x2: replayed, the nominal 1x1 placements failed, letters_H s0 0005 0023 0056)."""
     last = report.attempts[-1] if report.attempts else None
     replay = None if last is None else (last.proposal.get("evidence") or {}).get("replay_plan")
     if not replay or last is None or last.outcome != "repaired":
+        return report
+    if any(attempt.proposal.get("plugin") != last.proposal.get("plugin") for attempt in report.attempts[:-1]):
         return report
     return dataclasses.replace(report, plan=[[str(a) for a in step] for step in replay])
 

@@ -208,3 +208,26 @@ def test_cli_errors(tmp_path, capsys):
     assert "t.yaml:1:" in capsys.readouterr().err
     assert main(["refinements", "export", "--memory", str(tmp_path / "m.sqlite")]) == 2
     assert "no refinements to export in" in capsys.readouterr().err
+
+
+def test_a_replay_plan_is_kept_only_when_no_other_plugin_changed_the_plan_before():
+    """A re-orientation's replay plan is planned from the problem's initial state: kept as the refinement's plan
+    when it made the run's only repairs; after another plugin's splice (a tiling of a 1x2 where two 1x1 were), it
+    knows nothing of that change, and the plan as run is kept."""
+    from bt_meta.meta.executor import RunReport, _replayed
+    from bt_meta.meta.reasoner import Attempt
+
+    def attempt(number: int, plugin: str, outcome: str, replay: list | None = None) -> Attempt:
+        evidence = {"replay_plan": replay} if replay else {}
+        return Attempt(number, {}, "reachability", {"plugin": plugin, "evidence": evidence}, "", 0, 0.0, outcome)
+
+    as_run = [["place", "b1", "0.5", "1"], ["turn_over", "b7"], ["place", "b7", "2", "1"]]
+    replay = [["turn_over", "b7"], ["place", "b1", "0", "1"], ["place", "b7", "2", "1"]]
+    alone = RunReport("success", "H", attempts=[attempt(1, "reorientation", "repaired", replay)], plan=as_run)
+    assert _replayed(alone).plan == replay
+    twice = RunReport("success", "H", attempts=[attempt(1, "reorientation", "failed_again", replay),
+                                                 attempt(2, "reorientation", "repaired", replay)], plan=as_run)
+    assert _replayed(twice).plan == replay
+    after = RunReport("success", "H", attempts=[attempt(1, "object_substitution", "failed_again"),
+                                                 attempt(2, "reorientation", "repaired", replay)], plan=as_run)
+    assert _replayed(after).plan == as_run

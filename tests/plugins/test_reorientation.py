@@ -338,3 +338,34 @@ def test_a_letters_block_on_its_side_mid_letter_is_turned_before_the_rest_of_the
         assert reorientation.Reorientation(memory).bt_meta_propose_repairs(failure, context) is None  # as shown
     finally:
         memory.close()
+
+
+class CarriedWorld:
+    """A block held with the gripper at ``grip_rpy``; the table sees its normal ``normal``."""
+
+    def __init__(self, normal: tuple[float, float, float], grip_rpy: tuple[float, float, float],
+                 held: str | None = "b1") -> None:
+        self.normal, self.grip_rpy, self.held = normal, grip_rpy, held
+
+    def observe(self) -> dict[str, Any]:
+        return {"objects": {"b1": {"name": "b1", "pose": [0.6, 0.1, -0.1, 0, 0, 0], "ap": [0.6, 0.1, -0.12],
+                                   "an": list(self.normal)}},
+                "held": {"right": self.held, "left": None}, "gripper": {"right": [0.6, 0.1, -0.05, *self.grip_rpy]}}
+
+
+@pytest.mark.parametrize(("start", "grip", "held", "tilted"), [
+    (SIDE, (0.0, -math.pi / 2, 0.0), "b1", True),    # picked on its side, carried upright by a tilted wrist
+    (SIDE, (math.pi, 0.0, math.pi), "b1", False),    # held top-down and upright: it was turned already
+    (DOWN, (0.0, -math.pi / 2, 0.0), "b1", False),   # it started as demonstrated
+    (SIDE, (0.0, -math.pi / 2, 0.0), None, False),   # not held
+])
+def test_a_block_carried_upright_by_a_tilted_wrist_is_seen_as_turned(start, grip, held, tilted):
+    """The letters' place picks a block on its side top-down and tilts the wrist to carry it upright: the table
+    sees the demonstrated normal, but held so it cannot be put down square. Under a top-down grasp its normal is
+    a quarter off."""
+    run = SimpleNamespace(start_objects={"b1": {"name": "b1", "pose": [0.6, -0.3, -0.17, 0, 0, 0],
+                                                "ap": [0.6, -0.3, -0.2], "an": list(start)}})
+    normal = reorientation._held_tilted(CarriedWorld(DOWN, grip, held), run, "b1", np.array(DOWN))
+    assert (normal is not None) is tilted
+    if tilted:
+        assert reorientation._angle(normal, np.array(DOWN)) == pytest.approx(math.pi / 2, abs=1e-6)

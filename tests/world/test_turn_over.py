@@ -55,3 +55,45 @@ def test_a_block_on_another_face_stands_on_its_base_after_its_turns(roll, pitch,
         assert np.linalg.norm(sim.object_transform("b3")[:2, 3] - (x, y)) < 0.05  # where it lay
     finally:
         world.close()
+
+
+def test_a_block_a_failed_place_left_in_the_gripper_is_turned_from_where_it_was_picked():
+    """b1 on its side (letters_A s0 0040): place picks it top-down and tilts the wrist to carry it upright; the
+    wrist cannot reach down at the cell so (reachability, the block still held). The turn takes it back over where
+    it was picked and turns it there: it ends standing on its base near where it lay, and is placed on its cell."""
+    task_file = load_task_file(trees_dir() / "letters.yaml")
+    with quiet_stdout():
+        world = SimWorld(task_file.domain, task_file.problem("A"), load_grounding("letters"))
+    try:
+        sim = world.sim
+        x, y = sim.object_transform("b1")[:2, 3]
+        sim.move_object("b1", sim.resting_pose(sim.object_model("b1"), (x, y, 0.0, 0.0, math.radians(90.0), 0.0)))
+        sim.settle(60)
+        world.sync_collision()
+        place = world.skill("place")
+        place.start(["b1", "0", "1"])
+        status = RUNNING
+        for _ in range(800):
+            status = place.tick()
+            if status != RUNNING:
+                break
+        assert status == "FAILURE" and place.failure.kind == "reachability", place.failure
+        assert sim.held("right") == "b1"
+        others = {n: sim.object_transform(n)[:3, 3].copy() for n in sim.object_names() if n != "b1"}
+        assert turn(world, "b1") == "SUCCESS"
+        assert sim.held("right") is None
+        approach = sim.link_transform(world.end_effector("right"))[:3, 2]
+        assert approach[2] < -0.99  # the wrist left top-down: the next pick does not sweep the blocks beside it
+        assert sim.object_transform("b1")[2, 2] > math.cos(math.radians(10.0))
+        assert np.linalg.norm(sim.object_transform("b1")[:2, 3] - (x, y)) < 0.05
+        place = world.skill("place")
+        place.start(["b1", "0", "1"])
+        for _ in range(800):
+            status = place.tick()
+            if status != RUNNING:
+                break
+        assert status == "SUCCESS", place.failure
+        moved = {n: float(np.linalg.norm(sim.object_transform(n)[:3, 3] - p)) for n, p in others.items()}
+        assert max(moved.values()) < 0.005, moved
+    finally:
+        world.close()

@@ -400,6 +400,9 @@ class SimWorld:
         self._state = initial_state(problem)
         self.executed: list[dict[str, Any]] = []
         self.total_ticks = 0
+        self.grasp_poses: dict[str, np.ndarray] = {}
+        """Object -> the gripper pose (4x4, base frame) its last grasp closed at: where a skill that must let a
+        block go as it was picked (a turn of a block carried tilted) takes it back to."""
 
     @staticmethod
     def _start_pose(robot: Any, grounding: Grounding) -> dict[str, float]:

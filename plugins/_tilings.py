@@ -44,6 +44,7 @@ import numpy as np
 
 from bt_meta.bt.failures import RepairProposal
 from bt_meta.meta.proposals import SPLICE
+from bt_meta.world.poses import rpy_to_matrix
 
 SCORE = 0.6
 """Below the spares (0.85) and the nearest remembered decompositions: the plan the geometry alone gives is tried
@@ -180,8 +181,6 @@ def _unit_centres(state: Mapping[str, Any], to_frame: Callable[[float, float], C
     width = _width(state.get("shape")) or 1
     if len(pose) < 6:
         return []
-    from bt_meta.world.poses import rpy_to_matrix
-
     axis = np.asarray(rpy_to_matrix(pose[3], pose[4], pose[5]))[:, 0]
     centre = np.array(to_frame(pose[0], pose[1]))
     tip = np.array(to_frame(pose[0] + float(axis[0]), pose[1] + float(axis[1]))) - centre
@@ -248,8 +247,7 @@ def tiling_proposals(vector: Any, failure: Any, context: Any) -> list[RepairProp
     facts = list(getattr(problem, "init", None) or getattr(problem, "state", None) or ())
     assumed = {str(f[1]): str(f[2]) for f in facts if len(f) == 3 and f[0] == "shape"}
     colours = {str(f[1]): str(f[2]) for f in facts if len(f) == 3 and f[0] == "colour"}
-    seen = {str(k): dict(v) for k, v in ((observe() or {}).get("objects") or {}).items()
-            if isinstance(v, Mapping) and v.get("shape")}
+    seen = {name: state for name, state in _seen(world).items() if state.get("shape")}
     for name, state in seen.items():  # a stand-in the problem does not describe (a spare) is planned as it is seen
         assumed.setdefault(name, str(state["shape"]))
         if state.get("colour"):
@@ -328,12 +326,18 @@ def lands_on_a_block(failure: Any, mapping: Mapping[str, str], context: Any) -> 
         return False
     x, y = _number(args[1]), _number(args[2])
     frame = _action_frame(world, str(action))
-    seen = {str(k): dict(v) for k, v in ((observe() or {}).get("objects") or {}).items() if isinstance(v, Mapping)}
+    seen = _seen(world)
     block = str(mapping.get(args[0], args[0]))
     cells = footprint((seen.get(block) or {}).get("shape"), x, y) if x is not None and y is not None else None
     if not cells or frame is None:
         return False
     return bool(cells_in_the_way(world, frame, {n: v for n, v in seen.items() if n != block}, cells))
+
+
+def _seen(world: Any) -> dict[str, dict[str, Any]]:
+    """The objects the world shows (``observe()["objects"]``), by name."""
+    objects = (world.observe() or {}).get("objects") or {}
+    return {str(k): dict(v) for k, v in objects.items() if isinstance(v, Mapping)}
 
 
 def _action_frame(world: Any, action: str) -> str | None:

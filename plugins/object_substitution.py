@@ -189,11 +189,9 @@ def _names_missing(failure: Any, vector: MismatchVector) -> bool:
     """Whether the failed step's arguments -- or, for a method's guard that no longer holds, the entities the
     method bound -- name an entity the world does not show as the plan assumes it (a leg method's 1x1 seen as a
     1x2 after the step that put it down)."""
-    named = {str(a) for a in getattr(failure, "args", ()) or ()}
     bindings = (getattr(failure, "evidence", None) or {}).get("bindings")
-    if isinstance(bindings, Mapping):
-        named |= {str(v) for v in bindings.values()}
-    return bool({e.name for e in vector.missing} & named)
+    bound = {str(v) for v in bindings.values()} if isinstance(bindings, Mapping) else set()
+    return bool(_failed_missing(failure, vector) or {e.name for e in vector.missing} & bound)
 
 
 def _mends_the_failed_step(proposal: RepairProposal, failure: Any, vector: MismatchVector, context: Any) -> bool:

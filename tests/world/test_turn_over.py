@@ -19,15 +19,19 @@ from bt_meta.world.skills.place import top_down, turned_pose
 pytestmark = pytest.mark.slow
 
 
-def turn(world: SimWorld, block: str) -> str:
-    skill = Place(world)
-    skill.spec = {"mode": "turn"}
-    skill.start([block])
+def run_to_end(skill: Place, args: list[str]) -> str:
+    skill.start(args)
     for _ in range(800):
         status = skill.tick()
         if status != RUNNING:
             return status
-    raise AssertionError("turn_over still running")
+    raise AssertionError(f"{skill.name}{args} still running")
+
+
+def turn(world: SimWorld, block: str) -> str:
+    skill = Place(world)
+    skill.spec = {"mode": "turn"}
+    return run_to_end(skill, [block])
 
 
 @pytest.mark.parametrize(("roll", "pitch", "turns"), [(90.0, 0.0, 1), (0.0, -90.0, 1), (180.0, 0.0, 2)])
@@ -71,12 +75,7 @@ def test_a_block_a_failed_place_left_in_the_gripper_is_turned_from_where_it_was_
         sim.settle(60)
         world.sync_collision()
         place = world.skill("place")
-        place.start(["b1", "0", "1"])
-        status = RUNNING
-        for _ in range(800):
-            status = place.tick()
-            if status != RUNNING:
-                break
+        status = run_to_end(place, ["b1", "0", "1"])
         assert status == "FAILURE" and place.failure.kind == "reachability", place.failure
         assert sim.held("right") == "b1"
         others = {n: sim.object_transform(n)[:3, 3].copy() for n in sim.object_names() if n != "b1"}
@@ -87,11 +86,7 @@ def test_a_block_a_failed_place_left_in_the_gripper_is_turned_from_where_it_was_
         assert sim.object_transform("b1")[2, 2] > math.cos(math.radians(10.0))
         assert np.linalg.norm(sim.object_transform("b1")[:2, 3] - (x, y)) < 0.05
         place = world.skill("place")
-        place.start(["b1", "0", "1"])
-        for _ in range(800):
-            status = place.tick()
-            if status != RUNNING:
-                break
+        status = run_to_end(place, ["b1", "0", "1"])
         assert status == "SUCCESS", place.failure
         moved = {n: float(np.linalg.norm(sim.object_transform(n)[:3, 3] - p)) for n, p in others.items()}
         assert max(moved.values()) < 0.005, moved

@@ -134,6 +134,7 @@ class Place(PhasedSkill):
         self.turn = False
         self.drop = 0.03
         self._turned_pose = np.eye(4)
+        self._high = np.eye(4)
 
     def ground(self, args: tuple[str, ...]) -> None:
         if self.spec.get("mode", "place") == "turn":
@@ -194,7 +195,7 @@ class Place(PhasedSkill):
                 ("turn", lambda: self._move(self._high, "turn " + self.block)),  # high: the block clear
                 ("lower", lambda: self._move(self._turned_pose, "lower " + self.block)),  # of the table
                 ("release", lambda: Grasp(self.world, self.arm).begin(self.block, release=True)),
-                ("retreat", lambda: self._move(self._retreat(), "retreat")),
+                ("retreat", lambda: self._move(self._lifted(), "retreat")),
                 # the wrist back to top-down where it is: the next pick's move from the turned wrist swept the
                 # hand through the blocks beside the one to pick (letters_H s0 0024, a kept turn replayed first)
                 ("square", lambda: self._move(self._squared(), "wrist top-down")),
@@ -207,7 +208,7 @@ class Place(PhasedSkill):
             ("carry", lambda: self._move(self._at_goal(self.approach_height), "above the target")),
             ("lower", lambda: self._move(self._at_goal(0.0), "down at the target")),
             ("release", lambda: Grasp(self.world, self.arm).begin(self.block, release=True)),
-            ("retreat", lambda: self._move(self._retreat(), "retreat")),
+            ("retreat", lambda: self._move(self._lifted(), "retreat")),
         ]
 
     def _grasp(self) -> Grasp:
@@ -292,9 +293,7 @@ class Place(PhasedSkill):
                           "grasp " + self.block)
 
     def _lifted(self) -> np.ndarray:
-        pose = self.world.sim.link_transform(self.world.end_effector(self.arm)).copy()
-        pose[2, 3] += self.approach_height
-        return pose
+        return self._over(self.world.sim.link_transform(self.world.end_effector(self.arm)))
 
     def _half_turned(self) -> np.ndarray:
         """Half the turn's rotation, on the way up to where it ends: a quarter turn of the wrist in one joint-space
@@ -337,11 +336,6 @@ class Place(PhasedSkill):
     def _squared(self) -> np.ndarray:
         here = self.world.sim.link_transform(self.world.end_effector(self.arm))
         return top_down(float(here[0, 3]), float(here[1, 3]), float(here[2, 3]), GRIPPER_YAW)
-
-    def _retreat(self) -> np.ndarray:
-        pose = self.world.sim.link_transform(self.world.end_effector(self.arm)).copy()
-        pose[2, 3] += self.approach_height
-        return pose
 
     def finish(self) -> None:
         sim = self.world.sim

@@ -27,6 +27,7 @@ import zmq
 
 from bt_meta.bt.groot2.btlog import Btlog, BtlogError, BtlogWriter, read_btlog
 from bt_meta.bt.groot2.observer import StatusObserver
+from bt_meta.bt.groot2.protocol import ProtocolError
 from bt_meta.bt.groot2.published_tree import PublishedTree
 from bt_meta.bt.groot2.server import Groot2Server
 from bt_meta.bt.groot2.tree_xml import full_tree_xml
@@ -232,12 +233,14 @@ def test_recorded_transitions_equal_btcpp(context: zmq.Context) -> None:
 
 
 def read_flushed(path: Path, transitions: int) -> Btlog:
-    """BT.CPP's log once its writer thread (flushing every 10 ms) has written ``transitions`` records, or 2 s."""
+    """BT.CPP's log once its writer thread (flushing every 10 ms) has written ``transitions`` records, or 2 s. A
+    read in the middle of a flush sees a torn last record (``ProtocolError``: not a whole number of 9-byte
+    records) and is tried again."""
     deadline = time.monotonic() + 2
     while True:
         try:
             log = read_btlog(path)
-        except BtlogError:
+        except (BtlogError, ProtocolError):
             log = None
         if (log is not None and len(log.transitions) >= transitions) or time.monotonic() > deadline:
             return log if log is not None else read_btlog(path)

@@ -14,7 +14,9 @@ The variant's scene is built in pybullet and settled; then, in this order (the f
    grasped; a letters block on another face: also the turn the place skill's ``turn`` mode would make from that
    grasp). A role no candidate can fill: the failed solve's kind (``reachability`` beats ``collision``). A place
    where the task puts something that an object the task does not name occupies (its centre near; for a letter
-   cell, any part of it inside the cell's footprint): ``limit:collision``.
+   cell, any part of it inside the cell's footprint): ``limit:collision``. When several limits apply and the plan
+   step each stops is known (letters), the label is the one the plan meets first (an obstacle at the fourth
+   placement before a block out of reach at the fifth); otherwise the first found in this order.
 3. ``repairable`` -- the goal can be reached but not by the nominal plan: a needed object is missing or of
    another type (substitution), has another colour where the task's symbols name colours (its initial facts),
    is turned off its nominal up axis by more than 20 degrees (re-orientation / pose repair), or a fixture the
@@ -198,7 +200,7 @@ class Labeller:
         if frame is None:
             return None
         sim = world.sim
-        for action in self.plan:
+        for step, action in enumerate(self.plan):
             if action.name != "place":
                 continue
             shape = self.shapes.get(action.args[0])
@@ -215,7 +217,8 @@ class Labeller:
                     name, gap = min(near.items(), key=lambda item: item[1])
                     return Label("limit:collision", f"{name} reaches into the cell ({x + dx:g}, {y:g}) where the "
                                  f"task puts {action.args[0]} ({-gap * 1000:.1f} mm into its footprint)",
-                                 {"object": name, "target": [round(gx, 4), round(gy, 4)], "gap": round(gap, 5)})
+                                 {"object": name, "target": [round(gx, 4), round(gy, 4)], "gap": round(gap, 5),
+                                  "step": step})
         return None
 
     def _jobs(self, world: Any) -> list[tuple[str | None, tuple[float, float, float]]]:
@@ -252,25 +255,34 @@ class Labeller:
         feasible: dict[str, tuple[bool, str | None, str]] = {}
         for name in sorted({c for candidates in roles.values() for c in candidates}):
             feasible[name] = self._graspable(world, name)
+        # Every limit the checks find, with the plan step it stops: the run meets the earliest (a limit whose
+        # step is unknown keeps its place in the order below).
+        limits: list[Label] = []
         limit = self._fill(roles, feasible, present)
         if limit is not None:
-            return limit
+            limits.append(limit)
         fixtures = {n for n in self.needed if self.family.grasped is not None and n not in self.family.grasped}
-        for tx, ty, _ in self.targets:
-            for name in present:
-                if name in fixtures:
-                    continue
-                xy = sim.object_transform(name)[:2, 3]
-                if math.hypot(xy[0] - tx, xy[1] - ty) < BLOCKING_RADIUS * LB:
-                    return Label("limit:collision", f"{name} occupies a place the task puts something "
-                                 f"({tx:.3f}, {ty:.3f})", {"object": name, "target": [tx, ty]})
+        steps = self._target_steps()
+        for index, (tx, ty, _) in enumerate(self.targets):
+            blocking = next((name for name in present if name not in fixtures and math.hypot(
+                *(sim.object_transform(name)[:2, 3] - (tx, ty))) < BLOCKING_RADIUS * LB), None)
+            if blocking is not None:
+                limits.append(Label("limit:collision", f"{blocking} occupies a place the task puts something "
+                                    f"({tx:.3f}, {ty:.3f})", {"object": blocking, "target": [tx, ty],
+                                                              "step": steps.get(index)}))
+                break
         occupied = self._occupied_cell(world, [n for n in present if n not in fixtures])
         if occupied is not None:
-            return occupied
-        if sim.obstacles():
-            blocked = self._obstacle_label(world, roles, feasible, present)
-            if blocked is not None:
-                return blocked
+            limits.append(occupied)
+        blocked = self._obstacle_label(world, roles, feasible, present) if sim.obstacles() else None
+        if blocked is not None and blocked.expected.startswith("limit:"):
+            limits.append(blocked)
+        if limits:
+            if all(limit.evidence.get("step") is not None for limit in limits):
+                return min(limits, key=lambda limit: limit.evidence["step"])  # the first wins a tie
+            return limits[0]
+        if blocked is not None:
+            return blocked
         # 3. repairable or nominal-equivalent
         for name in self.needed:
             nominal = self.nominal.get(name)
@@ -324,6 +336,19 @@ class Labeller:
                 roles[name] = candidates
         return roles
 
+    def _step_of(self, name: str) -> int | None:
+        """The first step of the nominal plan whose arguments name ``name``."""
+        return next((i for i, action in enumerate(self.plan) if name in map(str, action.args)), None)
+
+    def _target_steps(self) -> dict[int, int]:
+        """Index in :attr:`targets` -> the plan step that puts something there (letters: a place per cell)."""
+        out: dict[int, int] = {}
+        for step, action in enumerate(self.plan):
+            if action.name == "place":
+                for _ in ((-0.5, 0.5) if self.shapes.get(action.args[0]) == "1x2" else (0.0,)):
+                    out[len(out)] = step
+        return out if len(out) == len(self.targets) else {}
+
     def _graspable(self, world: Any, name: str) -> tuple[bool, str | None, str]:
         """(ok, failure kind, message) of the top-down grasp and its approach above ``name``."""
         import pinocchio as pin
@@ -368,9 +393,12 @@ class Labeller:
         q0 = world.current_q()
         hit = self._hit(world, q0)
         if hit is not None:
-            return Label("limit:collision", f"the robot's start configuration runs into {hit}", {"contact": hit})
+            return Label("limit:collision", f"the robot's start configuration runs into {hit}",
+                         {"contact": hit, "step": -1})
         stand_in = None
-        for nominal, target in self.jobs:
+        place_steps = [i for i, action in enumerate(self.plan) if action.name == "place"]
+        letters = self.family.truth == "letters" and len(place_steps) == len(self.jobs)
+        for index, (nominal, target) in enumerate(self.jobs):
             if self.family.truth == "letters":
                 shape = present[nominal].shape if nominal in present else self.shapes.get(str(nominal))
                 pool = [n for n in roles["blocks"] if present[n].shape == shape] or list(roles["blocks"])
@@ -387,7 +415,8 @@ class Labeller:
             else:
                 if messages:
                     return Label("limit:collision", f"nothing can be put at ({target[0]:.3f}, {target[1]:.3f}) "
-                                 f"clear of the obstacles: {messages[0]}", {"target": list(target[:2])})
+                                 f"clear of the obstacles: {messages[0]}",
+                                 {"target": list(target[:2]), "step": place_steps[index] if letters else None})
                 continue
             if messages and usable[0] == nominal and stand_in is None:
                 stand_in = Label("repairable", f"{messages[0]}; another object gets there clear of the obstacles",
@@ -524,17 +553,22 @@ class Labeller:
               present: dict[str, Any]) -> Label | None:
         """A limit label when some role has no candidate the robot can grasp."""
         def limit(names: Iterable[str]) -> Label:
+            names = list(names)
             kinds = [feasible[n][1] for n in names if not feasible[n][0]]
             kind = "reachability" if "reachability" in kinds else "collision"
             message = next((feasible[n][2] for n in names if feasible[n][1] == kind), "")
-            return Label(f"limit:{kind}", f"no graspable object: {message}", {"kind": kind})
+            first = [self._step_of(n) for n in names if not feasible[n][0] and self._step_of(n) is not None]
+            return Label(f"limit:{kind}", f"no graspable object: {message}",
+                         {"kind": kind, "step": min(first) if first else None})
 
         if self.family.truth == "letters":
             ok = [n for n in roles["blocks"] if feasible[n][0]]
             n1 = sum(present[n].shape == "1x1" for n in ok)
             n2 = sum(present[n].shape == "1x2" for n in ok)
             if not letters_feasible(len(self.cells), max_pairs(self.cells), n1, n2):
-                return limit(roles["blocks"])
+                # the run stops at the first needed block it cannot grasp (a stand-in covers no cell more)
+                bad = [n for n in self.needed if n in feasible and not feasible[n][0]]
+                return limit([*bad, *(n for n in roles["blocks"] if n not in bad)])
             needed_bad = [n for n in self.needed if n in feasible and not feasible[n][0]]
             spare_ok = any(feasible[n][0] for n in roles["blocks"] if n not in self.needed)
             if needed_bad and not spare_ok:

@@ -51,6 +51,18 @@ LETTER_CASES = {
     "far_away": ("limit:reachability", "override: {b2: {pose: [0.98, 0.30, table, 0, 0, 0]}}"),
     "far_with_spare": ("repairable", "override: {b2: {pose: [0.98, 0.30, table, 0, 0, 0]}}\n    add: [{name: s, "
                                      "type: megablok_1x1, colour: blue, pose: [0.72, -0.52, table, 0, 0, 0]}]"),
+    # A block out of reach and a stand-in of another colour: the drawing is its cells (the substitution takes the
+    # red 1x1 when no blue one is there).
+    "far_with_a_red_spare": ("repairable", "override: {b2: {pose: [0.98, 0.30, table, 0, 0, 0]}}\n    add: [{name: "
+                             "s, type: megablok_1x1, colour: red, pose: [0.72, -0.52, table, 0, 0, 0]}]"),
+    # Two limits: the label is the one the plan meets first -- a box over cell (0, 0) (step 0) before b2 (step 2)
+    # out of reach; b0 out of reach (step 0) before the box over cell (3, 0) (step 2).
+    "far_and_an_earlier_cell_blocked": ("limit:collision", "override: {b2: {pose: [0.98, 0.30, table, 0, 0, 0]}}"
+                                        "\n    obstacles: [{name: o, shape: box, size: [0.05, 0.05, 0.06], pose: "
+                                        "[0.55, 0.10, table, 0, 0, 0]}]"),
+    "far_first_and_a_later_cell_blocked": ("limit:reachability", "override: {b0: {pose: [0.98, 0.30, table, 0, 0, "
+                                           "0]}}\n    obstacles: [{name: o, shape: box, size: [0.05, 0.05, 0.06], "
+                                           "pose: [0.55, -0.083, table, 0, 0, 0]}]"),
     "cell_blocked": ("limit:collision",
                      "add: [{name: d, type: megablok_1x1, colour: green, pose: [0.55, 0.10, table, 0, 0, 0]}]"),
     # Its centre is 55 mm from the nearest cell's (further than BLOCKING_RADIUS), its long side 6 mm into it.

@@ -9,7 +9,9 @@ the world for the symbol's object.
 
 Which symbols are entities: the problem's objects that are not poses and not features of the grounding (as the
 simulator itself checks a nominal scene). One is *missing* when the world does not report the object it grounds
-to, and a step still to run uses it -- as an argument, or through the pose or feature an argument names.
+to, or a failure of the run found that object out of reach where it lies (``out_of_reach``), and a step still to
+run uses it -- as an argument, or through the pose or feature an argument names. An object out of reach is no
+spare.
 
 A spare fits when it is reported by the world, no entity symbol grounds to it, no step of the plan names it, it is
 not held, and its type is the type the missing object has in the nominal part of the world's scene (a variant
@@ -28,6 +30,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from typing import Any
+
+from bt_meta_plugins._mismatch import out_of_reach
 
 from bt_meta.bt.failures import RepairProposal
 from bt_meta.meta.proposals import REBIND
@@ -95,13 +99,15 @@ def rebind_proposals(failure: Any, context: Any, limit: int = 3) -> list[RepairP
     symbols = entity_symbols(world, problem)
     todo = [p for p in plan if not p.get("done")]
     uses = {int(p["step"]): _used_symbols(world, p) for p in todo}
-    missing = {s: o for s, o in symbols.items() if o not in seen and any(s in u for u in uses.values())}
+    unusable = out_of_reach(failure, context)
+    missing = {s: o for s, o in symbols.items() if (o not in seen or o in unusable)
+               and any(s in u for u in uses.values())}
     if not missing:
         return []
     named = {str(a) for p in plan for a in p.get("args") or []}
     bound = set(symbols.values()) | named
     held = {str(v) for v in ((observe() or {}).get("held") or {}).values() if v}
-    spares = sorted(n for n in seen if n not in bound and n not in held)
+    spares = sorted(n for n in seen if n not in bound and n not in held and n not in unusable)
     types = demonstrated_types(world)
     out: list[RepairProposal] = []
     localisation = evidence.get("localisation") or {}
@@ -118,7 +124,9 @@ def rebind_proposals(failure: Any, context: Any, limit: int = 3) -> list[RepairP
         for rank, spare in enumerate(fitting[:limit]):
             out.append(RepairProposal(
                 REBIND, round(SCORE - 0.01 * rank, 4),
-                f"rebind {symbol} -> {spare}: {obj} is not on the table; {spare} is, unused, of the same type "
+                f"rebind {symbol} -> {spare}: {obj} is "
+                f"{'out of reach where it lies' if obj in unusable else 'not on the table'}; {spare} is on the table, "
+                f"unused, of the same type "
                 f"({wanted})" + (f" and colour ({colour})" if colour else ""),
                 changes={"symbols": {symbol: spare}, "from_step": from_step},
                 evidence={"matcher": "grounding_spares", "missing": {symbol: obj}, "type": wanted,

@@ -4,7 +4,11 @@ No experience is needed: the method that chose the missing entity says what it m
 checked again with the spare in the missing entity's place, in the state the method started from (the world's
 symbolic state with the method's executed steps undone) plus the spare's perceived facts. So the spare must have
 the colour only when the method's symbols ask for a colour (``usable(?b, 1x1, blue)``), its shape only when they
-ask for a shape; a method that binds the entity without conditions on it takes any free object of its type.
+ask for a shape; a method that binds the entity without conditions on it takes any free object of its type. A
+colour the methods name is a preference (``colours="prefer"``, the default): when no spare has it, the spares
+that meet the conditions but for their colour are proposed, scored lower, saying so -- the drawing is its cells,
+as the paper's red bar standing in for the blue one is (section 6.4). ``colours="require"`` never does. An object
+a failure of the run found out of reach where it lies (the vector's ``unusable``) is no spare.
 
 A spare is an object the world reports (``observe()["objects"]`` with a ``shape``) that no step of the plan uses
 and that is not itself missing; unknown objects (not in the problem) get the missing entity's unary facts
@@ -27,6 +31,8 @@ from bt_meta.meta.proposals import SUBSTITUTE
 
 SCORE = 0.85
 """Above the memory-based matches' best (0.9 - distance) only when they are far; ranked by name after."""
+OTHER_COLOUR = 0.1
+"""Taken off the score of a substitution whose spare has another colour than the methods name."""
 
 __all__ = ["spare_fits", "spare_proposals"]
 
@@ -63,9 +69,10 @@ def _undo_steps(state: Any, domain: Any, plan: Sequence[Mapping[str, Any]], step
 
 def spare_fits(spare: str, missing: str, facts: Sequence[tuple[str, ...]], methods: Sequence[Mapping[str, Any]],
                plan: Sequence[Mapping[str, Any]], domain: Any, state: Any, external: Any = None,
-               replaced: Mapping[str, str] | None = None) -> tuple[bool, str]:
+               replaced: Mapping[str, str] | None = None, any_colour: bool = False) -> tuple[bool, str]:
     """Whether ``spare`` (perceived as ``facts``) meets every condition the methods that chose ``missing`` put on
-    it; ``replaced`` are other substitutions made in the same proposal. Returns ``(fits, why)``."""
+    it; ``replaced`` are other substitutions made in the same proposal; ``any_colour``: checked as if it had the
+    missing entity's colour. Returns ``(fits, why)``."""
     mapping = {**dict(replaced or {}), missing: spare}
     choosing = [m for m in methods if missing in (m.get("bindings") or {}).values()]
     if not choosing:
@@ -80,6 +87,10 @@ def spare_fits(spare: str, missing: str, facts: Sequence[tuple[str, ...]], metho
         start = start.apply(add=[f for f in facts if f not in present],
                             delete=[f for f in present if f[0] in ("shape", "colour") and f[1] == spare
                                     and f not in facts])
+        if any_colour:
+            held = [tuple(f) for f in start]
+            start = start.apply(add=[("colour", spare, f[2]) for f in held if f[0] == "colour" and f[1] == missing],
+                                delete=[f for f in held if f[0] == "colour" and f[1] == spare])
         env = {k: mapping.get(v, v) for k, v in (record.get("bindings") or {}).items()}
         try:
             holds = method.precondition.holds(start, env, external)
@@ -90,9 +101,12 @@ def spare_fits(spare: str, missing: str, facts: Sequence[tuple[str, ...]], metho
     return True, "meets " + "; ".join(f"{r['method']}" for r in choosing)
 
 
-def spare_proposals(vector: Any, failure: Any, context: Any, limit: int = 3) -> list[RepairProposal]:
+def spare_proposals(vector: Any, failure: Any, context: Any, limit: int = 3, colours: str = "prefer"
+                    ) -> list[RepairProposal]:
     """``substitute`` proposals: every missing entity a step still to run uses, each given a spare that meets its
-    methods' conditions (one proposal with all of them), then the other fitting spares of the first one."""
+    methods' conditions (one proposal with all of them), then the other fitting spares of the first one. With
+    ``colours="prefer"``, a missing entity no spare fits gets the spares that would fit in its colour, scored
+    :data:`OTHER_COLOUR` lower (``require``: never)."""
     evidence = getattr(failure, "evidence", None) or {}
     plan = list(evidence.get("plan") or [])
     methods = list(evidence.get("methods") or [])
@@ -113,7 +127,8 @@ def spare_proposals(vector: Any, failure: Any, context: Any, limit: int = 3) -> 
     initial = list(getattr(problem, "state", None) or getattr(problem, "init", None) or ())
     missing_names = {e.name for e in vector.missing}
     used = _used(plan)
-    spares = sorted(n for n in seen if n not in used and n not in missing_names)
+    unusable = set(getattr(vector, "unusable", ()) or ())
+    spares = sorted(n for n in seen if n not in used and n not in missing_names and n not in unusable)
     todo = [p for p in plan if not p.get("done")]
     wanted = [e.name for e in vector.missing if any(e.name in map(str, p["args"]) for p in todo)]
     if not wanted or not spares:
@@ -128,11 +143,19 @@ def spare_proposals(vector: Any, failure: Any, context: Any, limit: int = 3) -> 
         return _perceived_facts(spare, seen[spare], template)
 
     fitting: dict[str, list[tuple[str, str]]] = {}
+    recoloured: set[str] = set()  # missing entities only a spare of another colour fits
     for missing in wanted:
-        for spare in spares:
-            ok, why = spare_fits(spare, missing, facts_of(spare, missing), methods, plan, domain, state, external)
-            if ok:
-                fitting.setdefault(missing, []).append((spare, why))
+        for any_colour in (False, True) if colours == "prefer" else (False,):
+            for spare in spares:
+                ok, why = spare_fits(spare, missing, facts_of(spare, missing), methods, plan, domain, state,
+                                     external, any_colour=any_colour)
+                if ok:
+                    fitting.setdefault(missing, []).append((spare, why + (" but for its colour" if any_colour
+                                                                          else "")))
+            if missing in fitting:
+                if any_colour:
+                    recoloured.add(missing)
+                break
     if not fitting:
         return []
     # one proposal replacing every missing entity that has a spare (greedy, in name order, each spare once)
@@ -142,7 +165,8 @@ def spare_proposals(vector: Any, failure: Any, context: Any, limit: int = 3) -> 
             if spare in joint.values():
                 continue
             facts = facts_of(spare, missing)
-            if spare_fits(spare, missing, facts, methods, plan, domain, state, external, joint)[0]:
+            if spare_fits(spare, missing, facts, methods, plan, domain, state, external, joint,
+                          any_colour=missing in recoloured)[0]:
                 joint[missing] = spare
                 break
     candidates: list[dict[str, str]] = [joint] if joint else []
@@ -157,10 +181,14 @@ def spare_proposals(vector: Any, failure: Any, context: Any, limit: int = 3) -> 
             from_step = min(from_step, int(failed))
         pairs = ", ".join(f"{m} -> {s}" for m, s in sorted(mapping.items()))
         reasons = {m: next(why for s, why in fitting[m] if s == mapping[m]) for m in mapping}
+        other = sorted(m for m in mapping if m in recoloured)
+        note = (f" (but for the colour of {', '.join(mapping[m] for m in other)}: no spare of the colour the methods "
+                "name)") if other else ""
         out.append(RepairProposal(
-            SUBSTITUTE, round(SCORE - 0.01 * rank, 4), f"substitute the spare(s) {pairs}: seen on the table, unused "
-            "by the plan, and they meet the conditions of the methods that chose the missing entities",
+            SUBSTITUTE, round(SCORE - 0.01 * rank - (OTHER_COLOUR if other else 0.0), 4),
+            f"substitute the spare(s) {pairs}: seen on the table, unused by the plan, and they meet the conditions of "
+            f"the methods that chose the missing entities{note}",
             changes={"mapping": dict(sorted(mapping.items())), "from_step": from_step},
-            evidence={"matcher": "spares", "vector": vector.to_dict(), "fits": reasons,
+            evidence={"matcher": "spares", "vector": vector.to_dict(), "fits": reasons, "other_colour": other,
                       "spares": {m: [s for s, _ in fitting[m]] for m in fitting}}))
     return out

@@ -10,8 +10,12 @@ x): each first uncovered cell gets a block that starts there and covers only nee
 bound to a block of its shape, preferring the block the plan put on one of its cells, then the plan's other blocks,
 then the others by name; colour counts only where the problem gives the plan's blocks one colour for all (the
 methods' symbols then ask for it) and only for blocks the plan does not already use (the plan's own blocks were
-bound by its methods; perception does not rebind them: a grid-map compares occupancy, not colour), else any
-colour does. The result is a ``splice`` of the remaining steps, in the
+bound by its methods; perception does not rebind them: a grid-map compares occupancy, not colour). With
+``colours="prefer"`` (the default) a colour the methods name is a preference: when no tiling exists with blocks
+of that colour, one with blocks of any colour is proposed, scored :data:`OTHER_COLOUR` lower and saying which
+blocks differ -- the drawing is its cells, as the paper's red bar standing in for the blue one is (section 6.4);
+``colours="require"`` never does. Blocks a failure of the run found out of reach where they lie
+(the vector's ``unusable``) are not used. The result is a ``splice`` of the remaining steps, in the
 order the plan would have reached the tiles' cells.
 
 Blocks already lying on cells the tiling fills -- above all the block the failed step itself put down, a 1x2 where
@@ -25,6 +29,7 @@ the two 1x2 blocks laid across the tops of the legs and the bar cells, the 1x1 b
 Offers:
 
 * :func:`footprint` -- the cells a block of a shape covers when placed at (x, y)
+* :func:`planned_shapes` -- the shapes the plan's steps were planned with (the problem's, or what a repair anchored)
 * :func:`tile` -- a tiling of cells with blocks of given shapes (``None`` when none exists)
 * :func:`tiling_proposals` -- the ``splice`` proposal for a failure, when a tiling differs from the plan
 * :func:`cells_in_the_way` -- the cells of a frame each object's current pose covers in part
@@ -55,6 +60,9 @@ MAX_NODES = 20000
 
 _SHAPE = re.compile(r"^(\d+)x(\d+)$")
 Cell = tuple[float, float]
+
+OTHER_COLOUR = 0.1
+"""Taken off the score of a tiling that needs a block of another colour than the methods name."""
 
 IN_THE_WAY = 0.9
 """lb: a block unit whose centre is nearer than this to a cell's centre along both of the frame's axes overlaps the
@@ -234,9 +242,22 @@ def _number(value: Any) -> float | None:
         return None
 
 
-def tiling_proposals(vector: Any, failure: Any, context: Any) -> list[RepairProposal]:
+def planned_shapes(problem: Any, world: Any) -> dict[str, str]:
+    """Block -> the shape the plan's steps were planned with: the problem's ``shape`` facts, overridden by the
+    world's belief (``symbolic_state()``), where a repair anchored a block's perceived shape -- the steps a tiling
+    planned lay b1 seen as a 1x2 at x = 2.5, and read with the problem's 1x1 they would need the half cell 2.5."""
+    facts = list(getattr(problem, "init", None) or getattr(problem, "state", None) or ())
+    shapes = {str(f[1]): str(f[2]) for f in facts if len(f) == 3 and f[0] == "shape"}
+    symbolic = getattr(world, "symbolic_state", None)
+    if callable(symbolic):
+        shapes.update({str(f[1]): str(f[2]) for f in symbolic() if len(f) == 3 and f[0] == "shape"})
+    return shapes
+
+
+def tiling_proposals(vector: Any, failure: Any, context: Any, colours: str = "prefer") -> list[RepairProposal]:
     """The ``splice`` of the remaining placements as a tiling of their cells with the blocks on the table, when it
     differs from the plan; ``[]`` when the plan's steps are not placements of shaped blocks or no tiling exists."""
+    relax_colour = colours == "prefer"
     evidence = getattr(failure, "evidence", None) or {}
     plan = list(evidence.get("plan") or [])
     world = getattr(context, "world", None)
@@ -245,7 +266,7 @@ def tiling_proposals(vector: Any, failure: Any, context: Any) -> list[RepairProp
     if not plan or observe is None or problem is None:
         return []
     facts = list(getattr(problem, "init", None) or getattr(problem, "state", None) or ())
-    assumed = {str(f[1]): str(f[2]) for f in facts if len(f) == 3 and f[0] == "shape"}
+    assumed = planned_shapes(problem, world)
     colours = {str(f[1]): str(f[2]) for f in facts if len(f) == 3 and f[0] == "colour"}
     seen = {name: state for name, state in _seen(world).items() if state.get("shape")}
     for name, state in seen.items():  # a stand-in the problem does not describe (a spare) is planned as it is seen
@@ -270,19 +291,27 @@ def tiling_proposals(vector: Any, failure: Any, context: Any) -> list[RepairProp
     planned_colours = {colours.get(b) for b in plan_blocks}
     if len(planned_colours) == 1 and None not in planned_colours:
         colour = planned_colours.pop()  # the methods' symbols ask the plan's blocks for one colour
-    on_hand = sorted((n for n in seen if n not in placed and _width(seen[n].get("shape")) is not None
-                      and (colour is None or n in plan_blocks or seen[n].get("colour") == colour)),
-                     key=lambda n: (n not in plan_blocks, plan_blocks.index(n) if n in plan_blocks else 0, n))
+    unusable = set(getattr(vector, "unusable", ()) or ())  # out of reach where they lie
     cells = [c for p in placements for c in p[3]]
     if len(set(cells)) != len(cells):
         return []  # the plan's own placements overlap: not a tiling problem
     owner = {c: p[2] for p in placements for c in p[3]}
     step_of = {c: p[0] for p in placements for c in p[3]}
-    counts: dict[str, int] = {}
-    for name in on_hand:
-        counts[str(seen[name]["shape"])] = counts.get(str(seen[name]["shape"]), 0) + 1
     prefer = {c: assumed.get(owner[c]) for c in cells}
-    tiles = tile(cells, counts, prefer)
+    relaxed = None
+    for wanted in dict.fromkeys([colour, None] if relax_colour else [colour]):
+        on_hand = sorted((n for n in seen if n not in placed and n not in unusable
+                          and _width(seen[n].get("shape")) is not None
+                          and (wanted is None or n in plan_blocks or seen[n].get("colour") == wanted)),
+                         key=lambda n: (n not in plan_blocks, plan_blocks.index(n) if n in plan_blocks else 0,
+                                        colour is not None and seen[n].get("colour") != colour, n))
+        counts: dict[str, int] = {}
+        for name in on_hand:
+            counts[str(seen[name]["shape"])] = counts.get(str(seen[name]["shape"]), 0) + 1
+        tiles = tile(cells, counts, prefer)
+        if tiles is not None:
+            relaxed = colour if wanted is None and colour is not None else None
+            break
     if tiles is None:
         return []
     frame = _action_frame(world, action)
@@ -306,13 +335,17 @@ def tiling_proposals(vector: Any, failure: Any, context: Any) -> list[RepairProp
         return []
     start, end = placements[0][0], placements[-1][0] + 1
     shown = "; ".join(f"{a[0]}({', '.join(a[1:])})" for a in actions)
+    other = sorted(b for b in centres if relaxed is not None and b not in plan_blocks
+                   and seen[b].get("colour") != relaxed)
+    note = f" ({', '.join(other)} not {relaxed}: no {relaxed} block can stand in)" if other else ""
     return [RepairProposal(
-        SPLICE, SCORE, f"steps {start}..{end - 1} as a tiling of their {len(cells)} cell(s) with the blocks on the "
-        f"table: {shown}", changes={"start": start, "end": end, "actions": actions},
+        SPLICE, round(SCORE - (OTHER_COLOUR if other else 0.0), 4), f"steps {start}..{end - 1} as a tiling of their "
+        f"{len(cells)} cell(s) with the blocks on the table: {shown}{note}",
+        changes={"start": start, "end": end, "actions": actions},
         evidence={"matcher": "tiling", "vector": vector.to_dict() if hasattr(vector, "to_dict") else None,
                   "cells": [list(c) for c in cells], "blocks": {n: seen[n].get("shape") for n in on_hand},
                   "in_the_way": {n: sorted(list(c) for c in v) for n, v in in_the_way.items()},
-                  "colour_required": colour})]
+                  "colour_required": colour, "other_colour": other})]
 
 
 def lands_on_a_block(failure: Any, mapping: Mapping[str, str], context: Any) -> bool:

@@ -28,13 +28,15 @@ The steps, as the paper gives them:
 only through a grounding symbol (the magnetic plan's poses are defined over ``active_part``) gets a ``rebind``
 proposal binding the symbol to an unused object of the part's demonstrated type.
 
-**Spares** (:mod:`bt_meta_plugins._spares`, no memory needed) come next: a missing entity that a step still to
-run uses is replaced one for one (``substitute``) by an object seen on the table that the plan does not use, when
-the precondition of every method that chose the missing entity holds with the spare in its place -- so colour
-counts only where the task's symbols name one. Besides ``unknown_entity`` and ``unexpected_configuration``, a
-``collision``, ``physical``, ``precondition`` or ``reachability`` failure is answered when the failed step itself
-names a missing entity (a 1x2 block placed where a 1x1 was planned collides: A's bar then stands in for H's two
-1x1 placements).
+**Spares** (:mod:`bt_meta_plugins._spares`, no memory needed) come next: a missing entity that a step still to run
+uses is replaced one for one (``substitute``) by an object seen on the table that the plan does not use, when the
+precondition of every method that chose the missing entity holds with the spare in its place -- so colour counts
+only where the task's symbols name one, and there as a preference (a spare of another colour is proposed, scored
+lower, only when none has the colour; ``colours="require"`` makes it a condition). An entity a failure of the run
+found out of reach where it lies (the skill's ``out_of_reach``) counts as missing and is never a spare. Besides
+``unknown_entity`` and ``unexpected_configuration``, a ``collision``, ``physical``, ``precondition`` or
+``reachability`` failure is answered when the failed step itself names a missing entity (a 1x2 block placed where a
+1x1 was planned collides: A's bar then stands in for H's two 1x1 placements).
 
 **Tilings** (:mod:`bt_meta_plugins._tilings`, no memory needed) come last: the cells the remaining placements
 need, covered anew with the blocks on the table (many-for-one and one-for-many shape substitutions the
@@ -52,8 +54,10 @@ what was seen, and it keeps what was anchored with a learned refinement (``docs/
 Settings (:class:`ObjectSubstitution` arguments, :func:`configure` for the module-level plugin, or the
 environment variable ``BT_META_SUBSTITUTION_MATCHER`` = ``gridmap`` | ``symbolic`` for the module's default):
 ``matcher``, ``k`` (matches kept), ``rotations``, ``level`` (``task`` | ``step``), ``max_proposals``, ``memory``,
-``spares`` (spares and grounding spares), ``geometry`` (tilings; default: with the ``gridmap`` matcher only --
-the ``symbolic`` matcher is the symbol-only baseline).
+``spares`` (spares and grounding spares), ``colours`` (``prefer`` | ``require``: whether a spare or a tiling may use
+a block of another colour than the methods name when none of that colour can stand in; default: ``prefer`` with
+the ``gridmap`` matcher, whose grid-maps compare form, ``require`` with the ``symbolic`` one), ``geometry`` (tilings;
+default: with the ``gridmap`` matcher only -- the ``symbolic`` matcher is the symbol-only baseline).
 Nothing here is random: ties are broken by rank, then by entity name.
 
 Offers:
@@ -79,7 +83,7 @@ from bt_meta_plugins._decompositions import Decomposition, Library, bind, why_no
 from bt_meta_plugins._grounding_spares import rebind_proposals
 from bt_meta_plugins._mismatch import Entity, MismatchVector, mismatch_vector
 from bt_meta_plugins._spares import spare_proposals
-from bt_meta_plugins._tilings import covers_the_same_cells, lands_on_a_block, tiling_proposals
+from bt_meta_plugins._tilings import covers_the_same_cells, lands_on_a_block, planned_shapes, tiling_proposals
 
 from bt_meta.bt.failures import FailureKind, RepairProposal
 from bt_meta.errors import ConfigError
@@ -103,6 +107,8 @@ __all__ = [
 
 MATCHERS = ("gridmap", "symbolic")
 LEVELS = ("task", "step")
+COLOURS = ("prefer", "require")
+"""How a colour the methods name binds a spare or a tiling's stand-in: first choice, or the only one."""
 ENV_MATCHER = "BT_META_SUBSTITUTION_MATCHER"
 _KINDS = (FailureKind.UNKNOWN_ENTITY, FailureKind.UNEXPECTED_CONFIGURATION)
 DEMOTED = 0.9
@@ -231,7 +237,8 @@ def _mending_first(proposals: list[RepairProposal], failure: Any, vector: Mismat
 
 
 def _failed_missing(failure: Any, vector: MismatchVector) -> set[str]:
-    return {e.name for e in vector.missing} & {str(a) for a in getattr(failure, "args", ()) or ()}
+    return ({e.name for e in vector.missing} | set(vector.unusable)) & {str(a) for a in getattr(failure, "args", ())
+                                                                        or ()}
 
 
 def _call(action: str, args: Sequence[Any]) -> str:
@@ -263,7 +270,7 @@ class ObjectSubstitution:
 
     def __init__(self, memory: Any = None, *, matcher: str | None = None, k: int = 5, rotations: bool = False,
                  level: str = "task", max_proposals: int = 3, anchor: bool = True, candidates: int = 200,
-                 spares: bool = True, geometry: bool | None = None) -> None:
+                 spares: bool = True, geometry: bool | None = None, colours: str | None = None) -> None:
         where = "<plugin settings>"
         if matcher is None:
             matcher = os.environ.get(ENV_MATCHER) or "gridmap"
@@ -273,6 +280,12 @@ class ObjectSubstitution:
                               where)
         if level not in LEVELS:
             raise ConfigError(f"object substitution: level must be one of {', '.join(LEVELS)}, got {level!r}",
+                              "<plugin settings>")
+        # a colour the methods name binds as the matcher compares: grid-maps see form (occupancy is colour
+        # presence), the symbol-only baseline compares exactly the facts
+        colours = colours or ("prefer" if matcher == "gridmap" else "require")
+        if colours not in COLOURS:
+            raise ConfigError(f"object substitution: colours must be one of {', '.join(COLOURS)}, got {colours!r}",
                               "<plugin settings>")
         if k < 1 or max_proposals < 1 or candidates < 1:
             raise ConfigError("object substitution: k, max_proposals and candidates must be >= 1", "<plugin settings>")
@@ -285,6 +298,7 @@ class ObjectSubstitution:
         self.anchor = anchor
         self.candidates = candidates
         self.spares = spares
+        self.colours = colours
         # the tilings read the placements' cells -- sub-symbolic, as the grid-maps are: the symbol-only baseline
         # (the symbolic matcher, the paper's comparison) goes without them unless asked
         self.geometry = (matcher == "gridmap") if geometry is None else geometry
@@ -428,8 +442,7 @@ class ObjectSubstitution:
         (a remembered decomposition of another part of the letter: the letter would have a hole and a block too
         many elsewhere)."""
         problem = getattr(getattr(context, "run", None), "problem", None)
-        facts = list(getattr(problem, "init", None) or getattr(problem, "state", None) or ())
-        assumed = {str(f[1]): str(f[2]) for f in facts if len(f) == 3 and f[0] == "shape"}
+        assumed = planned_shapes(problem, getattr(context, "world", None))
         observe = getattr(getattr(context, "world", None), "observe", None)
         seen = ((observe() or {}).get("objects") or {}) if observe is not None else {}
         perceived = {str(k): str(v["shape"]) for k, v in seen.items() if isinstance(v, Mapping) and v.get("shape")}
@@ -492,10 +505,12 @@ class ObjectSubstitution:
         if vector is None:
             return rebinds or None
         if failure.kind in _STEP_KINDS and not _names_missing(failure, vector):
-            return None  # a motion or grasp failure of a step whose entities are as the plan assumes
+            # a motion or grasp failure of a step whose entities are as the plan assumes -- but for a part the
+            # plan names through the grounding, which the step's arguments do not show (rebinds)
+            return rebinds or None
         plan = failure.evidence.get("plan") or []
         vector = _without_placed(vector, plan)
-        spares = spare_proposals(vector, failure, context) if self.spares else []
+        spares = spare_proposals(vector, failure, context, colours=self.colours) if self.spares else []
         renamed = {k for p in spares for k in (p.changes.get("mapping") or {})}
         # a symbol the plan's arguments name and a renaming spare covers is renamed (its methods' conditions are
         # checked); rebinding is for the parts the plan names only through the grounding
@@ -507,7 +522,8 @@ class ObjectSubstitution:
         if self.geometry:
             proposals = self._same_cells(proposals, plan, context)
             known = [p.changes.get("actions") for p in proposals if p.action == SPLICE]
-            proposals += [p for p in tiling_proposals(vector, failure, context) if p.changes["actions"] not in known]
+            proposals += [p for p in tiling_proposals(vector, failure, context, self.colours)
+                          if p.changes["actions"] not in known]
         proposals = _mending_first(proposals, failure, vector, context)
         if proposals and self.anchor:
             self.anchor_entities(vector, failure, context, proposals)

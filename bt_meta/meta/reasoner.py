@@ -288,7 +288,10 @@ class MetaReasoner:
         if elapsed >= self.limits.max_seconds:
             return self._stop(diagnosis, f"time budget spent ({elapsed:.2f} s of {self.limits.max_seconds} s "
                                          f"{self.limits.clock} time)")
-        if diagnosis.kind in MOTION_LIMITS and any(
+        # The same motion limit at the same step again: the repair did not change what limits it -- unless the
+        # failure names an object out of reach that no earlier failure did (a stand-in found out of reach in
+        # turn: a new failure, answered as one; the objects are finite and none is offered twice).
+        if diagnosis.kind in MOTION_LIMITS and not _newly_out_of_reach(diagnosis.failure, run) and any(
                 a.kind == diagnosis.kind.value and a.step == diagnosis.step for a in history):
             return self._stop(diagnosis, f"{diagnosis.kind.value} again at step {diagnosis.step} after a repair: "
                                          "a motion limit is reported, never looped on")
@@ -385,3 +388,12 @@ class ReasonerPlugin:
         diagnosis = Diagnosis(failure, failure.step, node_id, failure.kind)
         proposals, _ = self.reasoner.propose(diagnosis, context.run, plan_state, set())
         return {"kind": failure.kind.value, "proposals": [p.to_dict() for p in proposals]}
+
+
+def _newly_out_of_reach(failure: Failure, run: Any) -> bool:
+    """Whether ``failure`` names an object ``out_of_reach`` that no earlier failure of ``run`` named."""
+    name = (failure.evidence or {}).get("out_of_reach")
+    if not name:
+        return False
+    earlier = [f for f in getattr(run, "failures", None) or [] if f is not failure]
+    return all((f.evidence or {}).get("out_of_reach") != name for f in earlier)

@@ -35,6 +35,10 @@ variants:
     add:
       - {name: block, type: megablok_1x1, colour: red, pose: [0.52, -0.36, table, 0, 0, 0]}
       - {name: other_magnet, type: magnet_active, colour: green, pose: [0.66, -0.45, table, 0, 0, 20]}
+  far:
+    override: {active: {pose: [0.98, 0.30, table, 0, 0, 0]}}
+    add:
+      - {name: other_magnet, type: magnet_active, colour: yellow, pose: [0.66, -0.45, table, 0, 0, 30]}
 """
 
 
@@ -45,14 +49,14 @@ def host() -> Any:
         ("object_substitution", object_substitution.ObjectSubstitution(memory=None))])
 
 
-def run(scene: Path, memory: Path) -> tuple[Any, Any, list[Any]]:
+def run(scene: Path, memory: Path, variant: str = "spare") -> tuple[Any, Any, list[Any]]:
     from bt_meta.campaign.episode import variant_world
 
-    task_file, problem, world = variant_world(TASK_FILE, "nominal", scene, "spare", seed=0)
+    task_file, problem, world = variant_world(TASK_FILE, "nominal", scene, variant, seed=0)
     try:
         with RefinementStore.open(memory) as store:
             report = MetaExecutor(task_file.domain, problem, world, host(), task_file=task_file, refinements=store,
-                                  limits=Limits(max_attempts=3, max_seconds=60), variant="spare").run()
+                                  limits=Limits(max_attempts=3, max_seconds=60), variant=variant).run()
         return report, problem, list(world.sim.attachments())
     finally:
         world.close()
@@ -77,6 +81,21 @@ def test_the_missing_part_s_symbol_is_rebound_to_a_spare_of_its_type_and_the_ref
     again, _, joined = run(scene, memory)
     assert again.ok and again.attempts == [] and again.refinements_used == [saved["method"]]
     assert again.rebound == {"active_part": "other_magnet"} and joined == [("other_magnet", "reference")]
+
+
+def test_a_part_out_of_reach_where_it_lies_is_rebound_to_a_spare(tmp_path):
+    """The active part lies beyond the arm's reach: the move above it (a pose over ``active_part``) has no IK
+    solution and names it ``out_of_reach``; the symbol is rebound to the spare, which is joined."""
+    scene = tmp_path / "far_magnet.yaml"
+    scene.write_text(SCENE)
+    report, _, joined = run(scene, tmp_path / "memory.sqlite", "far")
+    assert report.ok, report.stop_reason
+    assert [(a.kind, a.proposal["action"]) for a in report.attempts] == [("reachability", "rebind")]
+    proposal = report.attempts[0].proposal
+    assert proposal["changes"]["symbols"] == {"active_part": "other_magnet"}
+    assert "out of reach where it lies" in proposal["description"]
+    assert report.failures[0]["evidence"]["out_of_reach"] == "active"
+    assert joined == [("other_magnet", "reference")]
 
 
 def test_no_spare_of_the_missing_part_s_type_no_rebinding(tmp_path):

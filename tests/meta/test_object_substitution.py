@@ -185,8 +185,11 @@ def test_one_for_one_substitute_and_the_colour_rule(task_file, letters_memory):
     failure, context, plan_state, world = bar_failure(task_file, letters_memory, renamed,
                                                       kind=FailureKind.UNKNOWN_ENTITY, placed=False)
     proposals = substitution.ObjectSubstitution(letters_memory).bt_meta_propose_repairs(failure, context)
-    assert [(p.action, p.changes) for p in proposals] == [("substitute", {"mapping": {"b5": "r5"}, "from_step": 4})]
+    assert (proposals[0].action, proposals[0].changes) == ("substitute", {"mapping": {"b5": "r5"}, "from_step": 4})
     assert proposals[0].evidence["match"]["distance"] == 0
+    # the tiling of the same cells comes after it, saying the red bar is not the methods' blue
+    assert [(p.action, p.evidence.get("other_colour")) for p in proposals[1:]] == [("splice", ["r5"])]
+    assert proposals[1].score < proposals[0].score
     state = world.symbolic_state()
     assert {("block", "r5"), ("available", "r5"), ("colour", "r5", "red")} <= set(state)
     repaired, _ = apply_proposal(proposals[0], plan_state, failed_step=4, failed_node="n8", domain=task_file.domain,
@@ -230,7 +233,10 @@ def test_nothing_to_do(task_file, letters_memory, tmp_path, monkeypatch):
     assert plugin.bt_meta_propose_repairs(failure, context) is None  # nothing missing
     monkeypatch.setenv("BT_META_MEMORY", str(tmp_path / "absent.sqlite"))
     failure, context, _, _ = bar_failure(task_file, None, VARIANT_OBJECTS["two_1x1_same_colour"])
-    assert substitution.ObjectSubstitution().bt_meta_propose_repairs(failure, context) is None  # no memory
+    # no memory: no remembered decomposition; only the geometry's tiling, with the two red 1x1 (not blue)
+    proposals = substitution.ObjectSubstitution().bt_meta_propose_repairs(failure, context)
+    assert [(p.evidence["matcher"], bool(p.evidence["other_colour"])) for p in proposals] == [("tiling", True)]
+    assert substitution.ObjectSubstitution(colours="require").bt_meta_propose_repairs(failure, context) is None
     # H's P_a has no place(b5, 1.5, 1): no query, so no match
     failure, context, _, _ = bar_failure(task_file, letters_memory, VARIANT_OBJECTS["two_1x1_same_colour"])
     vector = substitution.mismatch_vector(failure, context)

@@ -11,6 +11,7 @@ from typing import Any
 import bt_meta_plugins.object_substitution as substitution
 import pytest
 
+from bt_meta.errors import ConfigError
 from bt_meta.htn import load_task_file, load_task_text
 from bt_meta.memory import EpisodicMemory
 from bt_meta.meta import Limits, MetaExecutor
@@ -25,11 +26,15 @@ NOMINAL_A = {**{f"b{i}": ("1x1", "blue") for i in range(5)}, "b5": ("1x2", "blue
 
 
 class SceneWorld(FakeWorld):
-    """A fake world showing ``objects`` (name -> (shape, colour)); placing one it does not show fails."""
+    """A fake world showing ``objects`` (name -> (shape, colour)); placing one it does not show fails, and placing
+    one of ``far`` fails as the simulator's place skill does for a block out of reach (``reachability`` in the
+    approach, the block named ``out_of_reach``)."""
 
-    def __init__(self, domain: Any, problem: Any, objects: dict[str, tuple[str, str]], **kwargs: Any) -> None:
+    def __init__(self, domain: Any, problem: Any, objects: dict[str, tuple[str, str]], far: Any = (),
+                 **kwargs: Any) -> None:
         super().__init__(domain, problem, **kwargs)
         self.objects = dict(objects)
+        self.far = set(far)
 
     def observe(self) -> dict[str, Any]:
         return {"symbolic_state": self.symbolic_state(),
@@ -49,8 +54,11 @@ class AbsentBlock:
         self.absent = False
 
     def start(self, args: Any, ctx: Any = None) -> None:
-        self.absent = str(args[0]) not in self.world.objects
-        if self.absent:
+        self.absent = str(args[0]) not in self.world.objects or str(args[0]) in self.world.far
+        if str(args[0]) in self.world.far:
+            self.failure = SkillFailure("reachability", f"move_to above {args[0]}: no IK solution",
+                                        {"failed_phase": "approach", "out_of_reach": str(args[0])})
+        elif self.absent:
             self.failure = SkillFailure("unknown_entity", f"place: there is no block {args[0]!r} in the world",
                                         {"object": str(args[0]), "present": sorted(self.world.objects)})
         else:
@@ -72,15 +80,16 @@ def letters():
     return load_task_file(trees_dir() / "letters.yaml")
 
 
-def host(memory: Any = None) -> Any:
-    plugin = substitution.ObjectSubstitution(memory=memory)
+def host(memory: Any = None, **settings: Any) -> Any:
+    plugin = substitution.ObjectSubstitution(memory=memory, **settings)
     return make_host(("object_substitution", plugin))
 
 
 def _run(task_file: Any, problem: Any, objects: dict[str, tuple[str, str]], memory: Any = None,
-         faults: tuple[str, ...] = ()) -> Any:
-    world = SceneWorld(task_file.domain, problem, objects, faults=list(faults))
-    report = MetaExecutor(task_file.domain, problem, world, host(memory), limits=Limits(max_attempts=3)).run()
+         faults: tuple[str, ...] = (), far: Any = (), **settings: Any) -> Any:
+    world = SceneWorld(task_file.domain, problem, objects, far=far, faults=list(faults))
+    report = MetaExecutor(task_file.domain, problem, world, host(memory, **settings),
+                          limits=Limits(max_attempts=3)).run()
     return report, world
 
 
@@ -105,12 +114,64 @@ def test_colour_does_not_count_where_the_method_does_not_name_one():
 
 
 def test_no_spare_fits_no_substitution(letters):
+    """With ``colours="require"`` the methods' blue is a condition: a red 1x1 is no spare for a blue leg block."""
     objects = {n: v for n, v in NOMINAL_A.items() if n != "b2"}
     objects.update({"s_red": ("1x1", "red"), "s_big": ("1x2", "blue")})
-    report, _ = _run(letters, letters.problem("A"), objects)
+    report, _ = _run(letters, letters.problem("A"), objects, colours="require")
     assert not report.ok
     assert all(a.proposal["action"] != "substitute" for a in report.attempts)
     assert report.reported[0]["kind"] == "unknown_entity"
+
+
+def test_a_spare_of_another_colour_stands_in_only_when_none_has_the_methods_colour(letters):
+    """The default (``colours="prefer"``): the methods' blue is a first choice. With only a red 1x1 on the table
+    it stands in, scored below a spare of the named colour and saying so; a blue 1x1 beside it is taken instead."""
+    objects = {n: v for n, v in NOMINAL_A.items() if n != "b2"}
+    objects.update({"s_red": ("1x1", "red"), "s_big": ("1x2", "blue")})
+    report, _ = _run(letters, letters.problem("A"), objects)
+    assert report.ok, report.stop_reason
+    proposal = report.attempts[0].proposal
+    assert proposal["changes"]["mapping"] == {"b2": "s_red"}
+    assert proposal["evidence"]["other_colour"] == ["b2"] and "colour" in proposal["description"]
+    assert proposal["score"] < 0.85
+    objects["s_blue"] = ("1x1", "blue")
+    report, _ = _run(letters, letters.problem("A"), objects)
+    assert report.ok and report.attempts[0].proposal["changes"]["mapping"] == {"b2": "s_blue"}
+    assert report.attempts[0].proposal["evidence"]["other_colour"] == []
+
+
+def test_substitution_colours_setting_is_checked():
+    with pytest.raises(ConfigError, match="colours must be one of prefer, require"):
+        substitution.ObjectSubstitution(colours="any")
+
+
+def test_a_block_out_of_reach_is_replaced_by_a_spare(letters):
+    """b2 cannot be reached where it lies (the place skill's approach has no IK solution and names it
+    ``out_of_reach``): a ``reachability`` failure, which no other motion mends; a spare stands in for it."""
+    objects = {**NOMINAL_A, "s_blue": ("1x1", "blue")}
+    report, _ = _run(letters, letters.problem("A"), objects, far={"b2"})
+    assert report.ok, report.stop_reason
+    assert [(a.kind, a.proposal["action"]) for a in report.attempts] == [("reachability", "substitute")]
+    assert report.attempts[0].proposal["changes"]["mapping"] == {"b2": "s_blue"}
+    placed = [e["args"][0] for e in report.executed if e["status"] == "SUCCESS"]
+    assert "s_blue" in placed and "b2" not in placed
+
+
+def test_a_stand_in_found_out_of_reach_in_turn_is_replaced_and_never_taken_again(letters):
+    """b2 and the first spare by name (a_far) are both out of reach: the run remembers both (every failure of the
+    run that named an object ``out_of_reach``) and the next spare stands in; without one the run stops with the
+    limit, not a loop."""
+    objects = {**NOMINAL_A, "a_far": ("1x1", "blue"), "z_blue": ("1x1", "blue")}
+    report, _ = _run(letters, letters.problem("A"), objects, far={"b2", "a_far"})
+    assert report.ok, report.stop_reason
+    assert [a.proposal["changes"]["mapping"] for a in report.attempts] == [{"b2": "a_far"}, {"a_far": "z_blue"}]
+    placed = [e["args"][0] for e in report.executed if e["status"] == "SUCCESS"]
+    assert "z_blue" in placed and not {"b2", "a_far"} & set(placed)
+    del objects["z_blue"]
+    report, _ = _run(letters, letters.problem("A"), objects, far={"b2", "a_far"})
+    assert not report.ok
+    assert report.reported[-1]["kind"] == "reachability"
+    assert [a.proposal["changes"]["mapping"] for a in report.attempts] == [{"b2": "a_far"}]
 
 
 COLOURLESS = """

@@ -82,18 +82,53 @@ def test_one_1x2_where_two_1x1_that_are_not_side_by_side_were_planned_is_tiled_i
     assert cells == sorted(A_CELLS)
 
 
+def _tilings(report):
+    return [a for a in report.attempts if (a.proposal.get("evidence") or {}).get("matcher") == "tiling"]
+
+
 def test_colour_counts_where_the_plan_s_blocks_share_one(letters):
-    """Every block of A's plan is blue (its methods ask for blue): a red 1x2 spare does not stand in for the
-    missing b0 and b3 (a 1x1 as planned), so no tiling; a blue one does."""
+    """Every block of A's plan is blue (its methods ask for blue). With ``colours="require"`` a red 1x2 spare does
+    not stand in for the missing b0 and b1, so no tiling; a blue one does."""
+    objects = {n: v for n, v in NOMINAL_A.items() if n not in ("b0", "b1")}
+    objects["spare"] = ("1x2", "red")
+    report, _ = _run(letters, letters.problem("A"), objects, colours="require")
+    assert not _tilings(report)
+    objects["spare"] = ("1x2", "blue")  # 3 1x1 (b2, b3, b4) and 2 1x2 (b5, spare): A's 7 cells
+    report, _ = _run(letters, letters.problem("A"), objects, colours="require")
+    tilings = _tilings(report)
+    assert report.ok and len(tilings) == 1, report.stop_reason
+    assert "spare" in {a[1] for a in tilings[0].proposal["changes"]["actions"]}
+    assert tilings[0].proposal["evidence"]["other_colour"] == []
+
+
+def test_a_tiling_takes_another_colour_only_when_the_methods_colour_cannot_tile(letters):
+    """The default (``colours="prefer"``): the red 1x2 tiles A when no blue block can, scored lower and saying
+    which block differs; with a blue 1x2 beside it, the blue one is taken."""
     objects = {n: v for n, v in NOMINAL_A.items() if n not in ("b0", "b1")}
     objects["spare"] = ("1x2", "red")
     report, _ = _run(letters, letters.problem("A"), objects)
-    assert all((a.proposal.get("evidence") or {}).get("matcher") != "tiling" for a in report.attempts)
-    objects["spare"] = ("1x2", "blue")  # 3 1x1 (b2, b3, b4) and 2 1x2 (b5, spare): A's 7 cells
-    report, _ = _run(letters, letters.problem("A"), objects)
-    tilings = [a for a in report.attempts if (a.proposal.get("evidence") or {}).get("matcher") == "tiling"]
+    tilings = _tilings(report)
     assert report.ok and len(tilings) == 1, report.stop_reason
-    assert "spare" in {a[1] for a in tilings[0].proposal["changes"]["actions"]}
+    proposal = tilings[0].proposal
+    assert "spare" in {a[1] for a in proposal["changes"]["actions"]}
+    assert proposal["evidence"]["other_colour"] == ["spare"] and "not blue" in proposal["description"]
+    objects["another"] = ("1x2", "blue")
+    report, _ = _run(letters, letters.problem("A"), objects)
+    tilings = _tilings(report)
+    assert report.ok and len(tilings) == 1, report.stop_reason
+    used = {a[1] for a in tilings[0].proposal["changes"]["actions"]}
+    assert "another" in used and "spare" not in used
+
+
+def test_a_block_out_of_reach_is_left_out_of_the_tiling(letters):
+    """b5 (the bar) cannot be reached where it lies and no 1x2 spare is on the table, but two 1x1 are: the
+    tiling draws the bar with them and never names b5."""
+    objects = {**NOMINAL_A, "s0": ("1x1", "blue"), "s1": ("1x1", "blue")}
+    report, _ = _run(letters, letters.problem("A"), objects, far={"b5"})
+    assert report.ok, report.stop_reason
+    assert [a.kind for a in report.attempts] == ["reachability"]
+    placed = [e["args"][0] for e in report.executed if e["status"] == "SUCCESS"]
+    assert "b5" not in placed and {"s0", "s1"} <= set(placed)
 
 
 class _LetterGrounding:
@@ -173,3 +208,36 @@ def test_a_stand_in_put_down_where_the_failed_block_still_lies_would_land_on_it(
     moved = Failure(kind=FailureKind.UNKNOWN_ENTITY, message="b1 missing", step=1, action="place",
                     args=("b1", "0", "1"))
     assert not lands_on_a_block(moved, {"b1": "spare"}, context)  # (0, 1) is free
+
+
+def test_steps_an_earlier_repair_planned_are_read_with_the_shapes_it_anchored(letters):
+    """H's b1 is seen as a 1x2 (b7 gone) and an earlier tiling laid it across (2, 1) and (3, 1) at x = 2.5, the
+    belief anchoring its shape; b4 (the foot of the second leg) is then found out of reach. The steps still to run
+    need the cells they were planned for -- b1's two, not the half cell 2.5 the problem's 1x1 would read -- and
+    the blocks left (four 1x1 and b1) cannot cover those six: no tiling, so no splice that would leave a hole."""
+    problem = letters.problem("H")
+
+    class Table(LetterTable):
+        def symbolic_state(self):
+            return [("shape", "b1", "1x2")]
+
+    table = Table({})
+    table.objects["b0"] = table.at("1x1", 0, 0)
+    table.objects["b3"] = table.at("1x1", 0, 2)
+    for i, name in enumerate(["b2", "b5", "b6"]):
+        table.objects[name] = table.at("1x1", 8 + i, 6)
+    table.objects["b1"] = table.at("1x2", 8, 8)
+    done = [("b0", "0", "0"), ("b3", "0", "2")]
+    todo = [("b4", "3", "0"), ("b1", "2.5", "1"), ("b2", "0", "1"), ("b5", "3", "2"), ("b6", "1", "1")]
+    plan = [{"step": i, "action": "place", "args": list(a), "done": i < len(done)}
+            for i, a in enumerate(done + todo)]
+    failure = Failure(kind=FailureKind.REACHABILITY, message="b4 out of reach", step=2, action="place",
+                      args=("b4", "3", "0"), evidence={"plan": plan, "out_of_reach": "b4"})
+    context = SimpleNamespace(world=table, run=SimpleNamespace(problem=problem))
+    vector = SimpleNamespace(to_dict=lambda: {}, unusable=("b4",))
+    assert tiling_proposals(vector, failure, context) == []
+    table.objects["spare"] = table.at("1x1", 9, 9)  # one more 1x1: the six cells can be covered
+    (proposal,) = tiling_proposals(vector, failure, context)
+    assert sorted(map(tuple, proposal.evidence["cells"])) == [(0.0, 1.0), (1.0, 1.0), (2.0, 1.0), (3.0, 0.0),
+                                                               (3.0, 1.0), (3.0, 2.0)]
+    assert "b4" not in {a[1] for a in proposal.changes["actions"]}

@@ -152,3 +152,25 @@ def test_object_lost_on_the_way_is_physical(fresh):
     assert "lost" in move.failure.message and move.failure.evidence["held"] is None
     sim.move_object("active", sim.resting_pose(sim.object_model("active"), (x, y, 0, 0, 0, 0)))
     fresh.advance(2)
+
+
+def test_a_part_out_of_reach_where_it_lies_is_named_in_the_failure(fresh):
+    """The approach to the part has no IK solution: ``reachability``, and the evidence names the part
+    ``out_of_reach`` (object substitution takes another one; no other motion can pick this one up)."""
+    sim = fresh.sim
+    home = sim.object_pose("active")
+    sim.move_object("active", sim.resting_pose(sim.object_model("active"), (0.98, 0.30, 0, 0, 0, 0)))
+    fresh.advance(2)
+    try:
+        insert = Insert(fresh)
+        insert.start(["active", "reference"])
+        status, _ = run(insert)
+        assert status == FAILURE and insert.failure.kind == "reachability", insert.failure
+        assert insert.failure.evidence["failed_phase"] == "approach"
+        assert insert.failure.evidence["out_of_reach"] == "active"
+    finally:
+        sim.move_object("active", home)
+        fresh.advance(2)
+    # a motion that fails on the way to a target (not to the part where it lies) names nothing out of reach
+    skill = MoveTo(fresh).begin(down(2.0, -0.2, 0.1), "far away")
+    assert skill.tick() == FAILURE and "out_of_reach" not in skill.failure.evidence

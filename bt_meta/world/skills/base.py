@@ -180,10 +180,20 @@ class PhasedSkill(SimSkill):
     :meth:`phases` lists ``(name, make)`` pairs; ``make()`` is called when the phase begins (so targets come from
     the world as it is then) and returns a begun sub-skill, or ``None`` for a phase that only acts or checks.
     :meth:`finish` runs after the last phase.
+
+    A ``reachability`` failure in one of :attr:`REACH_PHASES` (the moves to the object where it lies, before it is
+    held) names that object in its evidence as ``out_of_reach``: the object cannot be picked up where it is, so a
+    repair needs another one in its place (object substitution reads it), not another motion.
     """
+
+    REACH_PHASES: tuple[str, ...] = ("approach", "descend")
 
     def phases(self) -> list[tuple[str, Any]]:
         raise NotImplementedError
+
+    def reached_object(self) -> str | None:
+        """The object the :attr:`REACH_PHASES` go to (the one picked up); ``None`` when there is none."""
+        return None
 
     def finish(self) -> None:
         """Final checks after the last phase; raise :class:`SkillAbort` to fail."""
@@ -211,7 +221,11 @@ class PhasedSkill(SimSkill):
             try:
                 status = self.run_child(self._child)
             except SkillAbort as abort:
-                abort.evidence.setdefault("failed_phase", self._plan[self._index][0])
+                phase = self._plan[self._index][0]
+                abort.evidence.setdefault("failed_phase", phase)
+                if abort.kind == FailureKind.REACHABILITY.value and phase in self.REACH_PHASES \
+                        and self.reached_object():
+                    abort.evidence.setdefault("out_of_reach", self.reached_object())
                 self.info["phases"].append({"phase": self._plan[self._index][0], **self._child.record()})
                 raise
             if status == RUNNING:

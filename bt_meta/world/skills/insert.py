@@ -76,6 +76,9 @@ class Insert(PhasedSkill):
         self.begin_phases()
         return self
 
+    def reached_object(self) -> str | None:
+        return self.part or None
+
     def phases(self) -> list[tuple[str, Any]]:
         if self.held_at_start:
             return [("insert", self._insert), ("check", self._check)]

@@ -5,7 +5,8 @@ mirrored from the simulator) and checks every waypoint of the straight joint-spa
 tick then drives the arm one waypoint further (``world.steps_per_tick`` physics steps) and the skill stays
 RUNNING until the gripper is within tolerance of the target. Failures are classified, never raised:
 
-* ``reachability`` -- IK found no solution (evidence: target, best residual);
+* ``reachability`` -- IK found no solution (evidence: target, best residual; for a pose symbol ``above`` an object,
+  the object as ``out_of_reach``: it cannot be picked up where it lies);
 * ``collision`` -- every IK solution, or a waypoint on the way, collides (evidence: the colliding pair);
 * ``physical`` -- the arm did not arrive (blocked), or the held object slipped out of the grasp.
 * ``verification`` -- at a pose with ``verify_lifted`` (section 7.3's staging), a listed part stayed on the table,
@@ -77,12 +78,15 @@ class MoveTo(SimSkill):
             # A grasp pose: the fingers may touch the object they are about to close on.
             self.world.allow_hand(self.world.object_name(str(spec["above"])), self.arm)
         self.begin(self.world.ground_pose(args[0], self.arm), args[0])
+        # a pose over an object where it lies: no IK solution there means the object is out of reach
+        self.reached = self.world.grasp_target
         self.verify = [self.world.object_name(str(o)) for o in spec.get("verify_lifted", ())]
 
     def begin(self, pose: np.ndarray, label: str = "") -> MoveTo:
         self.begin_ground()
         self.target = np.asarray(pose, dtype=float)
         self.label = label
+        self.reached: str | None = None
         self._waypoints = []
         self._next = 0
         self._settling = 0
@@ -135,6 +139,8 @@ class MoveTo(SimSkill):
             evidence["label"] = self.label
             if "pair" in evidence:  # geometry names -> object names ("board~2" is a part of "board")
                 evidence["objects"] = [world.contact_object(name) for name in evidence["pair"]]
+            if kind == FailureKind.REACHABILITY.value and self.reached:
+                evidence["out_of_reach"] = self.reached  # object substitution takes another one
             raise SkillAbort(kind, f"move_to {self.label}: {result.message}", evidence)
         assert result.q is not None
         indices = world.kin.arm_indices(self.arm)

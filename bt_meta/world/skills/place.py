@@ -171,6 +171,9 @@ class Place(PhasedSkill):
 
     # -- the phases ---------------------------------------------------------------------------------------------
 
+    def reached_object(self) -> str | None:
+        return self.block or None
+
     def phases(self) -> list[tuple[str, Any]]:
         if self.turn:
             held = self.world.sim.held(self.arm) == self.block

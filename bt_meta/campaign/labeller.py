@@ -14,11 +14,13 @@ The variant's scene is built in pybullet and settled; then, in this order (the f
    grasped; a letters block on another face: also the turn the place skill's ``turn`` mode would make from that
    grasp). A role no candidate can fill: the failed solve's kind (``reachability`` beats ``collision``). A place
    where the task puts something that an object the task does not name occupies (its centre near; for a letter
-   cell, any part of it inside the cell's footprint): ``limit:collision``. When several limits apply and the plan
+   cell, any part of it inside the cell's footprint): ``limit:collision``; a block the task names lying on another
+   block's cell is moved by the plan: ``repairable`` (step 3). When several limits apply and the plan
    step each stops is known (letters), the label is the one the plan meets first (an obstacle at the fourth
    placement before a block out of reach at the fifth); otherwise the first found in this order.
 3. ``repairable`` -- the goal can be reached but not by the nominal plan: a needed object is missing or of
-   another type (substitution), has another colour where the task's symbols name colours (its initial facts),
+   another type (substitution), lies on a cell where the task puts another block, has another colour where the
+   task's symbols name colours (its initial facts),
    is turned off its nominal up axis by more than 20 degrees (re-orientation / pose repair), or a fixture the
    nominal plan's absolute poses depend on moved more than 1 cm.
 4. ``nominal_equivalent`` -- otherwise (shifts, turns about the vertical, distractors clear of the work, colours
@@ -212,7 +214,7 @@ class Labeller:
                 pose[:2, :2] = [[c, -s_], [s_, c]]
                 pose[:3, 3] = (gx, gy, sim.table.top_z + 0.002 + PROBE_HEIGHT / 2.0)
                 near = {n: d for n, d in sim.box_clearances((LB, LB, PROBE_HEIGHT), pose, names, 0.0).items()
-                        if d < -PLACE_OVERLAP}
+                        if d < -PLACE_OVERLAP and n != str(action.args[0])}  # a block on its own cell is picked
                 if near:
                     name, gap = min(near.items(), key=lambda item: item[1])
                     return Label("limit:collision", f"{name} reaches into the cell ({x + dx:g}, {y:g}) where the "
@@ -262,16 +264,18 @@ class Labeller:
         if limit is not None:
             limits.append(limit)
         fixtures = {n for n in self.needed if self.family.grasped is not None and n not in self.family.grasped}
+        # only what the task does not name blocks a place: an object the plan uses is picked up by the plan
+        named = set(self.needed)
         steps = self._target_steps()
         for index, (tx, ty, _) in enumerate(self.targets):
-            blocking = next((name for name in present if name not in fixtures and math.hypot(
+            blocking = next((name for name in present if name not in fixtures and name not in named and math.hypot(
                 *(sim.object_transform(name)[:2, 3] - (tx, ty))) < BLOCKING_RADIUS * LB), None)
             if blocking is not None:
                 limits.append(Label("limit:collision", f"{blocking} occupies a place the task puts something "
                                     f"({tx:.3f}, {ty:.3f})", {"object": blocking, "target": [tx, ty],
                                                               "step": steps.get(index)}))
                 break
-        occupied = self._occupied_cell(world, [n for n in present if n not in fixtures])
+        occupied = self._occupied_cell(world, [n for n in present if n not in fixtures and n not in named])
         if occupied is not None:
             limits.append(occupied)
         blocked = self._obstacle_label(world, roles, feasible, present) if sim.obstacles() else None
@@ -284,6 +288,9 @@ class Labeller:
         if blocked is not None:
             return blocked
         # 3. repairable or nominal-equivalent
+        lying = self._occupied_cell(world, [n for n in present if n in named])
+        if lying is not None:  # a block the plan uses lies on another's cell: it must be moved first
+            return Label("repairable", lying.reason + "; the plan must move it first", lying.evidence)
         for name in self.needed:
             nominal = self.nominal.get(name)
             if name not in present or nominal is None:

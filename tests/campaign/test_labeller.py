@@ -63,6 +63,8 @@ LETTER_CASES = {
     "far_first_and_a_later_cell_blocked": ("limit:reachability", "override: {b0: {pose: [0.98, 0.30, table, 0, 0, "
                                            "0]}}\n    obstacles: [{name: o, shape: box, size: [0.05, 0.05, 0.06], "
                                            "pose: [0.55, -0.083, table, 0, 0, 0]}]"),
+    # A block the plan uses lying on another block's cell is picked up by the plan: not a limit.
+    "named_block_on_a_cell": ("repairable", "override: {b5: {pose: [0.55, 0.10, table, 0, 0, 0]}}"),
     "cell_blocked": ("limit:collision",
                      "add: [{name: d, type: megablok_1x1, colour: green, pose: [0.55, 0.10, table, 0, 0, 0]}]"),
     # Its centre is 55 mm from the nearest cell's (further than BLOCKING_RADIUS), its long side 6 mm into it.

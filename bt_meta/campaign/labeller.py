@@ -83,8 +83,13 @@ def letter_cells(plan: Iterable[Any], shapes: dict[str, str]) -> list[tuple[floa
         if action.name != "place":
             continue
         block, x, y = action.args[0], float(action.args[1]), float(action.args[2])
-        cells += [(x - 0.5, y), (x + 0.5, y)] if shapes.get(block) == "1x2" else [(x, y)]
+        cells += [(x + dx, y) for dx in _cell_offsets(shapes.get(block))]
     return cells
+
+
+def _cell_offsets(shape: str | None) -> tuple[float, ...]:
+    """The x offsets (lb) of the unit cells a block covers from its centre: a 1x2 lies along the letter's x."""
+    return (-0.5, 0.5) if shape == "1x2" else (0.0,)
 
 
 def max_pairs(cells: Sequence[tuple[float, float]]) -> int:
@@ -176,7 +181,7 @@ class Labeller:
             if action.name == "place" and frame is not None:
                 shape = self.shapes.get(action.args[0])
                 x, y = float(action.args[1]), float(action.args[2])
-                for dx in ((-0.5, 0.5) if shape == "1x2" else (0.0,)):
+                for dx in _cell_offsets(shape):
                     gx, gy, _ = world.ground_cell(str(frame), str(x + dx), str(y))
                     out.append((gx, gy, world.sim.table.top_z))
         if out:
@@ -207,7 +212,7 @@ class Labeller:
                 continue
             shape = self.shapes.get(action.args[0])
             x, y = float(action.args[1]), float(action.args[2])
-            for dx in ((-0.5, 0.5) if shape == "1x2" else (0.0,)):
+            for dx in _cell_offsets(shape):
                 gx, gy, yaw = world.ground_cell(str(frame), str(x + dx), str(y))
                 pose = np.eye(4)
                 c, s_ = math.cos(yaw), math.sin(yaw)
@@ -352,7 +357,7 @@ class Labeller:
         out: dict[int, int] = {}
         for step, action in enumerate(self.plan):
             if action.name == "place":
-                for _ in ((-0.5, 0.5) if self.shapes.get(action.args[0]) == "1x2" else (0.0,)):
+                for _ in _cell_offsets(self.shapes.get(action.args[0])):
                     out[len(out)] = step
         return out if len(out) == len(self.targets) else {}
 

@@ -28,6 +28,25 @@ def run_to_end(skill: Place, args: list[str]) -> str:
     raise AssertionError(f"{skill.name}{args} still running")
 
 
+def tipped(block: str, roll: float, pitch: float) -> tuple[SimWorld, float, float]:
+    """The shipped letter A scene with ``block`` laid on another face where it stood (degrees), settled; and
+    where it lies (x, y). The caller closes the world."""
+    task_file = load_task_file(trees_dir() / "letters.yaml")
+    with quiet_stdout():
+        world = SimWorld(task_file.domain, task_file.problem("A"), load_grounding("letters"))
+    try:
+        sim = world.sim
+        x, y = sim.object_transform(block)[:2, 3]
+        sim.move_object(block, sim.resting_pose(sim.object_model(block),
+                                                (x, y, 0.0, math.radians(roll), math.radians(pitch), 0.0)))
+        sim.settle(60)
+        world.sync_collision()
+    except BaseException:
+        world.close()
+        raise
+    return world, x, y
+
+
 def turn(world: SimWorld, block: str) -> str:
     skill = Place(world)
     skill.spec = {"mode": "turn"}
@@ -36,16 +55,9 @@ def turn(world: SimWorld, block: str) -> str:
 
 @pytest.mark.parametrize(("roll", "pitch", "turns"), [(90.0, 0.0, 1), (0.0, -90.0, 1), (180.0, 0.0, 2)])
 def test_a_block_on_another_face_stands_on_its_base_after_its_turns(roll, pitch, turns):
-    task_file = load_task_file(trees_dir() / "letters.yaml")
-    with quiet_stdout():
-        world = SimWorld(task_file.domain, task_file.problem("A"), load_grounding("letters"))
+    world, x, y = tipped("b3", roll, pitch)
     try:
         sim = world.sim
-        x, y = sim.object_transform("b3")[:2, 3]
-        model = sim.object_model("b3")
-        sim.move_object("b3", sim.resting_pose(model, (x, y, 0.0, math.radians(roll), math.radians(pitch), 0.0)))
-        sim.settle(60)
-        world.sync_collision()
         transform = sim.object_transform("b3")
         grasp = top_down(transform[0, 3], transform[1, 3], world.object_top("b3") + 0.004, math.pi)
         lifted = grasp.copy()
@@ -65,15 +77,9 @@ def test_a_block_a_failed_place_left_in_the_gripper_is_turned_from_where_it_was_
     """b1 on its side (letters_A s0 0040): place picks it top-down and tilts the wrist to carry it upright; the
     wrist cannot reach down at the cell so (reachability, the block still held). The turn takes it back over where
     it was picked and turns it there: it ends standing on its base near where it lay, and is placed on its cell."""
-    task_file = load_task_file(trees_dir() / "letters.yaml")
-    with quiet_stdout():
-        world = SimWorld(task_file.domain, task_file.problem("A"), load_grounding("letters"))
+    world, x, y = tipped("b1", 0.0, 90.0)
     try:
         sim = world.sim
-        x, y = sim.object_transform("b1")[:2, 3]
-        sim.move_object("b1", sim.resting_pose(sim.object_model("b1"), (x, y, 0.0, 0.0, math.radians(90.0), 0.0)))
-        sim.settle(60)
-        world.sync_collision()
         place = world.skill("place")
         status = run_to_end(place, ["b1", "0", "1"])
         assert status == "FAILURE" and place.failure.kind == "reachability", place.failure

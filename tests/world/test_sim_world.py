@@ -244,3 +244,28 @@ def test_a_housing_pressed_out_of_its_grasp_by_a_failed_insertion_backs_out_stil
     assert sim.held("right") == "housing"
     assert float(np.linalg.norm(world.held_relative("right")[:3, 3] - grasped[:3, 3])) < 0.005
     print("pressed out of the grasp by", pressed)
+
+
+@slow
+@pytest.mark.parametrize("spin", [0.0, 30.0, 45.0])
+def test_a_round_part_on_its_side_carried_from_where_it_lies_does_not_reach_into_the_table(sim, spin):
+    """A many-part object (the housing: two tubes of boxes) is checked as the convex hull of its parts. Its
+    bounding box, which the checker used before, put a corner 1.5 cm under the table for a housing lying on its
+    side spun 45 degrees about its axis, so every path lifting it from there collided (generated housing variants
+    0005 0036 0041: the re-grasp of a housing set down on its side)."""
+    task_file = load_task_file(trees_dir() / "housing_insertion.yaml")
+    world = SimWorld(task_file.domain, task_file.problem("nominal"), load_grounding("housing_insertion"), sim=sim)
+    model = sim.object_model("housing")
+    x, y = sim.object_transform("housing")[:2, 3]
+    sim.move_object("housing", sim.resting_pose(model, (x, y, 0.0, math.pi / 2.0, math.radians(spin), 0.0)))
+    world.sync_collision()
+    pose = sim.object_transform("housing")
+    low, high = model.extent()
+    box = np.array([[a, b, c] for a in (low[0], high[0]) for b in (low[1], high[1]) for c in (low[2], high[2])])
+    box_lowest = float((box @ pose[:3, :3].T + pose[:3, 3])[:, 2].min())
+    q = world.current_q()
+    world.collision.attach("housing", world.end_effector("right"), q)  # carried from where it lies
+    touching = [c for c in world.collision.all_contacts(q) if set(c.pair) == {"housing", "table"}]
+    assert not touching, touching
+    if spin == 45.0:
+        assert box_lowest < sim.table.top_z - 0.01  # the bounding box would have been 1 cm or more under the table

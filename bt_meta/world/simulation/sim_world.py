@@ -888,17 +888,17 @@ touch exactly, which is not a collision (pybullet, too, lets resting bodies over
 
 
 def _collision_shapes(model: ObjectModel) -> list[tuple[str, tuple[float, ...], np.ndarray]]:
-    """Boxes and cylinders for the collision checker: the model's parts, or its bounding box when it has many
-    (a hollow tube of 24 boxes checks as its hull: the gripper never goes inside it)."""
+    """Boxes and cylinders for the collision checker: the model's parts, or their convex hull when it has many (a
+    hollow tube of 24 boxes checks as its hull: the gripper never goes inside it). The hull, not the bounding box:
+    a round part lying on its side at any roll keeps its box's corners under the table, and every path lifting it
+    from there collided (the housings' re-grasp, generated housing variants 0005 0036 0041)."""
 
     def shrunk(*sizes: float) -> tuple[float, ...]:
         return tuple(max(1e-3, s - 2.0 * SHRINK) for s in sizes)
 
     if len(model.parts) > 6:
-        low, high = model.extent()
-        local = np.eye(4)
-        local[:3, 3] = (low + high) / 2.0
-        return [("box", shrunk(*(float(v) for v in high - low)), local)]
+        points = np.concatenate([_shrunk_part(part).corners() for part in model.parts])
+        return [("convex", tuple(float(v) for v in points.ravel()), np.eye(4))]
     out: list[tuple[str, tuple[float, ...], np.ndarray]] = []
     for part in model.parts:
         local = pose_to_matrix((*part.position, *part.rpy))
@@ -911,6 +911,21 @@ def _collision_shapes(model: ObjectModel) -> list[tuple[str, tuple[float, ...], 
             out.append(("convex", tuple(float(v) for row in part.vertices for v in row), local))
     return out
 
+
+
+def _shrunk_part(part: Box | Cylinder | Mesh) -> Box | Cylinder | Mesh:
+    """``part`` made :data:`SHRINK` smaller on every side (a mesh: its vertices drawn that far toward its centre)."""
+    if isinstance(part, Box):
+        return dataclasses.replace(part, size=tuple(max(1e-3, s - 2.0 * SHRINK) for s in part.size))
+    if isinstance(part, Cylinder):
+        return dataclasses.replace(part, radius=max(5e-4, part.radius - SHRINK),
+                                   length=max(1e-3, part.length - 2.0 * SHRINK))
+    vertices = np.asarray(part.vertices, dtype=float)
+    centre = vertices.mean(axis=0)
+    offset = vertices - centre
+    length = np.maximum(np.linalg.norm(offset, axis=1, keepdims=True), 1e-9)
+    inset = centre + offset * np.maximum(0.0, 1.0 - SHRINK / length)
+    return dataclasses.replace(part, vertices=tuple(tuple(float(v) for v in row) for row in inset))
 
 @hookimpl
 def bt_meta_make_world(name: str, domain: Any, problem: Any, options: dict[str, Any]) -> SimWorld | None:

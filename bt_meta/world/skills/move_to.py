@@ -29,6 +29,7 @@ import pinocchio as pin
 
 from bt_meta.bt.failures import FailureKind
 from bt_meta.world.base import RUNNING, SUCCESS
+from bt_meta.world.kinematics.path_planning import PlanningStats, plan_path
 from bt_meta.world.poses import matrix_to_pose, pose_to_matrix
 from bt_meta.world.skills.base import SimSkill, SkillAbort, rounded
 
@@ -155,23 +156,62 @@ class MoveTo(SimSkill):
         if self.check_path:
             collision = self._first_collision(waypoints)
             if collision is not None:
-                straight = self._straight_line(q_now, count)
-                if straight is None or self._first_collision(straight) is not None:
-                    straight = self._lift_first(q_now)
-                if straight is None or self._first_collision(straight) is not None:
+                around = self._around(q_now, result.q, count)
+                if around is None:
                     k, contact = collision
                     raise SkillAbort(
                         FailureKind.COLLISION,
                         f"move_to {self.label}: the joint-space path collides at {100 * (k + 1) // count}%: {contact}",
                         {"pair": list(contact.pair), "objects": [world.contact_object(n) for n in contact.pair],
                          "collision_kind": contact.kind, "penetration": contact.penetration,
-                         "waypoint": k + 1, "waypoints": count, "target": self.info["target"]},
+                         "waypoint": k + 1, "waypoints": count, "target": self.info["target"],
+                         "planner": self.info.get("planner")},
                     )
-                waypoints = straight
-                self.info["path"] = "cartesian"
+                waypoints, self.info["path"] = around
         self._waypoints = [q[indices] for q in waypoints]
-        self.info["waypoints"] = count
+        self.info["waypoints"] = len(waypoints)
         self.info["q_goal"] = rounded(goal)
+
+    def _around(self, q_now: np.ndarray, q_goal: np.ndarray, count: int) -> tuple[list[np.ndarray], str] | None:
+        """Waypoints that do not collide where the joint-space line does, and which way they go: the straight
+        Cartesian line, a lift before the line, else a path planned around (:func:`plan_path`, to the same IK
+        solution); ``None`` when none is free."""
+        straight = self._straight_line(q_now, count)
+        if straight is not None and self._first_collision(straight) is None:
+            return straight, "cartesian"
+        lifted = self._lift_first(q_now)
+        if lifted is not None and self._first_collision(lifted) is None:
+            return lifted, "lift_first"
+        planned = self._planned(q_now, q_goal)
+        return None if planned is None else (planned, "planned")
+
+    def _planned(self, q_now: np.ndarray, q_goal: np.ndarray) -> list[np.ndarray] | None:
+        """A path around what the straight lines hit, planned in the arm's joints (the other joints stay), then
+        cut into waypoints one tick of joint speed apart."""
+        world = self.world
+        indices = world.kin.arm_indices(self.arm)
+
+        def free(arm_q: np.ndarray) -> bool:
+            q = q_now.copy()
+            q[indices] = arm_q
+            return self.world.collision.check(q, arm=self.arm) is None
+
+        stats = PlanningStats()
+        path = plan_path(free, q_now[indices], q_goal[indices], world.kin.lower[indices], world.kin.upper[indices],
+                         seed=world.seed, stats=stats)
+        self.info["planner"] = {"found": stats.found, "iterations": stats.iterations, "checks": stats.checks,
+                                "nodes": stats.nodes}
+        if path is None:
+            return None
+        max_step = world.joint_speed * world.tick_seconds
+        out = []
+        for a, b in zip(path, path[1:]):
+            steps = max(1, math.ceil(float(np.max(np.abs(b - a))) / max_step))
+            for k in range(1, steps + 1):
+                q = q_now.copy()
+                q[indices] = a + (b - a) * (k / steps)
+                out.append(q)
+        return out
 
     def _first_collision(self, waypoints: list[np.ndarray]) -> tuple[int, Any] | None:
         for k, q in enumerate(waypoints[:-1]):

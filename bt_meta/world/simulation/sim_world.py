@@ -389,6 +389,8 @@ class SimWorld:
         self.ik = InverseKinematics(self.kin, self.collision)
         self._hand_links = {arm: self._arm_hand_links(arm) for arm in sim.robot.arms}
         self._geometry: dict[str, list[str]] = {}
+        self._put_down_at: dict[str, tuple[str, float]] = {}
+        """Anchor -> the part last put down there and its footprint radius (:meth:`_clear_of_others`)."""
         t = sim.table
         self.collision.add_box("table", (t.size_x, t.size_y, t.thickness),
                                pose_to_matrix((t.center_x, t.center_y, t.top_z - t.thickness / 2.0, 0, 0, 0)))
@@ -712,6 +714,7 @@ class SimWorld:
             return gripper
         if "anchor" in spec:
             position, _ = self.anchor(str(spec["anchor"]))
+            position = self._clear_of_others(str(spec["anchor"]), position, spec, arm)
             offset = [float(v) for v in spec.get("offset", (0.0, 0.0, 0.0))]
             out[:3, 3] = np.asarray(position) + np.asarray(offset)
             if "turn_up" in spec:
@@ -725,6 +728,37 @@ class SimWorld:
             return out
         raise SkillAbort(FailureKind.INTERNAL,
                          f"pose {symbol!r} in {self.grounding.path}: give pose, above, above_feature or anchor")
+
+    def _clear_of_others(self, anchor: str, position: tuple[float, float, float], spec: Mapping[str, Any], arm: str
+                         ) -> tuple[float, float, float]:
+        """Where a part is put down at ``anchor``: the anchor, or the nearest spot around it clear of every other
+        object and obstacle (:func:`~bt_meta.world.simulation.free_spots.nearest_free_spot`) when something lies
+        there. The part is the one held (else the one ``turn_up`` names); its footprint is every point it can
+        reach turning about the gripper. The retreat after letting go comes back to the same spot: the part last
+        put down at the anchor is remembered and not counted as in the way."""
+        from bt_meta.world.simulation.free_spots import nearest_free_spot
+
+        sim = self.sim
+        held = sim.held(arm)
+        if held is not None:
+            tcp = sim.link_transform(self.end_effector(arm))[:3, 3]
+            t = sim.object_transform(held)
+            points = sim.object_model(held).points() @ t[:3, :3].T + t[:3, 3]
+            self._put_down_at[anchor] = (held, float(np.max(np.linalg.norm(points - tcp, axis=1))))
+        elif "turn_up" in spec and self._put_down_at.get(anchor, ("",))[0] != self.object_name(str(spec["turn_up"])):
+            return position  # the part is not in the hand yet and was never put down here: nothing to clear
+        if anchor not in self._put_down_at:
+            return position
+        part, radius = self._put_down_at[anchor]
+        footprints = []
+        for name in sim.object_names():
+            if name != part and name not in {sim.held(a) for a in sim.robot.arms}:
+                t = sim.object_transform(name)
+                footprints.append((sim.object_model(name).points() @ t[:3, :3].T + t[:3, 3])[:, :2])
+        for model, t in sim.obstacles().values():
+            footprints.append((model.points() @ t[:3, :3].T + t[:3, 3])[:, :2])
+        spot = nearest_free_spot(position[:2], radius, footprints, sim.table.bounds)
+        return position if spot is None else (spot[0], spot[1], position[2])
 
     def held_pose(self, relative_to: str, pose: Sequence[float], arm: str | None = None) -> np.ndarray:
         """The gripper pose that puts the object held now at ``pose`` (x, y, z, roll, pitch, yaw; metres, radians)

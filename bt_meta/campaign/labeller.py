@@ -12,7 +12,8 @@ The variant's scene is built in pybullet and settled; then, in this order (the f
    object the robot must pick up (the needed ones, else spares that could stand in), mink IK to the top-down
    grasp pose the skills use, collision-checked against the robot and the scene (the hand may touch the object
    grasped; a letters block on another face: also the turn the place skill's ``turn`` mode would make from that
-   grasp). A role no candidate can fill: the failed solve's kind (``reachability`` beats ``collision``). A place
+   grasp; the motions between, against static obstacles, by the ways move_to takes: the joint-space line, the
+   gripper's straight line, a lift first, a planned path). A role no candidate can fill: the failed solve's kind (``reachability`` beats ``collision``). A place
    where the task puts something that an object the task does not name occupies (its centre near; for a letter
    cell, any part of it inside the cell's footprint): ``limit:collision``; a block the task names lying on another
    block's cell is moved by the plan: ``repairable`` (step 3). When several limits apply and the plan
@@ -377,7 +378,7 @@ class Labeller:
             try:
                 result = world.ik.solve("right", pin.SE3(target[:3, :3], target[:3, 3]), q, seed=0)
                 if result.success and allowed and world.sim.obstacles():  # the descent, against obstacles
-                    hit = self._path_hit(world, q, result.q)
+                    hit = self._move_hit(world, q, result.q, target)
                     if hit is not None:
                         return False, "collision", f"{name}: the descent to the grasp runs into {hit}"
             finally:
@@ -485,6 +486,33 @@ class Labeller:
             return why
         return self._path_hit(world, q_top, q_goal)
 
+    def _move_hit(self, world: Any, q_from: np.ndarray, q_to: np.ndarray, goal: np.ndarray) -> str | None:
+        """move_to's ways from ``q_from`` to ``q_to`` (the IK solution for gripper pose ``goal``), in its order: the
+        joint-space line, the gripper's straight line, a lift first, a path planned around
+        (:func:`~bt_meta.world.kinematics.path_planning.plan_path`, the skill's seed and budget). The joint line's
+        obstacle contact when every way runs into an obstacle, else None."""
+        from bt_meta.world.kinematics.forward import pose_matrix
+        from bt_meta.world.kinematics.path_planning import plan_path
+
+        hit = self._path_hit(world, q_from, q_to)
+        if hit is None:
+            return None
+        start = pose_matrix(world.kin.end_effector_pose(q_from, "right"))
+        if self._line_hit(world, q_from, start, goal) is None:
+            return None
+        if self._lift_first_hit(world, q_from, start, goal, q_to) is None:
+            return None
+        indices = world.kin.arm_indices("right")
+
+        def free(arm_q: np.ndarray) -> bool:
+            q = q_from.copy()
+            q[indices] = arm_q
+            return self._hit(world, q) is None
+
+        path = plan_path(free, q_from[indices], q_to[indices], world.kin.lower[indices], world.kin.upper[indices],
+                         seed=0)
+        return hit if path is None else None
+
     def _solve(self, world: Any, pose: np.ndarray, q: np.ndarray) -> tuple[np.ndarray | None, str | None]:
         """IK for a gripper pose: a collision-free solution, else (when only other objects are in the way, which the
         skills allow for) the unchecked one if it clears the obstacles. (q, the obstacle contact or failure)."""
@@ -517,7 +545,7 @@ class Labeller:
             q1, why = self._solve(world, above, q0)
             if q1 is None:
                 return f"reaching above {name}: {why}"
-            if (hit := self._path_hit(world, q0, q1)) is not None:
+            if (hit := self._move_hit(world, q0, q1, above)) is not None:
                 return f"reaching for {name} runs into {hit}"
             q2, why = self._solve(world, grasp, q1)
             if q2 is None:
@@ -533,7 +561,7 @@ class Labeller:
                 q3, why = self._solve(world, lifted, q2)
                 if q3 is None:
                     return f"lifting {name}: {why}"
-                if (hit := self._path_hit(world, q2, q3)) is not None:
+                if (hit := self._move_hit(world, q2, q3, lifted)) is not None:
                     return f"lifting {name} runs into {hit}"
                 held = np.linalg.inv(grasp) @ transform
                 goal_yaw = nearest_yaw(object_yaw(transform), symmetry(model), object_yaw(transform))
@@ -545,14 +573,12 @@ class Labeller:
                 q4, why = self._solve(world, over, q3)
                 if q4 is None:
                     return f"carrying {name} over ({target[0]:.3f}, {target[1]:.3f}): {why}"
-                hit = self._path_hit(world, q3, q4)
-                if hit is not None and (line := self._line_hit(world, q3, lifted, over)) is not None \
-                        and self._lift_first_hit(world, q3, lifted, over, q4) is not None:
-                    return f"carrying {name} to ({target[0]:.3f}, {target[1]:.3f}) runs into {hit} ({line})"
+                if (hit := self._move_hit(world, q3, q4, over)) is not None:
+                    return f"carrying {name} to ({target[0]:.3f}, {target[1]:.3f}) runs into {hit}"
                 q5, why = self._solve(world, down, q4)
                 if q5 is None:
                     return f"lowering {name} at ({target[0]:.3f}, {target[1]:.3f}): {why}"
-                if (hit := self._path_hit(world, q4, q5)) is not None:
+                if (hit := self._move_hit(world, q4, q5, down)) is not None:
                     return f"lowering {name} at ({target[0]:.3f}, {target[1]:.3f}) runs into {hit}"
                 return None
             finally:

@@ -16,7 +16,7 @@ Offers:
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -77,21 +77,26 @@ def clearance(centre: Sequence[float], radius: float, hulls: Sequence[np.ndarray
 
 def nearest_free_spot(anchor: Sequence[float], radius: float, footprints: Sequence[np.ndarray],
                       table: tuple[tuple[float, float], tuple[float, float]], *, margin: float = MARGIN,
-                      step: float = RING_STEP, most: float = MAX_SHIFT) -> tuple[float, float] | None:
+                      step: float = RING_STEP, most: float = MAX_SHIFT, prefer: Sequence[float] | None = None,
+                      accept: Callable[[float, float], bool] | None = None) -> tuple[float, float] | None:
     """The point nearest ``anchor`` (x, y) where a part of footprint radius ``radius`` keeps ``margin`` from every
-    footprint (2-D points of each other object's outline) and, if it is not the anchor, lies on the ``table`` ((x_min, x_max), (y_min,
-    y_max)); the anchor itself when it is clear. Candidates: rings ``step`` apart up to ``most``, sixteen points
-    each. ``None`` when none is clear (the caller keeps the anchor: the physics then says what happens)."""
+    footprint (2-D points of each other object's outline) and, if it is not the anchor, lies on the ``table``
+    ((x_min, x_max), (y_min, y_max)) and passes ``accept`` (the arm reaches it); the anchor itself when it is
+    clear, else ``prefer`` (the spot chosen before) when it still is. Candidates: rings ``step`` apart up to
+    ``most``, sixteen points each. ``None`` when none will do (the caller keeps the anchor: the physics then says
+    what happens)."""
     hulls = [_hull(np.asarray(f, dtype=float)[:, :2]) for f in footprints if len(f)]
     (x_low, x_high), (y_low, y_high) = table
     ax, ay = float(anchor[0]), float(anchor[1])
 
     def clear(x: float, y: float) -> bool:
         on_table = x_low + radius <= x <= x_high - radius and y_low + radius <= y <= y_high - radius
-        return on_table and clearance((x, y), radius, hulls) >= margin
+        return on_table and clearance((x, y), radius, hulls) >= margin and (accept is None or accept(x, y))
 
     if clearance((ax, ay), radius, hulls) >= margin:  # where the grounding file says, if nothing is in the way
         return ax, ay
+    if prefer is not None and clear(float(prefer[0]), float(prefer[1])):
+        return float(prefer[0]), float(prefer[1])
     for ring in range(1, int(round(most / step)) + 1):
         r = ring * step
         for k in range(_ANGLES):

@@ -389,8 +389,8 @@ class SimWorld:
         self.ik = InverseKinematics(self.kin, self.collision)
         self._hand_links = {arm: self._arm_hand_links(arm) for arm in sim.robot.arms}
         self._geometry: dict[str, list[str]] = {}
-        self._put_down_at: dict[str, tuple[str, float]] = {}
-        """Anchor -> the part last put down there and its footprint radius (:meth:`_clear_of_others`)."""
+        self._put_down_at: dict[str, tuple[str, float, tuple[float, float] | None]] = {}
+        """Anchor -> the part last put down there, its footprint radius, the spot chosen (:meth:`_clear_of_others`)."""
         t = sim.table
         self.collision.add_box("table", (t.size_x, t.size_y, t.thickness),
                                pose_to_matrix((t.center_x, t.center_y, t.top_z - t.thickness / 2.0, 0, 0, 0)))
@@ -714,13 +714,14 @@ class SimWorld:
             return gripper
         if "anchor" in spec:
             position, _ = self.anchor(str(spec["anchor"]))
-            position = self._clear_of_others(str(spec["anchor"]), position, spec, arm)
             offset = [float(v) for v in spec.get("offset", (0.0, 0.0, 0.0))]
-            out[:3, 3] = np.asarray(position) + np.asarray(offset)
             if "turn_up" in spec:
                 flip = [float(v) for v in spec.get("flip_axis", (1.0, 0.0, 0.0))]
                 out[:3, :3] = self.turn_up(str(spec["turn_up"]), math.radians(float(spec.get("turn", 90.0))),
                                            out[:3, :3], arm, np.asarray(flip)) @ out[:3, :3]
+            position = self._clear_of_others(str(spec["anchor"]), position, spec, arm, out[:3, :3], offset)
+            out[:3, 3] = np.asarray(position) + np.asarray(offset)
+            if "turn_up" in spec:
                 if "lowest" in spec and self.sim.held(arm) == self.object_name(str(spec["turn_up"])):
                     self._lowest_over(out, position, float(spec["lowest"]), float(offset[2]), arm)
             elif "lowest" in spec and self.sim.held(arm) is not None:  # not turned: by whatever is held, as it lies
@@ -729,27 +730,39 @@ class SimWorld:
         raise SkillAbort(FailureKind.INTERNAL,
                          f"pose {symbol!r} in {self.grounding.path}: give pose, above, above_feature or anchor")
 
-    def _clear_of_others(self, anchor: str, position: tuple[float, float, float], spec: Mapping[str, Any], arm: str
-                         ) -> tuple[float, float, float]:
+    def _clear_of_others(self, anchor: str, position: tuple[float, float, float], spec: Mapping[str, Any], arm: str,
+                         rotation: np.ndarray, offset: Sequence[float]) -> tuple[float, float, float]:
         """Where a part is put down at ``anchor``: the anchor, or the nearest spot around it clear of every other
         object and obstacle (:func:`~bt_meta.world.simulation.free_spots.nearest_free_spot`) when something lies
-        there. The part is the one held (else the one ``turn_up`` names); its footprint is every point it can
-        reach turning about the gripper. The retreat after letting go comes back to the same spot: the part last
-        put down at the anchor is remembered and not counted as in the way."""
+        there, where the gripper reaches at ``offset`` over it turned by ``rotation``. The part is the one held
+        (else the one ``turn_up`` names); its footprint is every point it can reach turning about the gripper.
+        The spot chosen is kept while it stays clear (the lower pose and the retreat after letting go come to the
+        same place): the part last put down at the anchor is remembered and not counted as in the way."""
+        import pinocchio as pin
+
         from bt_meta.world.simulation.free_spots import nearest_free_spot
 
         sim = self.sim
         held = sim.held(arm)
+        before = self._put_down_at.get(anchor)
         if held is not None:
             tcp = sim.link_transform(self.end_effector(arm))[:3, 3]
             t = sim.object_transform(held)
             points = sim.object_model(held).points() @ t[:3, :3].T + t[:3, 3]
-            self._put_down_at[anchor] = (held, float(np.max(np.linalg.norm(points - tcp, axis=1))))
-        elif "turn_up" in spec and self._put_down_at.get(anchor, ("",))[0] != self.object_name(str(spec["turn_up"])):
+            radius = float(np.max(np.linalg.norm(points - tcp, axis=1)))
+            if before is not None and before[0] == held:
+                radius = max(radius, before[1])  # the same part, held another way since: the larger footprint
+            self._put_down_at[anchor] = (held, radius, before[2] if before and before[0] == held else None)
+        elif "turn_up" in spec and (before is None or before[0] != self.object_name(str(spec["turn_up"]))):
             return position  # the part is not in the hand yet and was never put down here: nothing to clear
         if anchor not in self._put_down_at:
             return position
-        part, radius = self._put_down_at[anchor]
+        part, radius, chosen = self._put_down_at[anchor]
+
+        def reached(x: float, y: float) -> bool:
+            target = pin.SE3(rotation, np.array([x, y, position[2]]) + np.asarray(offset, dtype=float))
+            return bool(self.ik.solve(arm, target, self.current_q(), seed=self.seed).success)
+
         footprints = []
         for name in sim.object_names():
             if name != part and name not in {sim.held(a) for a in sim.robot.arms}:
@@ -757,7 +770,8 @@ class SimWorld:
                 footprints.append((sim.object_model(name).points() @ t[:3, :3].T + t[:3, 3])[:, :2])
         for model, t in sim.obstacles().values():
             footprints.append((model.points() @ t[:3, :3].T + t[:3, 3])[:, :2])
-        spot = nearest_free_spot(position[:2], radius, footprints, sim.table.bounds)
+        spot = nearest_free_spot(position[:2], radius, footprints, sim.table.bounds, prefer=chosen, accept=reached)
+        self._put_down_at[anchor] = (part, radius, spot)
         return position if spot is None else (spot[0], spot[1], position[2])
 
     def held_pose(self, relative_to: str, pose: Sequence[float], arm: str | None = None) -> np.ndarray:

@@ -1,13 +1,16 @@
 """MoveTo(pose): inverse kinematics for a gripper pose, then a joint-space trajectory executed over several ticks.
 
 The first tick solves IK (mink, the current configuration as the first seed, collision-aware against the scene
-mirrored from the simulator) and checks every waypoint of the straight joint-space path for collisions; each
+mirrored from the simulator) and checks every waypoint of the straight joint-space path for collisions -- where
+one collides, the gripper's straight line, a lift first, then a path planned around
+(:mod:`~bt_meta.world.kinematics.path_planning`) are tried in that order (``info["path"]`` says which); each
 tick then drives the arm one waypoint further (``world.steps_per_tick`` physics steps) and the skill stays
 RUNNING until the gripper is within tolerance of the target. Failures are classified, never raised:
 
 * ``reachability`` -- IK found no solution (evidence: target, best residual; for a pose symbol ``above`` an object,
   the object as ``out_of_reach``: it cannot be picked up where it lies);
-* ``collision`` -- every IK solution, or a waypoint on the way, collides (evidence: the colliding pair);
+* ``collision`` -- every IK solution collides, or every way there does (evidence: the colliding pair of the
+  joint-space line, the planner's cost);
 * ``physical`` -- the arm did not arrive (blocked), or the held object slipped out of the grasp.
 * ``verification`` -- at a pose with ``verify_lifted`` (section 7.3's staging), a listed part stayed on the table,
   or came along without being joined to what is held, directly or through other joins (it rests on it).

@@ -249,8 +249,12 @@ class Reorientation:
             replay = None
             first = None if initial is None else self._turns(world, domain, problem, problem.state, name, part,
                                                              initial, wanted, run)
-            if first is not None:  # the same repair from the start, for the refinement
-                replay = self._plan(domain, problem, problem.state,
+            if first is not None:  # the same repair from the start, for the refinement; the orientation facts
+                # sensing contradicted are no truer of the start, where the part already lay off (else the replay
+                # plans the turn that makes no claim, and the insertion's precondition fails on the next exposure)
+                start_state = problem.state.apply(add=(), delete=[_atom(text) for text in missing]) if missing \
+                    else problem.state
+                replay = self._plan(domain, problem, start_state,
                                     [(name, part)] * first + [tuple(t) for t in problem.tasks], run)
             if (name, turns, False) in tried:
                 log.info("reorientation: %d x %s of %s was tried and failed: not again", turns, name, part)

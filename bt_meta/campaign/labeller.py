@@ -13,7 +13,8 @@ The variant's scene is built in pybullet and settled; then, in this order (the f
    grasp pose the skills use, collision-checked against the robot and the scene (the hand may touch the object
    grasped; a letters block on another face: also the turn the place skill's ``turn`` mode would make from that
    grasp; the motions between, against static obstacles, by the ways move_to takes: the joint-space line, the
-   gripper's straight line, a lift first, a planned path). A role no candidate can fill: the failed solve's kind (``reachability`` beats ``collision``). A place
+   gripper's straight line, a lift first, a planned path). A role no candidate can fill: the failed solve's kind
+   (``reachability`` beats ``collision``). A place
    where the task puts something that an object the task does not name occupies (its centre near; for a letter
    cell, any part of it inside the cell's footprint): ``limit:collision``; a block the task names lying on another
    block's cell is moved by the plan: ``repairable`` (step 3). When several limits apply and the plan

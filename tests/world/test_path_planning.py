@@ -4,6 +4,7 @@ real simulator, MoveTo going over a wall the straight lines run into (slow)."""
 
 from __future__ import annotations
 
+import itertools
 import math
 import textwrap
 
@@ -27,7 +28,7 @@ def wall_with_gap(gap_low: float | None):
 
 
 def dense_free(path: list[np.ndarray], free, resolution: float = 0.005) -> bool:
-    for a, b in zip(path, path[1:]):
+    for a, b in itertools.pairwise(path):
         count = max(1, math.ceil(float(np.max(np.abs(b - a))) / resolution))
         if not all(free(a + (b - a) * (k / count)) for k in range(count + 1)):
             return False
@@ -42,7 +43,7 @@ def test_a_path_goes_through_the_gap_in_a_wall_the_straight_line_hits():
     assert path is not None and stats.found
     assert np.allclose(path[0], start) and np.allclose(path[-1], goal)
     assert dense_free(path, free, resolution=0.01)  # every segment is free where the planner checks it
-    through = [a + (b - a) * t for a, b in zip(path, path[1:]) for t in np.linspace(0, 1, 200)]
+    through = [a + (b - a) * t for a, b in itertools.pairwise(path) for t in np.linspace(0, 1, 200)]
     crossing = [q for q in through if abs(q[0]) < 0.05]
     assert crossing and all(0.6 < q[1] < 0.75 for q in crossing)  # it crosses the wall's line in the gap
     assert stats.checks > 0 and stats.iterations >= 1
@@ -54,7 +55,7 @@ def test_the_same_seed_gives_the_same_path_and_another_seed_may_not():
     first = plan_path(free, start, goal, LOWER, UPPER, resolution=0.01, iterations=2000, seed=4)
     again = plan_path(free, start, goal, LOWER, UPPER, resolution=0.01, iterations=2000, seed=4)
     assert first is not None and again is not None
-    assert len(first) == len(again) and all(np.array_equal(a, b) for a, b in zip(first, again))
+    assert len(first) == len(again) and all(np.array_equal(a, b) for a, b in zip(first, again, strict=True))
 
 
 def test_a_goal_walled_off_has_no_path_after_the_whole_budget():

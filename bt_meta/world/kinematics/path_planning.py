@@ -116,8 +116,9 @@ def plan_path(is_free: Free, start: Sequence[float], goal: Sequence[float], lowe
               shortcuts: int = 80, seed: int = 0, stats: PlanningStats | None = None) -> list[np.ndarray] | None:
     """A path from ``start`` to ``goal`` (both included) whose every configuration, ``resolution`` apart, satisfies
     ``is_free``; ``None`` when ``iterations`` rounds of RRT-Connect found none. Neither end is checked (the arm is
-    at ``start``; ``goal`` is an IK solution, checked when it was found). The path is then shortened by ``shortcuts`` random
-    attempts to join two of its configurations directly. ``lower``/``upper`` bound the samples (joint limits)."""
+    at ``start``; ``goal`` is an IK solution, checked when it was found). The path is then shortened by
+    ``shortcuts`` random attempts to join two of its configurations directly. ``lower``/``upper`` bound the
+    samples (joint limits)."""
     stats = stats if stats is not None else PlanningStats()
     q_start, q_goal = np.asarray(start, float), np.asarray(goal, float)
     low, high = np.asarray(lower, float), np.asarray(upper, float)

@@ -34,7 +34,7 @@ def _distance_to_polygon(point: np.ndarray, hull: np.ndarray) -> float:
     """Distance from ``point`` to the convex polygon ``hull`` (vertices in counter-clockwise order); 0 inside."""
     inside = True
     best = math.inf
-    for a, b in zip(hull, np.roll(hull, -1, axis=0)):
+    for a, b in zip(hull, np.roll(hull, -1, axis=0), strict=True):
         edge = b - a
         if edge[0] * (point[1] - a[1]) - edge[1] * (point[0] - a[0]) < 0.0:
             inside = False
@@ -97,7 +97,7 @@ def nearest_free_spot(anchor: Sequence[float], radius: float, footprints: Sequen
         return ax, ay
     if prefer is not None and clear(float(prefer[0]), float(prefer[1])):
         return float(prefer[0]), float(prefer[1])
-    for ring in range(1, int(round(most / step)) + 1):
+    for ring in range(1, round(most / step) + 1):
         r = ring * step
         for k in range(_ANGLES):
             angle = 2.0 * math.pi * k / _ANGLES

@@ -23,6 +23,7 @@ Offers:
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from typing import Any
@@ -208,7 +209,7 @@ class MoveTo(SimSkill):
             return None
         max_step = world.joint_speed * world.tick_seconds
         out = []
-        for a, b in zip(path, path[1:]):
+        for a, b in itertools.pairwise(path):
             steps = max(1, math.ceil(float(np.max(np.abs(b - a))) / max_step))
             for k in range(1, steps + 1):
                 q = q_now.copy()

@@ -24,8 +24,9 @@ runs that bring the normal within :data:`ALIGNED_ANGLE` of the demonstrated one.
 
 The proposal is a ``splice`` of the planned steps from the failed step on. Its evidence carries ``replay_plan``:
 the same re-orientation planned from the problem's initial state (the part's normal when the run started,
-``run.start_objects``), which the executor stores as the refinement (the failed attempt, its release and re-pick
-are not replayed on the next exposure). A held part whose method lets it go without a turn (a part jammed in an
+``run.start_objects``; without the orientation facts sensing contradicted, which were no truer then), which the
+executor stores as the refinement (the failed attempt, its release and re-pick are not replayed on the next
+exposure). A held part whose method lets it go without a turn (a part jammed in an
 insertion) is only set down first (``keep_goal``: the goal is not rewritten): the turns are counted at the next
 failure, from how it landed. A settle, or a number of turns, the run's repair history already tried is not
 proposed again (the part lands the same way: proposing it from each new step spent the attempt budget).

@@ -68,6 +68,8 @@ PLACE_OVERLAP = 0.0005
 a neighbour that only touches the cell's edge does not count)."""
 PROBE_HEIGHT = 0.02
 """Height (m) of the footprint probe above a letter cell, from just above the table: anything resting there."""
+REORIENT_PREFIX = "Reorient"
+"""Tasks so named re-orient a part by a regrasp (the ``reorientation`` repair plugin's convention)."""
 
 
 @dataclass(frozen=True)
@@ -150,9 +152,26 @@ class Labeller:
             self.nominal_xy = {name: world.sim.object_transform(name)[:2, 3].copy()
                                for name in world.sim.object_names()}
             self.jobs = self._jobs(world)
+            self.nominal_held = self._held_as_demonstrated(world)
         finally:
             world.close()
         self.cells = letter_cells(self.plan, self.shapes) if family.truth == "letters" else []
+        self.reorientable = any(str(task).startswith(REORIENT_PREFIX) for task in self.task_file.domain.tasks)
+
+    def _held_as_demonstrated(self, world: Any) -> dict[str, np.ndarray]:
+        """Object type -> the part in the gripper's frame as the nominal scene's top-down grasp holds it."""
+        from bt_meta.world.skills.place import GRIPPER_YAW, nearest_yaw, object_yaw, symmetry, top_down
+
+        out: dict[str, np.ndarray] = {}
+        for name in self.family.grasped or ():
+            if name not in world.sim.object_names():
+                continue
+            transform = world.sim.object_transform(name)
+            model = world.sim.object_model(name)
+            yaw = nearest_yaw(object_yaw(transform), symmetry(model), GRIPPER_YAW)
+            grasp = top_down(transform[0, 3], transform[1, 3], world.stack_top(name) + GRASP_HEIGHT, yaw)
+            out.setdefault(model.type, np.linalg.inv(grasp) @ transform)
+        return out
 
     def __enter__(self) -> Labeller:
         return self
@@ -531,7 +550,7 @@ class Labeller:
 
     def _carry_hit(self, world: Any, name: str, target: tuple[float, float, float], q0: np.ndarray) -> str | None:
         """Why ``name`` cannot be picked up and put at ``target`` clear of the obstacles, or None."""
-        from bt_meta.world.simulation.objects import pose_to_matrix
+        from bt_meta.world.kinematics.forward import pose_matrix
         from bt_meta.world.skills.place import GRIPPER_YAW, nearest_yaw, object_yaw, symmetry, top_down
 
         sim = world.sim
@@ -564,29 +583,74 @@ class Labeller:
                     return f"lifting {name}: {why}"
                 if (hit := self._move_hit(world, q2, q3, lifted)) is not None:
                     return f"lifting {name} runs into {hit}"
-                held = np.linalg.inv(grasp) @ transform
-                goal_yaw = nearest_yaw(object_yaw(transform), symmetry(model), object_yaw(transform))
-                block = pose_to_matrix((target[0], target[1], target[2] + model.lowest_z(0.0, 0.0) + 0.002,
-                                        0.0, 0.0, goal_yaw))
-                down = block @ np.linalg.inv(held)
-                over = down.copy()
-                over[2, 3] += APPROACH_HEIGHT
-                q4, why = self._solve(world, over, q3)
-                if q4 is None:
-                    return f"carrying {name} over ({target[0]:.3f}, {target[1]:.3f}): {why}"
-                if (hit := self._move_hit(world, q3, q4, over)) is not None:
-                    return f"carrying {name} to ({target[0]:.3f}, {target[1]:.3f}) runs into {hit}"
-                q5, why = self._solve(world, down, q4)
-                if q5 is None:
-                    return f"lowering {name} at ({target[0]:.3f}, {target[1]:.3f}): {why}"
-                if (hit := self._move_hit(world, q4, q5, down)) is not None:
-                    return f"lowering {name} at ({target[0]:.3f}, {target[1]:.3f}) runs into {hit}"
-                return None
+                first = None
+                attached = np.linalg.inv(grasp) @ transform
+                gripper = pose_matrix(world.kin.end_effector_pose(q2, "right"))
+                for held, block in self._arrivals(world, name, attached, target):
+                    if held is not attached:  # carried as another grasp holds it: move the parts to match
+                        moved = gripper @ held @ np.linalg.inv(attached) @ np.linalg.inv(gripper)
+                        for part in parts:
+                            now = world.collision.pose(part, q2).homogeneous
+                            world.collision.detach(part, pose=moved @ now)
+                            world.collision.attach(part, world.end_effector("right"), q2, allow=hand)
+                        attached = held
+                    why = self._put_down_hit(world, name, target, q3, block @ np.linalg.inv(held))
+                    if why is None:
+                        return None
+                    first = first or why
+                return first
             finally:
                 for part in parts:
                     world.collision.detach(part, pose=saved[part])
         finally:
             world.allow_hand(name, "right", False)
+
+    def _arrivals(self, world: Any, name: str, as_grasped: np.ndarray, target: tuple[float, float, float]
+                  ) -> list[tuple[np.ndarray, np.ndarray]]:
+        """The ways ``name`` can arrive at ``target``: (the part in the gripper's frame, the part's pose there).
+
+        As grasped where it lies, set down upright (the nominal plan's pose). A part turned off its nominal up axis
+        (not a letters block: the place skill's turn handles those) has two more, the two repairs of such a part:
+        held as the demonstrations grasp it, which a re-orientation gives when the task has ``Reorient...`` methods
+        (it sets the part down on another face and picks it again), and held as it lies, its tilt kept at the
+        target (pose backtracking's poses through the current grasp)."""
+        from bt_meta.world.simulation.objects import pose_to_matrix
+        from bt_meta.world.skills.place import nearest_yaw, object_yaw, symmetry
+
+        transform = world.sim.object_transform(name)
+        model = world.sim.object_model(name)
+        goal_yaw = nearest_yaw(object_yaw(transform), symmetry(model), object_yaw(transform))
+        upright = pose_to_matrix((target[0], target[1], target[2] + model.lowest_z(0.0, 0.0) + 0.002,
+                                  0.0, 0.0, goal_yaw))
+        out = [(as_grasped, upright)]
+        nominal_up = self.nominal_up.get(name, np.array([0.0, 0.0, 1.0]))
+        if self.family.truth == "letters" or _angle(_up(transform), nominal_up) <= UP_TOLERANCE:
+            return out
+        demonstrated = self.nominal_held.get(model.type)
+        if demonstrated is not None and self.reorientable:
+            out.append((demonstrated, upright))
+        tilted = transform.copy()
+        lowest = float(-(model.points() @ transform[:3, :3].T)[:, 2].min())
+        tilted[:3, 3] = (target[0], target[1], target[2] + lowest + 0.002)
+        out.append((as_grasped, tilted))
+        return out
+
+    def _put_down_hit(self, world: Any, name: str, target: tuple[float, float, float], q_lifted: np.ndarray,
+                      down: np.ndarray) -> str | None:
+        """Why the held ``name`` cannot be carried over ``target`` and lowered to gripper pose ``down``, or None."""
+        over = down.copy()
+        over[2, 3] += APPROACH_HEIGHT
+        q4, why = self._solve(world, over, q_lifted)
+        if q4 is None:
+            return f"carrying {name} over ({target[0]:.3f}, {target[1]:.3f}): {why}"
+        if (hit := self._move_hit(world, q_lifted, q4, over)) is not None:
+            return f"carrying {name} to ({target[0]:.3f}, {target[1]:.3f}) runs into {hit}"
+        q5, why = self._solve(world, down, q4)
+        if q5 is None:
+            return f"lowering {name} at ({target[0]:.3f}, {target[1]:.3f}): {why}"
+        if (hit := self._move_hit(world, q4, q5, down)) is not None:
+            return f"lowering {name} at ({target[0]:.3f}, {target[1]:.3f}) runs into {hit}"
+        return None
 
     def _fill(self, roles: dict[str, list[str]], feasible: dict[str, tuple[bool, str | None, str]],
               present: dict[str, Any]) -> Label | None:

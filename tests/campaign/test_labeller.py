@@ -143,6 +143,15 @@ MAGNETIC_CASES = {
                    "pose: [0.95, 0.30, table, 0, 0, 0]}]"),
     "shelf_over_the_active_part": ("limit:collision", "obstacles: [{name: o, shape: shelf, size: [0.12, 0.13, "
                                    "0.12], pose: [0.58, -0.40, table, 0, 0, 0]}]"),
+    # On its side with a shelf beside the reference: held as it lies and set down upright, the gripper would lie
+    # sideways (no IK there); the re-orientation's grasp and the pose kept at the target both get there.
+    "on_its_side_shelf_beside": ("repairable", "override: {active: {pose: [0.58, -0.40, table, 90, 0, 0]}}\n"
+                                 "    obstacles: [{name: o, shape: shelf, size: [0.054, 0.134, 0.09], thickness: 0.02, "
+                                 "pose: [0.8535, -0.0867, table, 0, 0, -62.22]}]"),
+    # ... but a shelf over the reference blocks every way of arriving there.
+    "on_its_side_shelf_over": ("limit:collision", "override: {active: {pose: [0.58, -0.40, table, 90, 0, 0]}}\n"
+                               "    obstacles: [{name: o, shape: shelf, size: [0.24, 0.26, 0.14], thickness: 0.02, "
+                               "pose: [0.62, -0.10, table, 0, 0, 0]}]"),
 }
 
 

@@ -5,6 +5,8 @@ Offers:
 
 * :class:`StepRelation` -- one step's relations, current and expected, and whether they deviate
 * :func:`step_relations` -- every comparable step (only the relations informative there are judged)
+* :func:`align_steps` -- which trace step each step of the current plan plays (a repair that spliced steps in moves
+  the plan's indices away from the traces')
 * :func:`moved`, :func:`moved_in_trace` -- did an object's pose change during a step (here, or in a trace)
 * :data:`MOVED_POSITION`, :data:`MOVED_ANGLE` -- what counts as moved
 """
@@ -28,7 +30,8 @@ from bt_meta.perception.keypoints import (
     relation,
 )
 
-__all__ = ["MOVED_ANGLE", "MOVED_POSITION", "StepRelation", "moved", "moved_in_trace", "step_relations"]
+__all__ = ["MOVED_ANGLE", "MOVED_POSITION", "StepRelation", "align_steps", "moved", "moved_in_trace",
+           "step_relations"]
 
 MOVED_POSITION = 0.005
 """Metres: an object that moved more than this (or turned more than :data:`MOVED_ANGLE`) during a step had its
@@ -69,20 +72,24 @@ def step_relations(
     position_tolerance: float | None = 0.01,
     angle_tolerance: float | None = math.radians(15.0),
     contact_distance: float | None = CONTACT_DISTANCE,
+    alignment: Mapping[int, int] | None = None,
 ) -> list[StepRelation]:
     """For every step of ``current`` (step -> object states) whose action (``actions``) the traces ran at the same
-    index: the current R_p / R_n, the traces' means, and whether they deviate (:func:`judge`) in the relations
-    informative there (:func:`~bt_meta.perception.keypoints.informative`: a part merely lying elsewhere does not
-    deviate)."""
+    index (or at the index ``alignment`` gives: :func:`align_steps`; steps it leaves out are not compared): the
+    current R_p / R_n, the traces' means, and whether they deviate (:func:`judge`) in the relations informative
+    there (:func:`~bt_meta.perception.keypoints.informative`: a part merely lying elsewhere does not deviate)."""
     rows = []
     for step in sorted(current):
         objects = current[step]
         if active not in objects or reference not in objects:
             continue
+        if alignment is not None and step not in alignment:
+            continue
+        index = alignment[step] if alignment is not None else step
         pairs = []
         for trace in traces:
-            if step < len(trace.steps) and trace.steps[step].action == actions.get(step):
-                state = trace.steps[step].state
+            if index < len(trace.steps) and trace.steps[index].action == actions.get(step):
+                state = trace.steps[index].state
                 try:
                     pairs.append((state.object(active), state.object(reference)))
                 except KeyError:
@@ -97,6 +104,43 @@ def step_relations(
         rows.append(StepRelation(step, actions.get(step, ""), observed.r_p, observed.r_n, expected.r_p, expected.r_n,
                                  expected.n, not verdict.matched, expected.r_p_std, expected.r_n_std))
     return rows
+
+
+def align_steps(plan: Sequence[Mapping[str, Any]], trace: Any, failed: int) -> dict[int, int]:
+    """Current plan step -> the step of ``trace`` that plays its part, for the run of steps around ``failed``.
+
+    A repair that spliced steps in (a re-orientation before the task runs again) leaves the plan's indices apart from
+    the traces': the task's second run is at steps 40..52 where the traces ran it at 0..12. The steps are matched
+    backwards from the failed one (and forwards after it) while action and arguments agree (an argument a repair
+    rewrote -- a pose symbol such as ``held:...`` -- plays the part of the one it replaced); of the trace steps the
+    failed one can be, the longest match wins, the same index on a tie. Empty when the failed step is not in the
+    trace (a step of the repair itself)."""
+    records = {int(r["step"]): r for r in plan}
+    steps = list(getattr(trace, "steps", ()))
+
+    def same(step: int, index: int) -> bool:
+        record = records.get(step)
+        if record is None or not 0 <= index < len(steps) or str(record["action"]) != steps[index].action:
+            return False
+        ours, theirs = [str(a) for a in record.get("args") or ()], [str(a) for a in steps[index].args]
+        return len(ours) == len(theirs) and all(a == b or ":" in a for a, b in zip(ours, theirs, strict=True))
+
+    best: dict[int, int] = {}
+    for start in range(len(steps) - 1, -1, -1):
+        mapping: dict[int, int] = {}
+        k = 0
+        while same(failed - k, start - k):
+            mapping[failed - k] = start - k
+            k += 1
+        if not mapping:
+            continue
+        k = 1
+        while same(failed + k, start + k):
+            mapping[failed + k] = start + k
+            k += 1
+        if len(mapping) > len(best) or (len(mapping) == len(best) and start == failed):
+            best = mapping
+    return best
 
 
 def _moved(before: Any, after: Any) -> bool:

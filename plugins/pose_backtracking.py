@@ -5,7 +5,9 @@ On a ``verification`` (or keypoint ``unexpected_configuration``) failure the plu
 1. takes the last N successful traces of the problem's root task (``EpisodicMemory.last_traces``) and, step by
    step, the mean R_p / R_n of the active and reference objects (:mod:`bt_meta.perception.keypoints`); it compares
    them with the same relation in the current execution (object states it snapshots after every step through
-   ``bt_meta_observe``) and finds the first deviating step;
+   ``bt_meta_observe``) and finds the first deviating step -- step for step as the traces ran them: after a repair
+   spliced steps in (a re-orientation, then the task again) the task's latest run is compared, not the first
+   (:func:`~bt_meta_plugins._trace_relations.align_steps`);
 2. collects the *pose-setting* primitives from there on: ``MoveTo`` steps during which the active object moved
    (it was in hand), outside the verification task (a step under a task named ``verify...``);
 3. backtracks to the last of them; on a later failure (``evidence["repair_history"]`` shows where it went) one
@@ -55,7 +57,7 @@ import numpy as np
 from bt_meta_plugins._good_poses import good_object_poses, gripper_pose_for, local_keypoints
 from bt_meta_plugins._good_poses import matrix_of as _matrix
 from bt_meta_plugins._good_poses import state_pose as _state_pose
-from bt_meta_plugins._trace_relations import StepRelation, step_relations
+from bt_meta_plugins._trace_relations import StepRelation, align_steps, step_relations
 from bt_meta_plugins._trace_relations import moved as _moved
 from bt_meta_plugins._trace_relations import moved_in_trace as _moved_in_trace
 
@@ -159,8 +161,13 @@ class PoseBacktracking:
         failed = failure.step if failure.step is not None else len(plan) - 1
         actions = {int(s["step"]): str(s["action"]) for s in plan}
         current = {s: objs for s, objs in self._current.items() if s <= failed} if self._run is context.run else {}
+        # which trace step each plan step plays: after a splice (a re-orientation, then the task again) the task's
+        # second run is compared with the traces, not its first
+        alignment = align_steps(plan, traces[0], failed)
+        aligned = alignment if alignment and any(k != v for k, v in alignment.items()) else None
         rows = step_relations(current, traces, active, reference, actions,
-                              position_tolerance=self.position_tolerance, angle_tolerance=self.angle_tolerance)
+                              position_tolerance=self.position_tolerance, angle_tolerance=self.angle_tolerance,
+                              alignment=aligned)
         deviating = [r.step for r in rows if r.deviates]
         evidence: dict[str, Any] = {"strategy": STRATEGY, "active": active, "reference": reference,
                                     "traces": [t.episode.id for t in traces], "relations": [r.as_dict() for r in rows]}
@@ -169,7 +176,7 @@ class PoseBacktracking:
             return None
         first = deviating[0]
         evidence["first_deviating_step"] = first
-        window = self._window(plan, current, traces, active, first)
+        window = self._window(plan, current, traces, active, first, aligned)
         evidence["pose_steps"] = window
         done = [int(a["proposal"]["changes"]["to_step"]) for a in failure.evidence.get("repair_history") or []
                 if (a.get("proposal") or {}).get("evidence", {}).get("strategy") == STRATEGY]
@@ -196,7 +203,8 @@ class PoseBacktracking:
             # (the part may have been picked again since, from somewhere else)
             replay_grasp = (self._grasps.get(to_step - 1) or {}).get(active, grasp) if replay is not None else grasp
             chain, replayable = self._feasible_chain(world, held_by, steps, traces, active, reference, objects, grasp,
-                                                     rng, limits, after, deadline, starts=[(replay, replay_grasp)])
+                                                     rng, limits, after, deadline, starts=[(replay, replay_grasp)],
+                                                     trace_steps=aligned)
             if chain is not None and not replayable:
                 fallback = fallback or (steps, chain)
                 continue
@@ -278,21 +286,34 @@ class PoseBacktracking:
         return names[0], names[1]
 
     def _window(self, plan: list[dict[str, Any]], current: Mapping[int, Mapping[str, Any]], traces: Sequence[Any],
-                active: str, first: int) -> list[int]:
+                active: str, first: int, alignment: Mapping[int, int] | None = None) -> list[int]:
         """Pose-setting steps of the attachment (not of its verification) from the first deviating step on: the
-        active object moved during them in this run, or -- for steps not run yet -- in the first trace."""
+        active object moved during them in this run, or -- for steps not run yet -- in the first trace.
+
+        With an ``alignment`` (plan step -> trace step, :func:`align_steps`) only the aligned steps count, and a
+        step's task is the one its trace step ran under (steps a repair spliced in carry the tasks of the step
+        they replaced: a second attach spliced in after the verification is not part of the verification)."""
         out = []
+        tasks_of_node = {str(r.get("node_id")): r.get("tasks") or [] for r in plan if r.get("node_id")}
         for record in plan:
             step = int(record["step"])
             if step < first or record["action"] not in self.pose_actions:
                 continue
-            if any(str(t).lower().startswith("verify") for t in record.get("tasks") or []):
+            index = step
+            tasks = record.get("tasks") or []
+            if alignment is not None:
+                if step not in alignment:
+                    continue
+                index = alignment[step]
+                node = traces[0].steps[index].node_id if index < len(traces[0].steps) else None
+                tasks = tasks_of_node.get(str(node), tasks) if node is not None else tasks
+            if any(str(t).lower().startswith("verify") for t in tasks):
                 continue
             before, after = current.get(step - 1), current.get(step)
             if before is not None and after is not None and active in before and active in after:
                 moved = _moved(before[active], after[active])
             else:
-                moved = _moved_in_trace(traces[0], step, active)
+                moved = _moved_in_trace(traces[0], index, active)
             if moved:
                 out.append(step)
         return out
@@ -301,7 +322,8 @@ class PoseBacktracking:
                         reference: str, objects: Mapping[str, Any], grasp: np.ndarray, rng: np.random.Generator,
                         limits: list[dict[str, Any]], after: tuple[int, np.ndarray] | None = None,
                         deadline: float = math.inf,
-                        starts: Sequence[tuple[np.ndarray | None, np.ndarray]] = ()
+                        starts: Sequence[tuple[np.ndarray | None, np.ndarray]] = (),
+                        trace_steps: Mapping[int, int] | None = None,
                         ) -> tuple[list[tuple[int, np.ndarray, dict[str, Any]]] | None, bool]:
         """The first sampled candidate (trace, turn) whose gripper poses for ``steps`` are all reachable without
         collision in a row from the current configuration and from each of ``starts`` (configuration and grasp
@@ -310,10 +332,12 @@ class PoseBacktracking:
         plan's next move
         (``after``: step and gripper pose, the retreat once the part is let go) is free too: ``(chain, True)``.
         Else the first that works from the current configuration only: ``(chain, False)``; else ``(None, False)``.
-        Failures are appended to ``limits``."""
+        Failures are appended to ``limits``. ``trace_steps``: the trace step each of ``steps`` plays (default the
+        same index)."""
         order = [int(j) for j in rng.permutation(len(traces))]
         turns = [self.turns[0], *(self.turns[int(k) + 1] for k in rng.permutation(len(self.turns) - 1))]
-        per_step = {step: good_object_poses(traces, step, active, reference, reference_now=objects[reference],
+        per_step = {step: good_object_poses(traces, (trace_steps or {}).get(step, step), active, reference,
+                                            reference_now=objects[reference],
                                             active_now=objects[active], turns=turns, order=order) for step in steps}
         reference_frame = _state_pose(objects[reference])
         count = min(self.max_candidates, *(len(c) for c in per_step.values()))

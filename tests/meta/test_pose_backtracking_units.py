@@ -3,6 +3,7 @@ step-by-step R_p/R_n comparison, durable pose symbols, and how the reasoner repo
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
@@ -115,6 +116,64 @@ def test_step_relations_find_the_first_deviating_step():
     # a step the traces ran with another action is not compared
     rows = pb.step_relations(on_side, traces, "active", "reference", {0: "MoveTo", 1: "Grasp", 2: "MoveTo"})
     assert [r.step for r in rows] == [0, 2]
+
+
+def _record(step: int, action: str, *args: str, tasks: tuple[str, ...] = ("Attach",), node: str | None = None
+            ) -> dict[str, Any]:
+    return {"step": step, "action": action, "args": list(args), "tasks": list(tasks), "node_id": node or f"n{step}"}
+
+
+def test_align_steps_follows_a_splice_to_the_tasks_latest_run():
+    from bt_meta_plugins._trace_relations import align_steps
+
+    traces = [joined_trace([0.62, -0.10, -0.18, 0.0, 0.0, 0.0], yaw=0.0, seed=0)]  # MoveTo p0, p1, p2
+    # the plain plan: every step is the trace's own
+    plan = [_record(k, "MoveTo", f"p{k}") for k in range(3)]
+    assert align_steps(plan, traces[0], 2) == {0: 0, 1: 1, 2: 2}
+    # a re-orientation spliced after the first run (turn, turn), then the task again: its steps 5..7 play 0..2,
+    # a pose a repair rewrote (held:...) plays the one it replaced, and a step before the failure counts forwards
+    spliced = [*plan, _record(3, "MoveTo", "turn_high"), _record(4, "Grasp"),
+               _record(5, "MoveTo", "p0"), _record(6, "MoveTo", "held:ref:0:0:0.05:0:0:0"), _record(7, "MoveTo", "p2")]
+    assert align_steps(spliced, traces[0], 7) == {5: 0, 6: 1, 7: 2}
+    assert align_steps(spliced, traces[0], 6) == {5: 0, 6: 1, 7: 2}
+    # a failure at a step the traces never ran (the repair's own) aligns nothing
+    assert align_steps(spliced, traces[0], 4) == {}
+
+
+def test_step_relations_and_the_window_compare_the_aligned_run():
+    from bt_meta_plugins._trace_relations import align_steps
+
+    traces = [joined_trace([0.62, -0.10, -0.18, 0.0, 0.0, 0.0], yaw=0.0, seed=s) for s in range(3)]
+    reference = observed("reference", [0.62, -0.10, -0.18, 0.0, 0.0, 0.0], REF_AP, REF_AN)
+
+    def now(pose):
+        return {"reference": reference, "active": observed("active", pose, ACTIVE_AP, ACTIVE_AN)}
+
+    # first run upside down (deviates from step 1), a turn spliced in, then the second run on its side
+    upside_down, side = math.pi, math.pi / 2
+    current = {0: now([0.92, -0.10, -0.18, upside_down, 0, 0]), 1: now([0.62, -0.10, -0.03, upside_down, 0, 0]),
+               2: now([0.62, -0.10, -0.13, upside_down, 0, 0]), 3: now([0.50, -0.28, -0.10, side, 0, 0]),
+               4: now([0.92, -0.10, -0.18, side, 0, 0]), 5: now([0.62, -0.10, -0.03, side, 0, 0]),
+               6: now([0.62, -0.10, -0.13, side, 0, 0])}
+    plan = [_record(0, "MoveTo", "p0"), _record(1, "MoveTo", "p1"), _record(2, "MoveTo", "p2"),
+            # the spliced steps carry the tasks of the step they replaced, here a verification's
+            _record(3, "MoveTo", "turn_high", tasks=("Attach", "Verify"), node="n9"),
+            _record(4, "MoveTo", "p0", tasks=("Attach", "Verify"), node="n10"),
+            _record(5, "MoveTo", "p1", tasks=("Attach", "Verify"), node="n11"),
+            _record(6, "MoveTo", "p2", tasks=("Attach", "Verify"), node="n12")]
+    actions = {int(r["step"]): r["action"] for r in plan}
+    alignment = align_steps(plan, traces[0], 6)
+    assert alignment == {4: 0, 5: 1, 6: 2}
+    rows = pb.step_relations(current, traces, "active", "reference", actions, alignment=alignment)
+    assert [r.step for r in rows] == [4, 5, 6]  # the second run only, against the traces' steps 0..2
+    assert math.degrees(rows[1].r_n) == pytest.approx(90.0)
+    plugin = pb.PoseBacktracking()
+    # the trace's steps ran as nodes n0..n2 (the plan's first run): their tasks say these are not a verification,
+    # so the second run's moves are in the window (without the alignment, the verification's tasks hid them)
+    traces = [dataclasses.replace(t, steps=tuple(dataclasses.replace(st, node_id=f"n{st.index}") for st in t.steps))
+              for t in traces]
+    assert plugin._window(plan, current, traces, "active", 5, alignment) == [5, 6]
+    assert plugin._window(plan, current, traces, "active", 5) == []
 
 
 def test_pose_symbols_round_trip_and_refuse_bad_input():

@@ -123,11 +123,13 @@ def run_episode(task: dict[str, Any]) -> dict[str, Any]:
                        simulated_seconds=round(float(report.get("simulated_seconds", 0.0)), 3),
                        error=None, report=report)
             saved = report.get("refinement_saved") or {}
-            if success and attempts and saved.get("method"):
+            if success and attempts:
+                # every repaired run, a refinement kept or not: one that kept none repeats its repair, and that
+                # counts against the second exposure
                 second = _one_run(task, copy, save=False)
                 row["second_exposure"] = {
                     "status": second.get("status"), "attempts": len(second.get("attempts") or []),
-                    "achieved": second.get("achieved"),
+                    "achieved": second.get("achieved"), "refinement_saved": bool(saved.get("method")),
                     "refinements_used": list(second.get("refinements_used") or [])}
             else:
                 row["second_exposure"] = None

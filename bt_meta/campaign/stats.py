@@ -11,8 +11,9 @@ What a row counts (``rows`` are the database's episode rows):
   have done the impossible is not a success
 * **loops** -- runs stopped because the attempt budget was spent
 * **false alarms** -- runs of a ``nominal_equivalent`` variant with any failure classified
-* **second exposure** -- every repaired run run again on the memory its repair wrote: attempts then; it counts as
-  done with zero attempts only when the simulator agrees (``false_successes``: ended success, task not done)
+* **second exposure** -- every repaired run run again on the memory its repair wrote (a run whose repair kept no
+  refinement too: it repeats its repair): attempts then; it counts as done with zero attempts only when the
+  simulator agrees (``false_successes``: ended success, task not done)
 
 Offers:
 

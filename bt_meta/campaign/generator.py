@@ -268,20 +268,40 @@ def _distractor(draw: _Draw, p: Perturbation, obj: Placed | None) -> dict[str, A
         type_name = str(draw.rng.choice(p.params["types"]))
         colour = str(draw.rng.choice(p.params["colours"]))
         spot = None
+        z = None
         if k == 0 and draw.targets and draw.rng.random() < p.params["on_target_probability"]:
             tx, ty = draw.targets[int(draw.rng.integers(len(draw.targets)))]
             spot, blocking = (tx, ty), [round(tx, 4), round(ty, 4)]
+            z = _resting_on(draw, type_name, tx, ty)
         else:
             spot = draw.sample_free(type_name, FREE_REGION)
         if spot is None:
             continue
-        item = Placed(draw.fresh_name("distractor"), type_name, colour, spot[0], spot[1], None,
+        item = Placed(draw.fresh_name("distractor"), type_name, colour, spot[0], spot[1], z,
                       (0.0, 0.0, float(draw.rng.uniform(-45.0, 45.0))))
         draw.objects.append(item)
         added.append(item.name)
     if not added:
         return None
     return {"kind": "distractor", "objects": added, "blocking": blocking}
+
+
+def _resting_on(draw: _Draw, type_name: str, x: float, y: float) -> float | None:
+    """The height (scene frame) at which an object of ``type_name`` rests on the object on the table under (x, y) --
+    a target on a part (the reference's magnet, the housing's bore) -- or ``None`` (on the table) when nothing is
+    there. Put on the table at the part's place instead, the two would start inside each other and the simulator
+    would throw the part over as it settles."""
+    from bt_meta.world.simulation.objects import make_model, rpy_to_matrix
+    from bt_meta.world.simulation.sim import Table
+
+    for other in draw.objects:
+        if other.z is not None or math.hypot(other.x - x, other.y - y) >= _radius(other.type):
+            continue
+        roll, pitch = (math.radians(v) for v in other.rpy[:2])
+        heights = (make_model(other.type).points() @ rpy_to_matrix(roll, pitch, 0.0).T)[:, 2]
+        top = Table().top_z + float(heights.max() - heights.min())
+        return top + make_model(type_name).lowest_z(0.0, 0.0) + 0.002
+    return None
 
 
 def _out_of_reach(draw: _Draw, p: Perturbation, obj: Placed) -> dict[str, Any] | None:

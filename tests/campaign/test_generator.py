@@ -109,3 +109,34 @@ def test_obstacles_stand_off_every_object_and_load_as_the_variants_obstacles(tmp
             assert [o.name for o in loaded.obstacles_for(VARIANT_NAME)] == [o["name"] for o in change["obstacles"]]
             assert loaded.obstacles_for(None) == scene.obstacles
         assert (near == 0) if on_work == 0.0 else near >= 9  # a first obstacle that fits nowhere near is dropped
+
+
+def test_a_distractor_blocking_a_target_on_a_part_rests_on_the_part(tmp_path):
+    """A target on a part (the reference's magnet): the blocking distractor is put on the part, not inside it,
+    and the settled scene keeps the part upright (inside it, the simulator threw the reference over)."""
+    import math
+
+    from bt_meta.campaign.families import family
+    from bt_meta.campaign.labeller import Labeller
+
+    scene = load_scene("magnetic_attach")
+    spec_path = tmp_path / "spec.yaml"
+    spec_path.write_text("family: magnetic\nperturbations:\n  - distractor: {probability: 1.0, count: [1, 1], "
+                         "types: [megablok_1x2], colours: [green], on_target_probability: 1.0}\n", encoding="utf-8")
+    spec = load_spec(spec_path, [o.name for o in scene.objects], family="magnetic")
+    reference = next(o for o in placed_objects(scene) if o.name == "reference")
+    objects, changes = draw_variant(placed_objects(scene), spec, 0, 0, targets=[(reference.x, reference.y)])
+    distractor = next(o for o in objects if o.name.startswith("distractor"))
+    assert changes[0]["blocking"] == [reference.x, reference.y]
+    assert distractor.z is not None and distractor.z > -0.20  # above the table top: on the reference
+    path = tmp_path / "v.yaml"
+    path.write_text(scene_text(scene, "v", objects, changes), encoding="utf-8")
+    with Labeller(family("magnetic"), scene) as labeller:
+        label = labeller.label(path, VARIANT_NAME, changes)
+        world = labeller._world(path, VARIANT_NAME)
+        try:
+            up = world.sim.object_transform("reference")[:3, 2]
+        finally:
+            world.close()
+    assert math.degrees(math.acos(min(1.0, float(up[2])))) < 5.0
+    assert label.expected == "limit:collision" and "distractor" in label.reason

@@ -140,6 +140,27 @@ def test_attached_object_moves_with_the_arm(scene, kin):
         scene.detach("held")
 
 
+def test_a_carried_object_keeps_a_clearance_from_other_objects_when_asked_not_from_the_table(scene, kin):
+    from bt_meta.world.kinematics.collision import TABLE
+
+    gripper = kin.end_effector_pose(kin.home, "right")
+    held_at = gripper * pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.1]))
+    scene.add_box("held", (0.04, 0.04, 0.04), held_at)
+    fingers = {c.first for c in scene.all_contacts(kin.home)}
+    scene.attach("held", "right_gripper", kin.home, allow=fingers)
+    # another block 3 mm beside the carried one, the table top 3 mm under it
+    beside = held_at * pin.SE3(np.eye(3), np.array([0.043, 0.0, 0.0]))
+    scene.add_box("beside", (0.04, 0.04, 0.04), beside)
+    scene.add_box(TABLE, (0.1, 0.1, 0.01), held_at.translation - np.array([0.0, 0.0, 0.02 + 0.003 + 0.005]))
+    assert scene.check(kin.home) is None
+    contact = scene.check(kin.home, carried_clearance=0.005)
+    assert contact is not None and set(contact.pair) == {"held", "beside"}
+    assert scene.check(kin.home, carried_clearance=0.002) is None
+    scene.remove("beside")
+    assert scene.check(kin.home, carried_clearance=0.005) is None  # the table: no clearance kept
+    assert scene.check(kin.home) is None  # the margin does not stay on the pairs
+
+
 def test_pose_helpers():
     pose = pose_from_xyz_rpy(1, 2, 3, 0.1, 0.2, 0.3)
     assert np.allclose(pin.rpy.matrixToRpy(pose.rotation), [0.1, 0.2, 0.3])

@@ -76,14 +76,20 @@ def test_a_block_on_another_face_stands_on_its_base_after_its_turns(roll, pitch,
 def test_a_block_a_failed_place_left_in_the_gripper_is_turned_from_where_it_was_picked():
     """b1 on its side (letters_A s0 0040): place picks it top-down and tilts the wrist to carry it upright; the
     wrist cannot reach down at the cell so (reachability, the block still held). The turn takes it back over where
-    it was picked and turns it there: it ends standing on its base near where it lay, and is placed on its cell."""
+    it was picked and turns it there: it ends standing on its base near where it lay, and is placed on its cell.
+    Carried tilted, b1 keeps clear of b2 beside it (it grazed it and tipped it over before the carry kept a
+    clearance)."""
     world, x, y = tipped("b1", 0.0, 90.0)
     try:
         sim = world.sim
+        before = {n: sim.object_transform(n).copy() for n in sim.object_names() if n != "b1"}
         place = world.skill("place")
         status = run_to_end(place, ["b1", "0", "1"])
         assert status == "FAILURE" and place.failure.kind == "reachability", place.failure
         assert sim.held("right") == "b1"
+        for name, pose in before.items():
+            now = sim.object_transform(name)
+            assert np.linalg.norm(now[:3, 3] - pose[:3, 3]) < 0.005 and now[2, 2] > math.cos(math.radians(5.0)), name
         others = {n: sim.object_transform(n)[:3, 3].copy() for n in sim.object_names() if n != "b1"}
         assert turn(world, "b1") == "SUCCESS"
         assert sim.held("right") is None

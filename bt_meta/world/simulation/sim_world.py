@@ -331,7 +331,7 @@ class SimWorld:
         scene: str | Path | None = None,
     ) -> None:
         from bt_meta.world.fake import initial_state
-        from bt_meta.world.kinematics.collision import CollisionChecker
+        from bt_meta.world.kinematics.collision import TABLE, CollisionChecker
         from bt_meta.world.kinematics.forward import Kinematics
         from bt_meta.world.kinematics.ik import InverseKinematics
         from bt_meta.world.simulation.scenes import load_scene
@@ -392,7 +392,7 @@ class SimWorld:
         self._put_down_at: dict[str, tuple[str, float, tuple[float, float] | None]] = {}
         """Anchor -> the part last put down there, its footprint radius, the spot chosen (:meth:`_clear_of_others`)."""
         t = sim.table
-        self.collision.add_box("table", (t.size_x, t.size_y, t.thickness),
+        self.collision.add_box(TABLE, (t.size_x, t.size_y, t.thickness),
                                pose_to_matrix((t.center_x, t.center_y, t.top_z - t.thickness / 2.0, 0, 0, 0)))
         for name, (model, transform) in sim.obstacles().items():  # static: added once, never moved
             for k, (kind, dims, local) in enumerate(_collision_shapes(model)):

@@ -47,8 +47,10 @@ class MoveTo(SimSkill):
 
     def __init__(self, world: Any, arm: str = "right", *, position_tolerance: float = 0.003,
                  orientation_tolerance: float = 0.05, settle_ticks: int = 12, require_arrival: bool = True,
-                 check_path: bool = True, check_held: bool = True) -> None:
+                 check_path: bool = True, check_held: bool = True, carried_clearance: float = 0.0) -> None:
         super().__init__(world, arm)
+        self.carried_clearance = carried_clearance
+        """A held object keeps this much (m) from every other object on the way (not from the table)."""
         self.position_tolerance = position_tolerance
         self.orientation_tolerance = orientation_tolerance
         self.settle_ticks = settle_ticks
@@ -198,7 +200,7 @@ class MoveTo(SimSkill):
         def free(arm_q: np.ndarray) -> bool:
             q = q_now.copy()
             q[indices] = arm_q
-            return self.world.collision.check(q, arm=self.arm) is None
+            return self.world.collision.check(q, arm=self.arm, carried_clearance=self.carried_clearance) is None
 
         stats = PlanningStats()
         path = plan_path(free, q_now[indices], q_goal[indices], world.kin.lower[indices], world.kin.upper[indices],
@@ -219,7 +221,7 @@ class MoveTo(SimSkill):
 
     def _first_collision(self, waypoints: list[np.ndarray]) -> tuple[int, Any] | None:
         for k, q in enumerate(waypoints[:-1]):
-            contact = self.world.collision.check(q, arm=self.arm)
+            contact = self.world.collision.check(q, arm=self.arm, carried_clearance=self.carried_clearance)
             if contact is not None:
                 return k, contact
         return None

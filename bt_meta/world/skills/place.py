@@ -58,6 +58,11 @@ where it was picked: the wrist's quarter turn dips the block on the way. Measure
 variants with a block on its side (seed 0): with both and the half turn 5 repaired, with the half turn alone 4;
 without the half turn letters_A 0040 collided whatever the height (0.3-2.2 mm into the table at 10-18 % of the
 joint-space path)."""
+CARRY_CLEARANCE = 0.005
+"""The block carried from the lift to over the target keeps this much (m) from every other object: a block carried
+tilted (picked on its side, the wrist turned to stand it up) grazed the block beside it, which the checker's
+slightly smaller shapes let through, and tipped it over (generated letters_A and letters_H 0040). Only the
+carry: lowering onto the target sets the block beside others."""
 FLIP_AXES = ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0))
 """Turn axes tried for a block upside down (base frame)."""
 
@@ -208,7 +213,7 @@ class Place(PhasedSkill):
             ("descend", self._descend),
             ("grasp", self._grasp),
             ("lift", lambda: self._move(self._lifted(), "lift " + self.block)),
-            ("carry", lambda: self._move(self._at_goal(self.approach_height), "above the target")),
+            ("carry", lambda: self._move(self._at_goal(self.approach_height), "above the target", CARRY_CLEARANCE)),
             ("lower", lambda: self._move(self._at_goal(0.0), "down at the target")),
             ("release", lambda: Grasp(self.world, self.arm).begin(self.block, release=True)),
             ("retreat", lambda: self._move(self._lifted(), "retreat")),
@@ -226,8 +231,8 @@ class Place(PhasedSkill):
         raised[2, 3] += heights * self.approach_height
         return raised
 
-    def _move(self, pose: np.ndarray, label: str) -> MoveTo:
-        return MoveTo(self.world, self.arm).begin(pose, label)
+    def _move(self, pose: np.ndarray, label: str, carried_clearance: float = 0.0) -> MoveTo:
+        return MoveTo(self.world, self.arm, carried_clearance=carried_clearance).begin(pose, label)
 
     def _grasp_yaw(self) -> float:
         """The gripper's yaw for the pick: nearest the arm's comfortable top-down yaw among the block's

@@ -33,6 +33,11 @@ SCORE = 0.85
 """Above the memory-based matches' best (0.9 - distance) only when they are far; ranked by name after."""
 OTHER_COLOUR = 0.1
 """Taken off the score of a substitution whose spare has another colour than the methods name."""
+PARTIAL = 0.3
+"""Taken off the score of a substitution that leaves a missing entity a later step names without a stand-in: it
+mends the failed step, and the plan still fails at that one, with the spare used up (letters_A 0098: b1 and b3
+missing, one spare 1x1; the spare went to b1, and a tiling of the rest with the 1x2 blocks was then out of reach).
+Below the tilings' score, which cover every cell still to fill."""
 
 __all__ = ["spare_fits", "spare_proposals"]
 
@@ -106,7 +111,8 @@ def spare_proposals(vector: Any, failure: Any, context: Any, limit: int = 3, col
     """``substitute`` proposals: every missing entity a step still to run uses, each given a spare that meets its
     methods' conditions (one proposal with all of them), then the other fitting spares of the first one. With
     ``colours="prefer"``, a missing entity no spare fits gets the spares that would fit in its colour, scored
-    :data:`OTHER_COLOUR` lower (``require``: never)."""
+    :data:`OTHER_COLOUR` lower (``require``: never). One that leaves a missing entity without a spare is scored
+    :data:`PARTIAL` lower."""
     evidence = getattr(failure, "evidence", None) or {}
     plan = list(evidence.get("plan") or [])
     methods = list(evidence.get("methods") or [])
@@ -184,11 +190,14 @@ def spare_proposals(vector: Any, failure: Any, context: Any, limit: int = 3, col
         other = sorted(m for m in mapping if m in recoloured)
         note = (f" (but for the colour of {', '.join(mapping[m] for m in other)}: no spare of the colour the methods "
                 "name)") if other else ""
+        left = sorted(m for m in wanted if m not in mapping)
+        if left:
+            note += f"; leaves {', '.join(left)} without a stand-in"
         out.append(RepairProposal(
-            SUBSTITUTE, round(SCORE - 0.01 * rank - (OTHER_COLOUR if other else 0.0), 4),
+            SUBSTITUTE, round(SCORE - 0.01 * rank - (OTHER_COLOUR if other else 0.0) - (PARTIAL if left else 0.0), 4),
             f"substitute the spare(s) {pairs}: seen on the table, unused by the plan, and they meet the conditions of "
             f"the methods that chose the missing entities{note}",
             changes={"mapping": dict(sorted(mapping.items())), "from_step": from_step},
             evidence={"matcher": "spares", "vector": vector.to_dict(), "fits": reasons, "other_colour": other,
-                      "spares": {m: [s for s, _ in fitting[m]] for m in fitting}}))
+                      "left_without_stand_in": left, "spares": {m: [s for s, _ in fitting[m]] for m in fitting}}))
     return out

@@ -244,3 +244,17 @@ def test_a_stand_in_the_plan_already_placed_is_not_taken_again(letters, letters_
     assert bound.count("s_blue") == 1, report.attempts
     placed = [e["args"][0] for e in report.executed if e["status"] == "SUCCESS" and e["action"] == "place"]
     assert placed.count("s_blue") == 1
+
+
+def test_a_spare_that_leaves_another_missing_block_without_one_ranks_below_a_tiling_of_the_rest(letters):
+    """b1 and b3 missing (legs' tops), one spare 1x1, and the apex block b4 a 1x2 (letters_A 0098's inventory). The
+    spare alone mends b1's step and leaves b3 without a stand-in, with nothing left to tile the rest; the tiling of
+    the cells still to fill (two 1x2 across the legs' tops and the bar, the spare at the apex) finishes A."""
+    objects = {n: v for n, v in NOMINAL_A.items() if n not in ("b1", "b3")}
+    objects.update({"b4": ("1x2", "blue"), "s_blue": ("1x1", "blue")})
+    report, _ = _run(letters, letters.problem("A"), objects)
+    assert report.ok, report.stop_reason
+    assert [a.proposal["action"] for a in report.attempts] == ["splice"]
+    placed = [e["args"] for e in report.executed if e["status"] == "SUCCESS" and e["action"] == "place"]
+    assert {tuple(a[1:]) for a in placed if a[0] in ("b4", "b5")} == {("0.5", "1"), ("2.5", "1")}
+    assert ["s_blue", "1.5", "2"] in placed

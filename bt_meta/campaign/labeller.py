@@ -562,11 +562,9 @@ class Labeller:
         grasp = top_down(transform[0, 3], transform[1, 3], top + GRASP_HEIGHT, yaw)
         world.allow_hand(name, "right", True)
         try:
-            q1, why = self._solve(world, above, q0)
+            q1, why = self._motion(world, q0, above, f"reaching above {name}", f"reaching for {name}")
             if q1 is None:
-                return f"reaching above {name}: {why}"
-            if (hit := self._move_hit(world, q0, q1, above)) is not None:
-                return f"reaching for {name} runs into {hit}"
+                return why
             q2, why = self._solve(world, grasp, q1)
             if q2 is None:
                 return f"grasping {name}: {why}"
@@ -578,11 +576,9 @@ class Labeller:
             try:
                 lifted = grasp.copy()
                 lifted[2, 3] += APPROACH_HEIGHT
-                q3, why = self._solve(world, lifted, q2)
+                q3, why = self._motion(world, q2, lifted, f"lifting {name}", f"lifting {name}")
                 if q3 is None:
-                    return f"lifting {name}: {why}"
-                if (hit := self._move_hit(world, q2, q3, lifted)) is not None:
-                    return f"lifting {name} runs into {hit}"
+                    return why
                 first = None
                 attached = np.linalg.inv(grasp) @ transform
                 gripper = pose_matrix(world.kin.end_effector_pose(q2, "right"))
@@ -640,17 +636,22 @@ class Labeller:
         """Why the held ``name`` cannot be carried over ``target`` and lowered to gripper pose ``down``, or None."""
         over = down.copy()
         over[2, 3] += APPROACH_HEIGHT
-        q4, why = self._solve(world, over, q_lifted)
+        at = f"({target[0]:.3f}, {target[1]:.3f})"
+        q4, why = self._motion(world, q_lifted, over, f"carrying {name} over {at}", f"carrying {name} to {at}")
         if q4 is None:
-            return f"carrying {name} over ({target[0]:.3f}, {target[1]:.3f}): {why}"
-        if (hit := self._move_hit(world, q_lifted, q4, over)) is not None:
-            return f"carrying {name} to ({target[0]:.3f}, {target[1]:.3f}) runs into {hit}"
-        q5, why = self._solve(world, down, q4)
-        if q5 is None:
-            return f"lowering {name} at ({target[0]:.3f}, {target[1]:.3f}): {why}"
-        if (hit := self._move_hit(world, q4, q5, down)) is not None:
-            return f"lowering {name} at ({target[0]:.3f}, {target[1]:.3f}) runs into {hit}"
-        return None
+            return why
+        return self._motion(world, q4, down, f"lowering {name} at {at}", f"lowering {name} at {at}")[1]
+
+    def _motion(self, world: Any, q_from: np.ndarray, pose: np.ndarray, solving: str, moving: str
+                ) -> tuple[np.ndarray | None, str | None]:
+        """The move from ``q_from`` to gripper ``pose``: (its goal configuration, None), or (None, why not: no
+        solution while ``solving``, or an obstacle in the way while ``moving``)."""
+        q, why = self._solve(world, pose, q_from)
+        if q is None:
+            return None, f"{solving}: {why}"
+        if (hit := self._move_hit(world, q_from, q, pose)) is not None:
+            return None, f"{moving} runs into {hit}"
+        return q, None
 
     def _fill(self, roles: dict[str, list[str]], feasible: dict[str, tuple[bool, str | None, str]],
               present: dict[str, Any]) -> Label | None:

@@ -110,11 +110,12 @@ def align_steps(plan: Sequence[Mapping[str, Any]], trace: Any, failed: int) -> d
     """Current plan step -> the step of ``trace`` that plays its part, for the run of steps around ``failed``.
 
     A repair that spliced steps in (a re-orientation before the task runs again) leaves the plan's indices apart from
-    the traces': the task's second run is at steps 40..52 where the traces ran it at 0..12. The steps are matched
-    backwards from the failed one (and forwards after it) while action and arguments agree (an argument a repair
-    rewrote -- a pose symbol such as ``held:...`` -- plays the part of the one it replaced); of the trace steps the
-    failed one can be, the longest match wins, the same index on a tie. Empty when the failed step is not in the
-    trace (a step of the repair itself)."""
+    the traces': the task's second run is at steps 40..52 where the traces ran it at 0..12. Every step up to the
+    failed one matching the trace's at its own index (no splice before it), the indices are kept. Otherwise the steps
+    are matched backwards from the failed one (and forwards after it) while action and arguments agree (an argument
+    a repair rewrote -- a pose symbol such as ``held:...``, in the plan or in a trace of a repaired run -- plays the
+    part of the one it replaced); of the trace steps the failed one can be, the longest match wins. Empty when the
+    failed step is not in the trace (a step of the repair itself)."""
     records = {int(r["step"]): r for r in plan}
     steps = list(getattr(trace, "steps", ()))
 
@@ -123,8 +124,16 @@ def align_steps(plan: Sequence[Mapping[str, Any]], trace: Any, failed: int) -> d
         if record is None or not 0 <= index < len(steps) or str(record["action"]) != steps[index].action:
             return False
         ours, theirs = [str(a) for a in record.get("args") or ()], [str(a) for a in steps[index].args]
-        return len(ours) == len(theirs) and all(a == b or ":" in a for a, b in zip(ours, theirs, strict=True))
+        return len(ours) == len(theirs) and all(a == b or ":" in a or ":" in b
+                                                for a, b in zip(ours, theirs, strict=True))
 
+    if all(same(k, k) for k in range(failed + 1)):
+        mapping = {k: k for k in range(failed + 1)}
+        k = failed + 1
+        while same(k, k):
+            mapping[k] = k
+            k += 1
+        return mapping
     best: dict[int, int] = {}
     for start in range(len(steps) - 1, -1, -1):
         mapping: dict[int, int] = {}
@@ -138,7 +147,7 @@ def align_steps(plan: Sequence[Mapping[str, Any]], trace: Any, failed: int) -> d
         while same(failed + k, start + k):
             mapping[failed + k] = start + k
             k += 1
-        if len(mapping) > len(best) or (len(mapping) == len(best) and start == failed):
+        if len(mapping) > len(best):
             best = mapping
     return best
 

@@ -140,6 +140,24 @@ def test_align_steps_follows_a_splice_to_the_tasks_latest_run():
     assert align_steps(spliced, traces[0], 4) == {}
 
 
+def test_align_steps_keeps_the_indices_of_a_plan_nothing_was_spliced_into():
+    """A trace of a repaired run (its rewritten moves are ``held:...`` symbols) and a plan that repeats a pattern:
+    the plan's steps up to the failed one are the trace's at the same index, so they stay there, even where another
+    start in the trace would match as long (the tutorial's peg: the second repaired run found no pose when the
+    pick was aligned with the verification's)."""
+    from types import SimpleNamespace
+
+    from bt_meta_plugins._trace_relations import align_steps
+
+    def step(action, *args):
+        return SimpleNamespace(action=action, args=args)
+
+    trace = SimpleNamespace(steps=[step("MoveTo", "above"), step("MoveTo", "held:base:0:0:0.05:0:0:0"),
+                                   step("Grasp"), step("MoveTo", "above"), step("MoveTo", "grasp"), step("Grasp")])
+    plan = [_record(0, "MoveTo", "above"), _record(1, "MoveTo", "joint"), _record(2, "Grasp")]
+    assert align_steps(plan, trace, 2) == {0: 0, 1: 1, 2: 2}
+
+
 def test_step_relations_and_the_window_compare_the_aligned_run():
     from bt_meta_plugins._trace_relations import align_steps
 

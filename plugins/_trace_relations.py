@@ -127,26 +127,26 @@ def align_steps(plan: Sequence[Mapping[str, Any]], trace: Any, failed: int) -> d
         return len(ours) == len(theirs) and all(a == b or ":" in a or ":" in b
                                                 for a, b in zip(ours, theirs, strict=True))
 
-    if all(same(k, k) for k in range(failed + 1)):
-        mapping = {k: k for k in range(failed + 1)}
-        k = failed + 1
-        while same(k, k):
-            mapping[k] = k
-            k += 1
-        return mapping
-    best: dict[int, int] = {}
-    for start in range(len(steps) - 1, -1, -1):
+    def run_from(start: int) -> dict[int, int]:
+        """The failed step as trace step ``start``: the steps matching backwards from there, then forwards."""
         mapping: dict[int, int] = {}
         k = 0
         while same(failed - k, start - k):
             mapping[failed - k] = start - k
             k += 1
-        if not mapping:
-            continue
-        k = 1
-        while same(failed + k, start + k):
-            mapping[failed + k] = start + k
-            k += 1
+        if mapping:
+            k = 1
+            while same(failed + k, start + k):
+                mapping[failed + k] = start + k
+                k += 1
+        return mapping
+
+    kept = run_from(failed)
+    if 0 in kept:  # every step up to the failed one at its own index: nothing spliced before it
+        return kept
+    best: dict[int, int] = {}
+    for start in range(len(steps) - 1, -1, -1):
+        mapping = run_from(start)
         if len(mapping) > len(best):
             best = mapping
     return best

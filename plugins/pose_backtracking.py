@@ -294,7 +294,8 @@ class PoseBacktracking:
         step's task is the one its trace step ran under (steps a repair spliced in carry the tasks of the step
         they replaced: a second attach spliced in after the verification is not part of the verification)."""
         out = []
-        tasks_of_node = {str(r.get("node_id")): r.get("tasks") or [] for r in plan if r.get("node_id")}
+        tasks_of_node = ({str(r.get("node_id")): r.get("tasks") or [] for r in plan if r.get("node_id")}
+                         if alignment is not None else {})
         for record in plan:
             step = int(record["step"])
             if step < first or record["action"] not in self.pose_actions:

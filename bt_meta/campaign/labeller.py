@@ -160,18 +160,21 @@ class Labeller:
 
     def _held_as_demonstrated(self, world: Any) -> dict[str, np.ndarray]:
         """Object type -> the part in the gripper's frame as the nominal scene's top-down grasp holds it."""
-        from bt_meta.world.skills.place import GRIPPER_YAW, nearest_yaw, object_yaw, symmetry, top_down
-
         out: dict[str, np.ndarray] = {}
         for name in self.family.grasped or ():
-            if name not in world.sim.object_names():
-                continue
-            transform = world.sim.object_transform(name)
-            model = world.sim.object_model(name)
-            yaw = nearest_yaw(object_yaw(transform), symmetry(model), GRIPPER_YAW)
-            grasp = top_down(transform[0, 3], transform[1, 3], world.stack_top(name) + GRASP_HEIGHT, yaw)
-            out.setdefault(model.type, np.linalg.inv(grasp) @ transform)
+            if name in world.sim.object_names():
+                out.setdefault(world.sim.object_model(name).type,
+                               np.linalg.inv(self._over(world, name, GRASP_HEIGHT)) @ world.sim.object_transform(name))
         return out
+
+    @staticmethod
+    def _over(world: Any, name: str, height: float) -> np.ndarray:
+        """The top-down gripper pose ``height`` over ``name``'s top, at the yaw the skills pick it at."""
+        from bt_meta.world.skills.place import GRIPPER_YAW, nearest_yaw, object_yaw, symmetry, top_down
+
+        transform = world.sim.object_transform(name)
+        yaw = nearest_yaw(object_yaw(transform), symmetry(world.sim.object_model(name)), GRIPPER_YAW)
+        return top_down(transform[0, 3], transform[1, 3], world.stack_top(name) + height, yaw)
 
     def __enter__(self) -> Labeller:
         return self
@@ -386,14 +389,10 @@ class Labeller:
         """(ok, failure kind, message) of the top-down grasp and its approach above ``name``."""
         import pinocchio as pin
 
-        from bt_meta.world.skills.place import GRIPPER_YAW, nearest_yaw, object_yaw, symmetry, top_down
-
         transform = world.sim.object_transform(name)
-        yaw = nearest_yaw(object_yaw(transform), symmetry(world.sim.object_model(name)), GRIPPER_YAW)
-        top = world.stack_top(name)
         q = world.current_q()
         for height, allowed in ((APPROACH_HEIGHT, False), (GRASP_HEIGHT, True)):
-            target = top_down(transform[0, 3], transform[1, 3], top + height, yaw)
+            target = self._over(world, name, height)
             world.allow_hand(name, "right", allowed)
             try:
                 result = world.ik.solve("right", pin.SE3(target[:3, :3], target[:3, 3]), q, seed=0)
@@ -411,7 +410,7 @@ class Labeller:
             # tilt in the gripper): the turn the skill would make from that grasp, lifted, must be reachable.
             from bt_meta.world.skills.place import turned_pose
 
-            grasp = top_down(transform[0, 3], transform[1, 3], top + GRASP_HEIGHT, yaw)
+            grasp = self._over(world, name, GRASP_HEIGHT)
             lifted = grasp.copy()
             lifted[2, 3] += APPROACH_HEIGHT
             if not turned_pose(world, name, "right", lifted, np.linalg.inv(grasp) @ transform)[1]:
@@ -551,15 +550,9 @@ class Labeller:
     def _carry_hit(self, world: Any, name: str, target: tuple[float, float, float], q0: np.ndarray) -> str | None:
         """Why ``name`` cannot be picked up and put at ``target`` clear of the obstacles, or None."""
         from bt_meta.world.kinematics.forward import pose_matrix
-        from bt_meta.world.skills.place import GRIPPER_YAW, nearest_yaw, object_yaw, symmetry, top_down
 
-        sim = world.sim
-        transform = sim.object_transform(name)
-        model = sim.object_model(name)
-        yaw = nearest_yaw(object_yaw(transform), symmetry(model), GRIPPER_YAW)
-        top = world.stack_top(name)
-        above = top_down(transform[0, 3], transform[1, 3], top + APPROACH_HEIGHT, yaw)
-        grasp = top_down(transform[0, 3], transform[1, 3], top + GRASP_HEIGHT, yaw)
+        transform = world.sim.object_transform(name)
+        above, grasp = self._over(world, name, APPROACH_HEIGHT), self._over(world, name, GRASP_HEIGHT)
         world.allow_hand(name, "right", True)
         try:
             q1, why = self._motion(world, q0, above, f"reaching above {name}", f"reaching for {name}")

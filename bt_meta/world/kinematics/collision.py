@@ -43,6 +43,7 @@ TABLE = "table"
 """The scene object a world adds as the table top: carried objects keep no clearance from it (what they are lifted
 from and lowered onto)."""
 
+
 def pose_from_xyz_rpy(x: float, y: float, z: float, roll: float = 0.0, pitch: float = 0.0, yaw: float = 0.0) -> pin.SE3:
     return pin.SE3(pin.rpy.rpyToMatrix(roll, pitch, yaw), np.array([x, y, z], dtype=float))
 
@@ -169,6 +170,7 @@ class CollisionChecker:
         self._pairs = np.argwhere(np.triu(active, 1))  # setCollisionPairs adds them in this (row-major) order
         self._pair_kinds = ["self" if second < n_robot else "scene" for second in self._pairs[:, 1].tolist()]
         self._masks = {}
+        self._carried: list[int] | None = None
         self._geometry_data = None
         self._broadphase = None
 
@@ -380,11 +382,14 @@ class CollisionChecker:
 
     def _carried_pairs(self) -> list[int]:
         """Indices of the pairs of a carried object and another scene object but the table (what it is lifted from
-        and lowered onto)."""
-        n_robot = self._robot_geometries
-        objects = self.geometry.geometryObjects
-        return [k for k, (first, second) in enumerate(self._pairs.tolist())
-                if first >= n_robot and second >= n_robot and TABLE not in (objects[first].name, objects[second].name)]
+        and lowered onto); found once per set of pairs (a move checks every waypoint, a planned path hundreds)."""
+        if self._carried is None:
+            n_robot = self._robot_geometries
+            objects = self.geometry.geometryObjects
+            self._carried = [k for k, (first, second) in enumerate(self._pairs.tolist())
+                             if first >= n_robot and second >= n_robot
+                             and TABLE not in (objects[first].name, objects[second].name)]
+        return self._carried
 
     def all_contacts(self, q: np.ndarray) -> list[Contact]:
         """Every colliding pair at ``q`` (slower than :meth:`check`: no early stop)."""

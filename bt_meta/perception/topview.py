@@ -49,12 +49,26 @@ class TopView:
 
     def grid_map_at(self, centre: Sequence[float], *, z: float | None = None, object_name: str | None = None,
                     colour: str | None = None, shape: str | None = None) -> GridMap:
-        """The grid-map of the window around table point ``centre`` on the plane at height ``z`` (default: the
-        blocks' top surface when any block was seen, else the table top)."""
+        """The grid-map of the window around table point ``centre`` on the plane at height ``z`` (default:
+        :meth:`surface_near`)."""
         if z is None:
-            z = float(np.median([b.top_z for b in self.blocks])) if self.blocks else self.projection.plane_z
+            z = self.surface_near(centre)
         return grid_map_at(self.rgb, self.projection.at_height(z), centre, spec=self.spec,
                            thresholds=self.thresholds, object_name=object_name, colour=colour, shape=shape)
+
+    def surface_near(self, centre: Sequence[float]) -> float:
+        """The height a window around ``centre`` is read at: the top of the block seen nearest its centre among
+        those inside it; when none is, the blocks' median top; with no block, the table top. Not the median of
+        every blob in view: a tall obstacle (a post) among a few blobs -- a finished letter merges into one --
+        pulls the median up, and a window read at the wrong height is shifted in the perspective image."""
+        if not self.blocks:
+            return self.projection.plane_z
+        reach = self.spec.window / 2.0 + self.spec.cell_size
+        cx, cy = float(centre[0]), float(centre[1])
+        inside = [b for b in self.blocks if max(abs(b.centroid[0] - cx), abs(b.centroid[1] - cy)) <= reach]
+        if inside:
+            return float(min(inside, key=lambda b: np.hypot(b.centroid[0] - cx, b.centroid[1] - cy)).top_z)
+        return float(np.median([b.top_z for b in self.blocks]))
 
     def block_near(self, point: Sequence[float], radius: float) -> Block | None:
         return nearest_block(self.blocks, point, radius)

@@ -145,3 +145,37 @@ def test_simulator_grid_maps_of_a_1x2_and_two_1x1():
         pair = top.grid_map_at((0.80, -0.05))
         assert render(pair) == "\n".join(["......", "..rr..", "..rr..", "..rr..", "..rr..", "......"])
         assert grid_difference(bar, pair) == 0
+
+
+@pytest.mark.slow
+def test_a_tall_obstacle_in_view_does_not_shift_the_window_of_a_merged_letter():
+    """A finished letter is one blob of unknown shape, so the apex window is read at a default height; with a
+    18 cm post elsewhere in view the median of the two blobs' tops put it half-way up, and the perspective shifted
+    the apex half a cell (generated letters_A s1 0011, a false alarm). The window is read at the top of the
+    block seen nearest its centre."""
+    from bt_meta.perception.colours import scene_thresholds
+    from bt_meta.perception.topview import capture
+    from bt_meta.world.simulation.camera import TopViewCamera
+    from bt_meta.world.simulation.objects import megablok
+    from bt_meta.world.simulation.obstacles import obstacle_model
+    from bt_meta.world.simulation.sim import Simulation
+
+    with Simulation(seed=0) as sim:
+        bar = (0.611, 0.0085)
+        sim.spawn("bar", megablok("1x2", "blue"), (*bar, 0, 0, 0, math.pi / 2), on_table=True)
+        sim.spawn("apex", megablok("1x1", "blue"), (bar[0] + LB, bar[1], 0, 0, 0, 0), on_table=True)
+        sim.add_obstacle("post", obstacle_model("post", {"radius": 0.054, "height": 0.18}),
+                         (0.963, -0.371, sim.table.top_z, 0, 0, 0))
+        sim.settle(120)
+        top = capture(TopViewCamera(sim), thresholds=scene_thresholds(sim.table.colour))  # as camera_perception
+        assert [b.shape for b in top.blocks if b.colour == "blue"] == ["unknown"]  # the letter is one blob
+        post = next(b for b in top.blocks if b.colour != "blue")
+        letter = next(b for b in top.blocks if b.colour == "blue")
+        assert post.top_z - letter.top_z > 0.1
+        apex = (bar[0] + LB, bar[1])
+        assert top.surface_near(apex) == pytest.approx(letter.top_z)
+        assert render(top.grid_map_at(apex)) == render(top.grid_map_at(apex, z=letter.top_z))
+        assert render(top.grid_map_at(apex)).split("\n")[2:4] == ["..bb..", "..bb.."]
+        # far from every block the window is read at the blocks' median top, as before
+        far = (0.45, -0.55)
+        assert top.surface_near(far) == pytest.approx(float(np.median([b.top_z for b in top.blocks])))

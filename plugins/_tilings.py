@@ -30,9 +30,12 @@ Offers:
 
 * :func:`footprint` -- the cells a block of a shape covers when placed at (x, y)
 * :func:`planned_shapes` -- the shapes the plan's steps were planned with (the problem's, or what a repair anchored)
-* :func:`tile` -- a tiling of cells with blocks of given shapes (``None`` when none exists)
+* :func:`tile` -- a tiling of cells with blocks of given shapes (``None`` when none exists); :func:`tilings` --
+  every one, in the search's order
+* :class:`Drawing`, :func:`read_drawing` -- the placements, blocks, shapes and colour a failure's tilings read
 * :func:`tiling_proposals` -- the ``splice`` proposal for a failure, when a tiling differs from the plan
 * :func:`cells_in_the_way` -- the cells of a frame each object's current pose covers in part
+* :func:`coordinate_text` -- a coordinate as a task file writes it
 * :func:`lands_on_a_block` -- whether a failed placement run again with stand-ins would put its block on another
 * :func:`covers_the_same_cells` -- whether a splice's placements cover the cells of the steps it replaces (a
   remembered decomposition that draws another part of the letter does not)
@@ -42,7 +45,8 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -68,7 +72,18 @@ IN_THE_WAY = 0.9
 """lb: a block unit whose centre is nearer than this to a cell's centre along both of the frame's axes overlaps the
 cell (touching is 1.0; 0.9 leaves 6 mm of the cell covered)."""
 
-__all__ = ["cells_in_the_way", "covers_the_same_cells", "footprint", "lands_on_a_block", "tile", "tiling_proposals"]
+__all__ = [
+    "Drawing",
+    "cells_in_the_way",
+    "coordinate_text",
+    "covers_the_same_cells",
+    "footprint",
+    "lands_on_a_block",
+    "read_drawing",
+    "tile",
+    "tiling_proposals",
+    "tilings",
+]
 
 
 def _width(shape: str | None) -> int | None:
@@ -93,6 +108,13 @@ def tile(cells: Sequence[Cell], counts: Mapping[str, int], prefer: Mapping[Cell,
     """Cover every cell once with blocks of the shapes in ``counts`` (how many of each are on hand; all needn't
     be used): a list of (shape, centroid), or ``None``. ``prefer`` gives a shape to try first at a cell (what
     the plan assumed there)."""
+    return next(tilings(cells, counts, prefer), None)
+
+
+def tilings(cells: Sequence[Cell], counts: Mapping[str, int], prefer: Mapping[Cell, str] | None = None
+            ) -> Iterator[list[tuple[str, Cell]]]:
+    """Every tiling :func:`tile` could return, in its search order (the first is :func:`tile`'s), until the search
+    has visited :data:`MAX_NODES` nodes."""
     needed = sorted(set(cells), key=lambda c: (c[1], c[0]))
     wanted = set(needed)
     left = dict(counts)
@@ -101,13 +123,14 @@ def tile(cells: Sequence[Cell], counts: Mapping[str, int], prefer: Mapping[Cell,
     budget = [MAX_NODES]
     shapes = sorted((s for s in left if _width(s) is not None), key=lambda s: -int(_width(s) or 0))
 
-    def search() -> bool:
+    def search() -> Iterator[list[tuple[str, Cell]]]:
         budget[0] -= 1
         if budget[0] < 0:
-            return False
+            return
         first = next((c for c in needed if c not in covered), None)
         if first is None:
-            return True
+            yield list(placed)
+            return
         order = sorted(shapes, key=lambda s: (s != (prefer or {}).get(first), -int(_width(s) or 0)))
         for shape in order:
             if left.get(shape, 0) <= 0:
@@ -120,14 +143,12 @@ def tile(cells: Sequence[Cell], counts: Mapping[str, int], prefer: Mapping[Cell,
             left[shape] -= 1
             covered.update(cover)
             placed.append((shape, centre))
-            if search():
-                return True
+            yield from search()
             placed.pop()
             covered.difference_update(cover)
             left[shape] += 1
-        return False
 
-    return list(placed) if search() else None
+    yield from search()
 
 
 def _cells(calls: Sequence[Sequence[Any]], shapes: Mapping[str, str | None]) -> list[Cell] | None:
@@ -254,17 +275,54 @@ def planned_shapes(problem: Any, world: Any) -> dict[str, str]:
     return shapes
 
 
-def tiling_proposals(vector: Any, failure: Any, context: Any, colours: str = "prefer") -> list[RepairProposal]:
-    """The ``splice`` of the remaining placements as a tiling of their cells with the blocks on the table, when it
-    differs from the plan; ``[]`` when the plan's steps are not placements of shaped blocks or no tiling exists."""
-    relax_colour = colours == "prefer"
+@dataclass
+class Drawing:
+    """What the tilings read off a failure: the placements of the plan (the steps still to run and those run),
+    the blocks the world shows, the shapes the steps were planned with and the colour the methods ask for."""
+
+    world: Any
+    action: str
+    frame: str | None
+    todo: list[tuple[int, str, list[Cell]]]
+    """(step, block, cells) of each placement still to run, in plan order."""
+    done: list[tuple[int, str, list[Cell]]]
+    """The same for the placements of the same action already run."""
+    seen: dict[str, dict[str, Any]]
+    assumed: dict[str, str]
+    unusable: set[str]
+    """Blocks a failure of the run found out of reach where they lie."""
+    colour: str | None
+    """The colour the methods ask the plan's blocks for (every block of the steps to run has it), else ``None``."""
+    records: list[Mapping[str, Any]]
+
+    @property
+    def cells(self) -> list[Cell]:
+        return [c for p in self.todo for c in p[2]]
+
+    @property
+    def placed(self) -> set[str]:
+        """The blocks a placement already run put down (not a block an executed ``turn_over`` turned)."""
+        return {str((r.get("args") or [""])[0]) for r in self.records
+                if r.get("done") and str(r.get("action")) == self.action}
+
+    def on_hand(self, wanted: str | None, candidates: Iterable[str], plan_blocks: Sequence[str]) -> list[str]:
+        """The blocks of ``candidates`` a tile may take, with the colour ``wanted`` (or any), the plan's blocks
+        first (in plan order), then those of the methods' colour, then by name."""
+        return sorted((n for n in candidates if n not in self.unusable and _width(self.seen[n].get("shape")) is not None
+                       and (wanted is None or n in plan_blocks or self.seen[n].get("colour") == wanted)),
+                      key=lambda n: (n not in plan_blocks, plan_blocks.index(n) if n in plan_blocks else 0,
+                                     self.colour is not None and self.seen[n].get("colour") != self.colour, n))
+
+
+def read_drawing(vector: Any, failure: Any, context: Any) -> Drawing | None:
+    """The :class:`Drawing` of a failure, or ``None`` when the steps still to run are not placements of shaped
+    blocks by one action (the geometry does not say what they need) or their cells overlap."""
     evidence = getattr(failure, "evidence", None) or {}
     plan = list(evidence.get("plan") or [])
     world = getattr(context, "world", None)
     problem = getattr(getattr(context, "run", None), "problem", None)
-    observe = getattr(world, "observe", None)
-    if not plan or observe is None or problem is None:
-        return []
+    if not plan or getattr(world, "observe", None) is None or problem is None:
+        return None
     facts = list(getattr(problem, "init", None) or getattr(problem, "state", None) or ())
     assumed = planned_shapes(problem, world)
     colours = {str(f[1]): str(f[2]) for f in facts if len(f) == 3 and f[0] == "colour"}
@@ -273,38 +331,52 @@ def tiling_proposals(vector: Any, failure: Any, context: Any, colours: str = "pr
         assumed.setdefault(name, str(state["shape"]))
         if state.get("colour"):
             colours.setdefault(name, str(state["colour"]))
-    todo = [p for p in plan if not p.get("done")]
-    placements = []
-    for record in todo:
+
+    def placement(record: Mapping[str, Any]) -> tuple[int, str, list[Cell]] | None:
         args = [str(a) for a in record.get("args") or []]
         x, y = (_number(args[1]), _number(args[2])) if len(args) == 3 else (None, None)
         cells = footprint(assumed.get(args[0]), x, y) if args and x is not None and y is not None else None
-        if cells is None:
-            return []  # a step that is not a placement of a shaped block: the geometry does not say what it needs
-        placements.append((int(record["step"]), str(record["action"]), args[0], cells))
-    if not placements or len({p[1] for p in placements}) != 1:
-        return []
-    action = placements[0][1]
-    placed = {str(a) for p in plan if p.get("done") for a in (p.get("args") or [])[:1]}
-    plan_blocks = [p[2] for p in placements]
+        return None if cells is None else (int(record["step"]), args[0], cells)
+
+    todo: list[tuple[int, str, list[Cell]]] = []
+    for record in (p for p in plan if not p.get("done")):
+        found = placement(record)
+        if found is None:
+            return None  # a step that is not a placement of a shaped block: the geometry does not say what it needs
+        todo.append(found)
+    actions = {str(r["action"]) for r in plan if not r.get("done")}
+    if not todo or len(actions) != 1:
+        return None
+    action = actions.pop()
+    done = [found for r in plan if r.get("done") and str(r["action"]) == action
+            if (found := placement(r)) is not None]
+    cells = [c for p in todo for c in p[2]]
+    if len(set(cells)) != len(cells):
+        return None  # the plan's own placements overlap: not a tiling problem
     colour = None
-    planned_colours = {colours.get(b) for b in plan_blocks}
+    planned_colours = {colours.get(p[1]) for p in todo}
     if len(planned_colours) == 1 and None not in planned_colours:
         colour = planned_colours.pop()  # the methods' symbols ask the plan's blocks for one colour
-    unusable = set(getattr(vector, "unusable", ()) or ())  # out of reach where they lie
-    cells = [c for p in placements for c in p[3]]
-    if len(set(cells)) != len(cells):
-        return []  # the plan's own placements overlap: not a tiling problem
-    owner = {c: p[2] for p in placements for c in p[3]}
-    step_of = {c: p[0] for p in placements for c in p[3]}
-    prefer = {c: assumed.get(owner[c]) for c in cells}
+    return Drawing(world=world, action=action, frame=_action_frame(world, action), todo=todo, done=done, seen=seen,
+                   assumed=assumed, unusable=set(getattr(vector, "unusable", ()) or ()), colour=colour, records=plan)
+
+
+def tiling_proposals(vector: Any, failure: Any, context: Any, colours: str = "prefer") -> list[RepairProposal]:
+    """The ``splice`` of the remaining placements as a tiling of their cells with the blocks on the table, when it
+    differs from the plan; ``[]`` when the plan's steps are not placements of shaped blocks or no tiling exists."""
+    drawing = read_drawing(vector, failure, context)
+    if drawing is None:
+        return []
+    world, action, seen, colour = drawing.world, drawing.action, drawing.seen, drawing.colour
+    placements, cells = drawing.todo, drawing.cells
+    plan_blocks = [p[1] for p in placements]
+    owner = {c: p[1] for p in placements for c in p[2]}
+    step_of = {c: p[0] for p in placements for c in p[2]}
+    prefer = {c: drawing.assumed.get(owner[c]) for c in cells}
     relaxed = None
-    for wanted in dict.fromkeys([colour, None] if relax_colour else [colour]):
-        on_hand = sorted((n for n in seen if n not in placed and n not in unusable
-                          and _width(seen[n].get("shape")) is not None
-                          and (wanted is None or n in plan_blocks or seen[n].get("colour") == wanted)),
-                         key=lambda n: (n not in plan_blocks, plan_blocks.index(n) if n in plan_blocks else 0,
-                                        colour is not None and seen[n].get("colour") != colour, n))
+    tiles = None
+    for wanted in dict.fromkeys([colour, None] if colours == "prefer" else [colour]):
+        on_hand = drawing.on_hand(wanted, (n for n in seen if n not in drawing.placed), plan_blocks)
         counts: dict[str, int] = {}
         for name in on_hand:
             counts[str(seen[name]["shape"])] = counts.get(str(seen[name]["shape"]), 0) + 1
@@ -314,7 +386,7 @@ def tiling_proposals(vector: Any, failure: Any, context: Any, colours: str = "pr
             break
     if tiles is None:
         return []
-    frame = _action_frame(world, action)
+    frame = drawing.frame
     in_the_way = cells_in_the_way(world, frame, {n: seen[n] for n in on_hand}, cells) if frame else {}
     free = list(on_hand)
     bound: list[tuple[int, str, list[Cell]]] = []
@@ -328,9 +400,9 @@ def tiling_proposals(vector: Any, failure: Any, context: Any, colours: str = "pr
         free.remove(block)
         bound.append((min(step_of[c] for c in cover), block, cover))
         centres[block] = centre
-    actions = [[action, block, _text(centres[block][0]), _text(centres[block][1])]
+    actions = [[action, block, coordinate_text(centres[block][0]), coordinate_text(centres[block][1])]
                for block in (bound[i][1] for i in _in_order(bound, in_the_way))]
-    old = [[str(r["action"]), *map(str, r["args"])] for r in todo]
+    old = [[str(r["action"]), *map(str, r["args"])] for r in drawing.records if not r.get("done")]
     if actions == old:
         return []
     start, end = placements[0][0], placements[-1][0] + 1
@@ -380,6 +452,6 @@ def _action_frame(world: Any, action: str) -> str | None:
     return str(spec["frame"]) if isinstance(spec, Mapping) and spec.get("frame") else None
 
 
-def _text(value: float) -> str:
+def coordinate_text(value: float) -> str:
     """A coordinate as the task file writes it (``1``, ``1.5``)."""
     return str(int(value)) if float(value).is_integer() else f"{value:g}"

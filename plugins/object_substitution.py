@@ -40,7 +40,9 @@ found out of reach where it lies (the skill's ``out_of_reach``) counts as missin
 
 **Tilings** (:mod:`bt_meta_plugins._tilings`, no memory needed) come last: the cells the remaining placements
 need, covered anew with the blocks on the table (many-for-one and one-for-many shape substitutions the
-demonstrations never decomposed: one 1x2 where two 1x1 blocks that are not side by side were planned).
+demonstrations never decomposed: one 1x2 where two 1x1 blocks that are not side by side were planned). When the
+cells still to fill have no tiling, **re-tiling** (:mod:`bt_meta_plugins._retiling`) tiles the whole drawing again,
+moving blocks already placed (the 1x1 on a leg's top goes to a foot so that two 1x2 can lie across the leg tops).
 
 Before proposing, the unknown entities are **anchored** in the world's symbolic state (``world.apply_symbolic``):
 their perceived ``block``/``shape``/``colour`` facts replace what the problem assumed, and an unknown entity the
@@ -82,6 +84,7 @@ from typing import Any
 from bt_meta_plugins._decompositions import Decomposition, Library, bind, why_not
 from bt_meta_plugins._grounding_spares import rebind_proposals
 from bt_meta_plugins._mismatch import Entity, MismatchVector, mismatch_vector
+from bt_meta_plugins._retiling import retiling_proposals
 from bt_meta_plugins._spares import spare_proposals
 from bt_meta_plugins._tilings import covers_the_same_cells, lands_on_a_block, planned_shapes, tiling_proposals
 
@@ -522,8 +525,9 @@ class ObjectSubstitution:
         if self.geometry:
             proposals = self._same_cells(proposals, plan, context)
             known = [p.changes.get("actions") for p in proposals if p.action == SPLICE]
-            proposals += [p for p in tiling_proposals(vector, failure, context, self.colours)
-                          if p.changes["actions"] not in known]
+            tiled = (tiling_proposals(vector, failure, context, self.colours)
+                     or retiling_proposals(vector, failure, context, self.colours))
+            proposals += [p for p in tiled if p.changes["actions"] not in known]
         proposals = _mending_first(proposals, failure, vector, context)
         if proposals and self.anchor:
             self.anchor_entities(vector, failure, context, proposals)

@@ -250,7 +250,7 @@ class MetaExecutor:
                 break
             skipped: list[dict[str, Any]] = []
             applied = self._apply(decision.proposals, diagnosis, plan_state, run, domain, report, tried, started,
-                                  effects, skipped)
+                                  effects, skipped, anchored)
             if applied is None:
                 report.stop_reason = _unapplied_reason(diagnosis, skipped)
                 report.reported.append(_with_tried(self.reasoner.report_entry(diagnosis), report.attempts,
@@ -387,9 +387,11 @@ class MetaExecutor:
 
     def _apply(self, proposals: list[Any], diagnosis: Diagnosis, plan_state: PlanState, run: RunContext,
                domain: Any, report: RunReport, tried: set[str], started: float, effects: dict[str, int],
-               skipped: list[dict[str, Any]]) -> PlanState | None:
+               skipped: list[dict[str, Any]],
+               anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]]) -> PlanState | None:
         """The plan state of the first proposal that applies and does something no earlier attempt did;
-        ``skipped`` receives the others with why (not applicable, or equivalent to attempt N)."""
+        ``skipped`` receives the others with why (not applicable, or equivalent to attempt N). The applied
+        proposal's ``facts`` (:func:`_apply_facts`) join the world's symbolic state and ``anchored``."""
         # Repairs start from what the world is, not from what the failed run believed.
         symbolic = getattr(self.world, "symbolic_state", None)
         if symbolic is not None:
@@ -428,6 +430,8 @@ class MetaExecutor:
             log.info("meta: attempt %d: %s (%s, score %.2f, %s) -> %s", attempt.number, proposal.action,
                      proposal.plugin, proposal.score, proposal.description, change)
             run.emit("repair", outcome="applied", attempt=attempt.to_dict())
+            if _apply_facts(self.world, proposal, anchored) and symbolic is not None:
+                run.state = symbolic()
             return new_state
         return None
 
@@ -453,6 +457,25 @@ class MetaExecutor:
         log.info("meta: run %s %s after %d attempt(s) in %.3f s%s", report.problem, report.status,
                  len(report.attempts), report.seconds, f" ({report.stop_reason})" if report.stop_reason else "")
         return report
+
+
+def _apply_facts(world: Any, proposal: Any, anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]]) -> bool:
+    """Make a proposal's ``changes["facts"]`` (``{"add": [atom, ...], "delete": [...]}``) true in the world's
+    symbolic state (``world.apply_symbolic``) as it is applied -- not when it is proposed, since a proposal that is
+    never applied must leave the belief alone (a re-tiling takes placed blocks back off the drawing) -- and note
+    them with the anchored facts. Whether anything changed."""
+    facts = (getattr(proposal, "changes", None) or {}).get("facts")
+    apply = getattr(world, "apply_symbolic", None)
+    if not isinstance(facts, dict) or apply is None:
+        return False
+    add = [tuple(str(a) for a in atom) for atom in facts.get("add") or []]
+    delete = [tuple(str(a) for a in atom) for atom in facts.get("delete") or []]
+    if not (add or delete):
+        return False
+    before = _symbolic(world)
+    apply(add=add, delete=delete)
+    _note_changes(anchored, before, _symbolic(world))
+    return True
 
 
 def _survives(attempt: Attempt, plan: list[list[str]]) -> bool:

@@ -47,8 +47,13 @@ class MoveTo(SimSkill):
 
     def __init__(self, world: Any, arm: str = "right", *, position_tolerance: float = 0.003,
                  orientation_tolerance: float = 0.05, settle_ticks: int = 12, require_arrival: bool = True,
-                 check_path: bool = True, check_held: bool = True, carried_clearance: float = 0.0) -> None:
+                 check_path: bool = True, check_held: bool = True, carried_clearance: float = 0.0,
+                 speed: float = 1.0) -> None:
         super().__init__(world, arm)
+        if not 0.0 < speed <= 1.0:
+            raise ValueError(f"move_to speed must be in (0, 1] of the world's joint speed, got {speed}")
+        self.speed = speed
+        """Fraction of the world's joint speed the waypoints are cut for."""
         self.carried_clearance = carried_clearance
         """A held object keeps this much (m) from every other object on the way (not from the table)."""
         self.position_tolerance = position_tolerance
@@ -131,6 +136,10 @@ class MoveTo(SimSkill):
             )
         return RUNNING
 
+    def _max_step(self) -> float:
+        """The largest joint change (rad) between waypoints: one tick at :attr:`speed` of the joint speed."""
+        return self.world.joint_speed * self.speed * self.world.tick_seconds
+
     def _plan(self) -> None:
         world = self.world
         assert self.target is not None
@@ -152,7 +161,7 @@ class MoveTo(SimSkill):
         assert result.q is not None
         indices = world.kin.arm_indices(self.arm)
         start, goal = q_now[indices], result.q[indices]
-        max_step = world.joint_speed * world.tick_seconds
+        max_step = self._max_step()
         count = max(1, math.ceil(float(np.max(np.abs(goal - start))) / max_step))
         waypoints = []
         for k in range(1, count + 1):
@@ -209,7 +218,7 @@ class MoveTo(SimSkill):
                                 "nodes": stats.nodes}
         if path is None:
             return None
-        max_step = world.joint_speed * world.tick_seconds
+        max_step = self._max_step()
         out = []
         for a, b in itertools.pairwise(path):
             steps = max(1, math.ceil(float(np.max(np.abs(b - a))) / max_step))
@@ -249,7 +258,7 @@ class MoveTo(SimSkill):
         if not result.success or result.q is None:
             return None
         start_q, goal = q[indices], result.q[indices]
-        count = max(1, math.ceil(float(np.max(np.abs(goal - start_q))) / (world.joint_speed * world.tick_seconds)))
+        count = max(1, math.ceil(float(np.max(np.abs(goal - start_q))) / self._max_step()))
         for k in range(1, count + 1):
             step = q.copy()
             step[indices] = start_q + (goal - start_q) * (k / count)

@@ -63,6 +63,15 @@ CARRY_CLEARANCE = 0.005
 tilted (picked on its side, the wrist turned to stand it up) grazed the block beside it, which the checker's
 slightly smaller shapes let through, and tipped it over (generated letters_A and letters_H 0040). Only the
 carry: lowering onto the target sets the block beside others."""
+WITHDRAW_SPEED = 0.25
+"""Fraction of the joint speed a block is drawn out from between blocks it touches (up its own height and 5 mm):
+lifted at full speed out of a drawn letter, a block kicked its neighbour 2 cm aside (a re-tiling moving the 1x1 on
+a leg's top, generated letters_A s1 0046); at half speed it did not."""
+SET_DOWN = 0.015
+"""m over the target where a block set down beside others slows to :data:`WITHDRAW_SPEED`: lowered at full speed
+next to the block on the cell above, it shoved that block 5 mm into the apex's way (generated letters_A s1 0046)."""
+BESIDE = 0.005
+"""m: a block put down this close to another object is set down slowly."""
 FLIP_AXES = ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0))
 """Turn axes tried for a block upside down (base frame)."""
 
@@ -170,6 +179,7 @@ class Place(PhasedSkill):
         self.block = block
         self.goal = goal
         self._yaw: float | None = None
+        self._beside: bool | None = None
         self.info.update(block=block, goal=rounded(goal))
         self.begin_phases()
         return self
@@ -188,6 +198,7 @@ class Place(PhasedSkill):
                     ("approach", lambda: self._move(self._over_block(self.approach_height), "above " + self.block)),
                     ("descend", self._descend),
                     ("grasp", self._grasp),
+                    ("withdraw", self._withdraw),
                     ("lift", lambda: self._move(self._lifted(), "lift " + self.block)),
                 ]
             elif picked is not None:
@@ -212,9 +223,11 @@ class Place(PhasedSkill):
             ("approach", lambda: self._move(self._over_block(self.approach_height), "above " + self.block)),
             ("descend", self._descend),
             ("grasp", self._grasp),
+            ("withdraw", self._withdraw),
             ("lift", lambda: self._move(self._lifted(), "lift " + self.block)),
             ("carry", lambda: self._move(self._at_goal(self.approach_height), "above the target", CARRY_CLEARANCE)),
-            ("lower", lambda: self._move(self._at_goal(0.0), "down at the target")),
+            ("lower", lambda: self._move(self._at_goal(self._set_down_height()), "down at the target")),
+            ("set down", self._set_down),
             ("release", lambda: Grasp(self.world, self.arm).begin(self.block, release=True)),
             ("retreat", lambda: self._move(self._lifted(), "retreat")),
         ]
@@ -225,6 +238,39 @@ class Place(PhasedSkill):
         if poses is not None:
             poses[self.block] = self.world.sim.link_transform(self.world.end_effector(self.arm)).copy()
         return Grasp(self.world, self.arm).begin(self.block, release=False)
+
+    def _withdraw(self) -> MoveTo | None:
+        """Draw the block slowly (:data:`WITHDRAW_SPEED`) straight up out from between the objects it touches, by
+        its own height and 5 mm; nothing when it touches only the table."""
+        sim = self.world.sim
+        if not sim.contacts(self.block) - {"table", "robot"}:
+            return None
+        low, high = sim.object_model(self.block).extent()
+        raised = sim.link_transform(self.world.end_effector(self.arm)).copy()
+        raised[2, 3] += float(np.max(high - low)) + 0.005
+        return MoveTo(self.world, self.arm, speed=WITHDRAW_SPEED).begin(raised, "withdraw " + self.block)
+
+    def _beside_others(self) -> bool:
+        """Whether the block, put down at the target, would come within :data:`BESIDE` of another object."""
+        sim = self.world.sim
+        low, high = sim.object_model(self.block).extent()
+        centre = self._goal_block().copy()
+        centre[:3, 3] += centre[:3, :3] @ ((low + high) / 2.0)
+        others = [n for n in sim.object_names() if n != self.block]
+        return bool(others) and bool(sim.box_clearances(high - low, centre, others, BESIDE))
+
+    def _set_down_height(self) -> float:
+        """How high over the target the lowering at full speed ends: :data:`SET_DOWN` beside other objects (the
+        rest is :meth:`_set_down`), else on the target."""
+        if self._beside is None:
+            self._beside = self._beside_others()
+        return SET_DOWN if self._beside else 0.0
+
+    def _set_down(self) -> MoveTo | None:
+        """The last :data:`SET_DOWN` onto the target, slowly (:data:`WITHDRAW_SPEED`), beside other objects."""
+        if not self._beside:
+            return None
+        return MoveTo(self.world, self.arm, speed=WITHDRAW_SPEED).begin(self._at_goal(0.0), "set down at the target")
 
     def _over(self, pose: np.ndarray, heights: float = 1.0) -> np.ndarray:
         raised = np.asarray(pose, float).copy()

@@ -85,8 +85,11 @@ def _colour_of(problem: Any, symbol: str) -> str | None:
     return next((str(f[2]) for f in facts if len(f) == 3 and f[0] == "colour" and str(f[1]) == symbol), None)
 
 
-def rebind_proposals(failure: Any, context: Any, limit: int = 3) -> list[RepairProposal]:
-    """``rebind`` proposals: each missing entity symbol a step still to run uses, bound to a fitting spare."""
+def rebind_proposals(failure: Any, context: Any, limit: int = 3, *, failed_step_only: bool = False
+                     ) -> list[RepairProposal]:
+    """``rebind`` proposals: each missing entity symbol a step still to run uses -- with ``failed_step_only``, the
+    failed step itself (a motion failure of a step that does not use the missing part is not its doing: rebinding
+    then leaves the failed step as it was and runs it again) -- bound to a fitting spare."""
     world = getattr(context, "world", None)
     run = getattr(context, "run", None)
     problem = getattr(run, "problem", None)
@@ -100,8 +103,15 @@ def rebind_proposals(failure: Any, context: Any, limit: int = 3) -> list[RepairP
     todo = [p for p in plan if not p.get("done")]
     uses = {int(p["step"]): _used_symbols(world, p) for p in todo}
     unusable = out_of_reach(failure, context)
+    localisation = evidence.get("localisation") or {}
+    failed = localisation.get("step", getattr(failure, "step", None))
+    if failed_step_only and failed is not None:
+        uses_failed = uses.get(int(failed), set())
+        wanted_uses = [uses_failed]
+    else:
+        wanted_uses = list(uses.values())
     missing = {s: o for s, o in symbols.items() if (o not in seen or o in unusable)
-               and any(s in u for u in uses.values())}
+               and any(s in u for u in wanted_uses)}
     if not missing:
         return []
     named = {str(a) for p in plan for a in p.get("args") or []}
@@ -110,8 +120,6 @@ def rebind_proposals(failure: Any, context: Any, limit: int = 3) -> list[RepairP
     spares = sorted(n for n in seen if n not in bound and n not in held and n not in unusable)
     types = demonstrated_types(world)
     out: list[RepairProposal] = []
-    localisation = evidence.get("localisation") or {}
-    failed = localisation.get("step", getattr(failure, "step", None))
     for symbol, obj in sorted(missing.items()):
         wanted = types.get(obj)
         if wanted is None:  # what the missing object was is unknown: no spare can be said to fit

@@ -503,7 +503,8 @@ class ObjectSubstitution:
     def bt_meta_propose_repairs(self, failure: Any, context: Any) -> list[RepairProposal] | None:
         if failure.kind not in _KINDS and failure.kind not in _STEP_KINDS:
             return None
-        rebinds = rebind_proposals(failure, context) if self.spares else []
+        rebinds = rebind_proposals(failure, context, failed_step_only=failure.kind in _STEP_KINDS) \
+            if self.spares else []
         vector = mismatch_vector(failure, context)
         if vector is None:
             return rebinds or None

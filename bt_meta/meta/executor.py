@@ -274,9 +274,10 @@ class MetaExecutor:
         report.rebound = dict(plan_state.rebound)
         if report.status == "success" and report.attempts and self.refinements is not None and self.save_refinements:
             # a repair that only replays through its own replay plan must be the last one (whose plan is saved)
+            replaying = _replaying(report.attempts)
             unkept = [a.number for a in report.attempts if _survives(a, report.plan) and (
                 (a.proposal.get("evidence") or {}).get("keep") is False
-                or ((a.proposal.get("evidence") or {}).get("replay_plan") and a is not report.attempts[-1]))]
+                or ((a.proposal.get("evidence") or {}).get("replay_plan") and a is not replaying))]
             if unkept:  # a repair that worked from where this run stood, not from the initial state
                 report.refinement_saved = {"saved": False, "reason": f"attempt(s) {unkept}: the proposing plugin says "
                                                                      "the repaired plan does not replay from the start"}
@@ -502,18 +503,32 @@ def _rebind(world: Any, before: dict[str, str], after: dict[str, str]) -> None:
 
 
 def _replayed(report: RunReport) -> RunReport:
-    """``report`` with the plan a refinement should replay: the last (repairing) attempt's ``replay_plan`` when its
-    plugin planned the repair from the initial state (a re-orientation: not the failed attach, its release and the
+    """``report`` with the plan a refinement should replay: the last (repairing) attempt's ``replay_plan`` (or an
+    earlier one's that only rebinds followed, :func:`_replaying`) when its plugin planned the repair from the
+    initial state (a re-orientation: not the failed attach, its release and the
     re-pick), else the plan as run. Not when another plugin's attempt came earlier: the replay plan, planned from
     the problem's initial state, knows nothing of what that changed (a letters block turned after a tiling replaced
     two 1x1 by a 1x2: replayed, the nominal 1x1 placements failed, letters_H s0 0005 0023 0056)."""
-    last = report.attempts[-1] if report.attempts else None
+    last = _replaying(report.attempts)
     replay = None if last is None else (last.proposal.get("evidence") or {}).get("replay_plan")
-    if not replay or last is None or last.outcome != "repaired":
+    if not replay or last is None or report.attempts[-1].outcome != "repaired":
         return report
-    if any(attempt.proposal.get("plugin") != last.proposal.get("plugin") for attempt in report.attempts[:-1]):
+    before = report.attempts[:report.attempts.index(last)]
+    if any(attempt.proposal.get("plugin") != last.proposal.get("plugin") for attempt in before):
         return report
     return dataclasses.replace(report, plan=[[str(a) for a in step] for step in replay])
+
+
+def _replaying(attempts: list[Attempt]) -> Attempt | None:
+    """The attempt whose ``replay_plan`` a refinement may replay: the last one, or the last with a replay plan when
+    every attempt after it only rebinds grounding symbols (a spare for a part the plan reaches later: no step
+    changes, and the refinement keeps the rebinding itself)."""
+    for attempt in reversed(attempts):
+        if (attempt.proposal.get("evidence") or {}).get("replay_plan"):
+            return attempt
+        if attempt.proposal.get("action") != "rebind":
+            return None
+    return None
 
 
 def _with_tried(entry: dict[str, Any], attempts: list[Attempt], diagnosis: Diagnosis,

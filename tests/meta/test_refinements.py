@@ -217,9 +217,11 @@ def test_a_replay_plan_is_kept_only_when_no_other_plugin_changed_the_plan_before
     from bt_meta.meta.executor import RunReport, _replayed
     from bt_meta.meta.reasoner import Attempt
 
-    def attempt(number: int, plugin: str, outcome: str, replay: list | None = None) -> Attempt:
+    def attempt(number: int, plugin: str, outcome: str, replay: list | None = None, action: str = "splice"
+                ) -> Attempt:
         evidence = {"replay_plan": replay} if replay else {}
-        return Attempt(number, {}, "reachability", {"plugin": plugin, "evidence": evidence}, "", 0, 0.0, outcome)
+        return Attempt(number, {}, "reachability", {"plugin": plugin, "action": action, "evidence": evidence}, "", 0,
+                       0.0, outcome)
 
     as_run = [["place", "b1", "0.5", "1"], ["turn_over", "b7"], ["place", "b7", "2", "1"]]
     replay = [["turn_over", "b7"], ["place", "b1", "0", "1"], ["place", "b7", "2", "1"]]
@@ -231,3 +233,11 @@ def test_a_replay_plan_is_kept_only_when_no_other_plugin_changed_the_plan_before
     after = RunReport("success", "H", attempts=[attempt(1, "object_substitution", "failed_again"),
                                                  attempt(2, "reorientation", "repaired", replay)], plan=as_run)
     assert _replayed(after).plan == as_run
+    # a rebinding after it changes no step (generated letters_A s1 0052: b0 turned, then the missing b2's spare)
+    rebound = RunReport("success", "H", attempts=[attempt(1, "reorientation", "failed_again", replay),
+                                                   attempt(2, "object_substitution", "repaired", action="rebind")],
+                        plan=as_run)
+    assert _replayed(rebound).plan == replay
+    spliced = RunReport("success", "H", attempts=[attempt(1, "reorientation", "failed_again", replay),
+                                                   attempt(2, "object_substitution", "repaired")], plan=as_run)
+    assert _replayed(spliced).plan == as_run  # a later splice changed steps the replay plan does not know

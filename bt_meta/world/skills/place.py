@@ -219,12 +219,19 @@ class Place(PhasedSkill):
                 # hand through the blocks beside the one to pick (letters_H s0 0024, a kept turn replayed first)
                 ("square", lambda: self._move(self._squared(), "wrist top-down")),
             ]
+        if self.world.sim.held(self.arm) == self.block:
+            # still held from a placement that failed on the way (a repair runs it again): carried from here
+            pick = [("lift", lambda: self._move(self._lifted(), "lift " + self.block))]
+        else:
+            pick = [
+                ("approach", lambda: self._move(self._over_block(self.approach_height), "above " + self.block)),
+                ("descend", self._descend),
+                ("grasp", self._grasp),
+                ("withdraw", self._withdraw),
+                ("lift", lambda: self._move(self._lifted(), "lift " + self.block)),
+            ]
         return [
-            ("approach", lambda: self._move(self._over_block(self.approach_height), "above " + self.block)),
-            ("descend", self._descend),
-            ("grasp", self._grasp),
-            ("withdraw", self._withdraw),
-            ("lift", lambda: self._move(self._lifted(), "lift " + self.block)),
+            *pick,
             ("carry", lambda: self._move(self._at_goal(self.approach_height), "above the target", CARRY_CLEARANCE)),
             ("lower", lambda: self._move(self._at_goal(self._set_down_height()), "down at the target")),
             ("set down", self._set_down),

@@ -1,0 +1,83 @@
+"""The place skill among blocks already drawn, in the real simulator (slow): a block drawn out from between
+others and one set down beside another leave their neighbours where they were; a placement that failed on the way
+(the block still held) is carried on from where it is when it runs again."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bt_meta.htn import load_task_file
+from bt_meta.resources import trees_dir
+from bt_meta.world.base import RUNNING
+from bt_meta.world.simulation.sim_world import SimWorld, load_grounding, quiet_stdout
+from bt_meta.world.skills import Place
+from bt_meta.world.skills.place import SET_DOWN
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture
+def world():
+    task_file = load_task_file(trees_dir() / "letters.yaml")
+    with quiet_stdout():
+        w = SimWorld(task_file.domain, task_file.problem("A"), load_grounding("letters"))
+    yield w
+    w.close()
+
+
+def place(world: SimWorld, block: str, x: str, y: str) -> tuple[str, Place]:
+    skill = Place(world)
+    skill.spec = {"frame": "letter"}
+    skill.start([block, x, y])
+    for _ in range(1500):
+        status = skill.tick()
+        if status != RUNNING:
+            return status, skill
+    raise AssertionError(f"place({block}, {x}, {y}) still running")
+
+
+def xy(world: SimWorld, block: str) -> np.ndarray:
+    return world.sim.object_transform(block)[:2, 3].copy()
+
+
+def phases(skill: Place) -> list[str]:
+    """The phases that moved or acted (a phase with nothing to do is listed without a skill)."""
+    return [p["phase"] for p in skill.info["phases"] if "skill" in p]
+
+
+def test_a_block_drawn_out_from_between_others_and_set_down_beside_one_leaves_them_in_place(world):
+    """A's first leg (b0 at (0, 0), b1 on it at (0, 1)) and b2 across (2, 1)-(3, 1); then b1 is moved to the foot
+    (3, 0) under b2, the re-tiling's move (generated letters_A s1 0046): b1 leaves b0's side slowly, and goes down
+    slowly beside b2. At full speed b0 was kicked 2 cm and b2 shoved 5 mm."""
+    assert place(world, "b0", "0", "0")[0] == "SUCCESS"
+    status, first = place(world, "b1", "0", "1")
+    assert status == "SUCCESS" and "set down" in phases(first)  # beside b0
+    assert place(world, "b5", "2.5", "1")[0] == "SUCCESS"
+    b0, b5 = xy(world, "b0"), xy(world, "b5")
+    status, moved = place(world, "b1", "3", "0")
+    assert status == "SUCCESS", moved.info
+    assert "withdraw" in phases(moved) and "set down" in phases(moved)
+    assert np.linalg.norm(xy(world, "b0") - b0) < 0.002
+    assert np.linalg.norm(xy(world, "b5") - b5) < 0.002
+    # alone on the table nothing slows: a block picked where nothing touches it is lifted at once
+    status, alone = place(world, "b4", "5", "0")
+    assert status == "SUCCESS" and "withdraw" not in phases(alone) and "set down" not in phases(alone)
+    assert SET_DOWN > 0
+
+
+def test_a_placement_run_again_with_its_block_still_held_carries_it_from_where_it_is(world):
+    sim = world.sim
+    # hold b3 as a failed carry would have left it: picked, lifted, not put down
+    skill = Place(world)
+    skill.spec = {"frame": "letter"}
+    skill.start(["b3", "5", "0"])
+    while skill.info.get("phase") != "carry":
+        assert skill.tick() == RUNNING
+    assert sim.held("right") == "b3"
+    status, again = place(world, "b3", "5", "1")
+    assert status == "SUCCESS", again.info
+    assert phases(again)[0] == "lift" and "grasp" not in phases(again)
+    assert sim.held("right") is None
+    target = np.array(world.ground_cell("letter", "5", "1")[:2])
+    assert np.linalg.norm(xy(world, "b3") - target) < 0.01

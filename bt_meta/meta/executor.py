@@ -274,7 +274,7 @@ class MetaExecutor:
         report.rebound = dict(plan_state.rebound)
         if report.status == "success" and report.attempts and self.refinements is not None and self.save_refinements:
             # a repair that only replays through its own replay plan must be the last one (whose plan is saved)
-            replaying = _replaying(report.attempts)
+            replaying = (_replaying(report.attempts) or (None,))[0]
             unkept = [a.number for a in report.attempts if _survives(a, report.plan) and (
                 (a.proposal.get("evidence") or {}).get("keep") is False
                 or ((a.proposal.get("evidence") or {}).get("replay_plan") and a is not replaying))]
@@ -423,7 +423,8 @@ class MetaExecutor:
                 continue
             attempt = Attempt(number=len(report.attempts) + 1, failure=diagnosis.failure.to_dict(),
                               kind=diagnosis.kind.value, proposal=proposal.to_dict(), change=change,
-                              step=diagnosis.step, seconds=round(time.perf_counter() - attempt_started, 6))
+                              step=diagnosis.step, seconds=round(time.perf_counter() - attempt_started, 6),
+                              replaced=_replaced_steps(proposal, plan_state, diagnosis.step))
             attempt.failure.pop("evidence", None)
             attempt.failure["evidence_keys"] = sorted(diagnosis.failure.evidence)
             report.attempts.append(attempt)
@@ -503,32 +504,72 @@ def _rebind(world: Any, before: dict[str, str], after: dict[str, str]) -> None:
 
 
 def _replayed(report: RunReport) -> RunReport:
-    """``report`` with the plan a refinement should replay: the last (repairing) attempt's ``replay_plan`` (or an
-    earlier one's that only rebinds followed, :func:`_replaying`) when its plugin planned the repair from the
-    initial state (a re-orientation: not the failed attach, its release and the
-    re-pick), else the plan as run. Not when another plugin's attempt came earlier: the replay plan, planned from
-    the problem's initial state, knows nothing of what that changed (a letters block turned after a tiling replaced
-    two 1x1 by a 1x2: replayed, the nominal 1x1 placements failed, letters_H s0 0005 0023 0056)."""
-    last = _replaying(report.attempts)
-    replay = None if last is None else (last.proposal.get("evidence") or {}).get("replay_plan")
-    if not replay or last is None or report.attempts[-1].outcome != "repaired":
+    """``report`` with the plan a refinement should replay: a ``replay_plan`` its plugin planned from the initial
+    state (a re-orientation: not the failed attach, its release and the re-pick), with the repairs made after it
+    carried over (:func:`_replaying`), else the plan as run."""
+    found = _replaying(report.attempts)
+    if found is None or report.attempts[-1].outcome != "repaired":
         return report
-    before = report.attempts[:report.attempts.index(last)]
-    if any(attempt.proposal.get("plugin") != last.proposal.get("plugin") for attempt in before):
-        return report
-    return dataclasses.replace(report, plan=[[str(a) for a in step] for step in replay])
+    return dataclasses.replace(report, plan=found[1])
 
 
-def _replaying(attempts: list[Attempt]) -> Attempt | None:
-    """The attempt whose ``replay_plan`` a refinement may replay: the last one, or the last with a replay plan when
-    every attempt after it only rebinds grounding symbols (a spare for a part the plan reaches later: no step
-    changes, and the refinement keeps the rebinding itself)."""
-    for attempt in reversed(attempts):
-        if (attempt.proposal.get("evidence") or {}).get("replay_plan"):
-            return attempt
-        if attempt.proposal.get("action") != "rebind":
+def _replaying(attempts: list[Attempt]) -> tuple[Attempt, list[list[str]]] | None:
+    """The last attempt with a ``replay_plan`` and that plan with every later attempt's change made again in it:
+    a rebinding changes no step; a splice replaces the steps it replaced (found by what they are, once); a
+    substitution renames from the step it renamed from (letters_A s1 0118: b2 turned, then two blocks for the bar
+    b5 out of reach). ``None`` when there is none, when another plugin's attempt came before it -- the replay plan,
+    planned from the problem's initial state, knows nothing of what that changed (a letters block turned after a
+    tiling replaced two 1x1 by a 1x2: replayed, the nominal 1x1 placements failed, letters_H s0 0005 0023 0056) --
+    or when a later change cannot be found in it."""
+    index = next((i for i in range(len(attempts) - 1, -1, -1)
+                  if (attempts[i].proposal.get("evidence") or {}).get("replay_plan")), None)
+    if index is None:
+        return None
+    first = attempts[index]
+    if any(a.proposal.get("plugin") != first.proposal.get("plugin") for a in attempts[:index]):
+        return None
+    plan: list[list[str]] | None = [[str(a) for a in step] for step in first.proposal["evidence"]["replay_plan"]]
+    for later in attempts[index + 1:]:
+        plan = _carried_over(plan, later)
+        if plan is None:
             return None
+    return first, plan
+
+
+def _carried_over(plan: list[list[str]], attempt: Attempt) -> list[list[str]] | None:
+    """``plan`` with ``attempt``'s change made in it (see :func:`_replaying`), or ``None``."""
+    action = attempt.proposal.get("action")
+    changes = attempt.proposal.get("changes") or {}
+    if action == "rebind":
+        return plan
+    where = [i for i in range(len(plan) - len(attempt.replaced) + 1)
+             if attempt.replaced and plan[i:i + len(attempt.replaced)] == attempt.replaced]
+    if len(where) != 1:
+        return None
+    at = where[0]
+    if action == "splice":
+        actions = [[str(a) for a in call] for call in changes.get("actions") or []]
+        return [*plan[:at], *actions, *plan[at + len(attempt.replaced):]]
+    if action == "substitute":
+        mapping = {str(k): str(v) for k, v in (changes.get("mapping") or {}).items()}
+        return [*plan[:at], *([step[0], *(mapping.get(a, a) for a in step[1:])] for step in plan[at:])]
     return None
+
+
+def _replaced_steps(proposal: Any, plan_state: PlanState, failed_step: int) -> list[list[str]]:
+    """The steps ``proposal`` changes, as they are before it applies (:attr:`Attempt.replaced`)."""
+    steps = plan_state.steps()
+    changes = getattr(proposal, "changes", None) or {}
+    try:
+        if proposal.action == "splice":
+            span = range(int(changes.get("start", failed_step)), int(changes.get("end", failed_step + 1)))
+        elif proposal.action == "substitute":
+            span = range(int(changes.get("from_step", failed_step)), int(changes.get("from_step", failed_step)) + 1)
+        else:
+            return []
+    except (TypeError, ValueError):
+        return []
+    return [[str(a) for a in steps[i].task] for i in span if 0 <= i < len(steps)]
 
 
 def _with_tried(entry: dict[str, Any], attempts: list[Attempt], diagnosis: Diagnosis,

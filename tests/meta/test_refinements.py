@@ -238,6 +238,18 @@ def test_a_replay_plan_is_kept_only_when_no_other_plugin_changed_the_plan_before
                                                    attempt(2, "object_substitution", "repaired", action="rebind")],
                         plan=as_run)
     assert _replayed(rebound).plan == replay
-    spliced = RunReport("success", "H", attempts=[attempt(1, "reorientation", "failed_again", replay),
-                                                   attempt(2, "object_substitution", "repaired")], plan=as_run)
-    assert _replayed(spliced).plan == as_run  # a later splice changed steps the replay plan does not know
+    # a later splice is made again in the replay plan where the steps it replaced are (letters_A s1 0118)
+    later = attempt(2, "object_substitution", "repaired")
+    later.proposal["changes"] = {"actions": [["place", "s0", "2", "1"], ["place", "s1", "3", "1"]]}
+    later.replaced = [["place", "b7", "2", "1"]]
+    spliced = RunReport("success", "H", attempts=[attempt(1, "reorientation", "failed_again", replay), later],
+                        plan=as_run)
+    assert _replayed(spliced).plan == [*replay[:2], ["place", "s0", "2", "1"], ["place", "s1", "3", "1"]]
+    later.replaced = [["place", "b9", "2", "1"]]  # not in the replay plan: the plan as run
+    assert _replayed(spliced).plan == as_run
+    renamed = attempt(2, "object_substitution", "repaired", action="substitute")
+    renamed.proposal["changes"] = {"mapping": {"b7": "s0"}}
+    renamed.replaced = [["place", "b1", "0", "1"]]
+    substituted = RunReport("success", "H", attempts=[attempt(1, "reorientation", "failed_again", replay), renamed],
+                            plan=as_run)
+    assert _replayed(substituted).plan == [["turn_over", "b7"], ["place", "b1", "0", "1"], ["place", "s0", "2", "1"]]

@@ -516,10 +516,12 @@ def _replayed(report: RunReport) -> RunReport:
 def _replaying(attempts: list[Attempt]) -> tuple[Attempt, list[list[str]]] | None:
     """The last attempt with a ``replay_plan`` and that plan with every later attempt's change made again in it:
     a rebinding changes no step; a splice replaces the steps it replaced (found by what they are, once); a
-    substitution renames from the step it renamed from (letters_A s1 0118: b2 turned, then two blocks for the bar
-    b5 out of reach). ``None`` when there is none, when another plugin's attempt came before it -- the replay plan,
-    planned from the problem's initial state, knows nothing of what that changed (a letters block turned after a
-    tiling replaced two 1x1 by a 1x2: replayed, the nominal 1x1 placements failed, letters_H s0 0005 0023 0056) --
+    backtrack or an argument rewrite gives each step it rewrote (found once) its new arguments (magnetic s1 0016:
+    three turns, then the attach's pose); a substitution renames from the step it renamed from (letters_A s1 0118:
+    b2 turned, then two blocks for the bar b5 out of reach). ``None`` when there is none, when another plugin's
+    attempt came before it -- the replay plan, planned from the problem's initial state, knows nothing of what that
+    changed (a letters block turned after a tiling replaced two 1x1 by a 1x2: replayed, the nominal 1x1 placements
+    failed, letters_H s0 0005 0023 0056) --
     or when a later change cannot be found in it."""
     index = next((i for i in range(len(attempts) - 1, -1, -1)
                   if (attempts[i].proposal.get("evidence") or {}).get("replay_plan")), None)
@@ -542,6 +544,19 @@ def _carried_over(plan: list[list[str]], attempt: Attempt) -> list[list[str]] | 
     changes = attempt.proposal.get("changes") or {}
     if action == "rebind":
         return plan
+    if action in ("backtrack", "rewrite_args"):  # each rewritten step found once, its arguments replaced
+        rewritten = changes.get("args") or {}
+        new_args = ([rewritten[k] for k in sorted(rewritten, key=int)] if isinstance(rewritten, dict)
+                    else [rewritten])
+        if len(new_args) != len(attempt.replaced) or not attempt.replaced:
+            return None
+        out = [list(step) for step in plan]
+        for old, args in zip(attempt.replaced, new_args, strict=True):
+            found = [i for i, step in enumerate(plan) if step == old]
+            if len(found) != 1:
+                return None
+            out[found[0]] = [old[0], *(str(a) for a in args)]
+        return out
     where = [i for i in range(len(plan) - len(attempt.replaced) + 1)
              if attempt.replaced and plan[i:i + len(attempt.replaced)] == attempt.replaced]
     if len(where) != 1:
@@ -565,6 +580,10 @@ def _replaced_steps(proposal: Any, plan_state: PlanState, failed_step: int) -> l
             span = range(int(changes.get("start", failed_step)), int(changes.get("end", failed_step + 1)))
         elif proposal.action == "substitute":
             span = range(int(changes.get("from_step", failed_step)), int(changes.get("from_step", failed_step)) + 1)
+        elif proposal.action == "backtrack":
+            span = sorted(int(k) for k in (changes.get("args") or {}))
+        elif proposal.action == "rewrite_args":
+            span = [int(changes.get("step", failed_step))]
         else:
             return []
     except (TypeError, ValueError):

@@ -127,8 +127,9 @@ class Attempt:
     outcome: str = "pending"
     """``"repaired"`` (the rest of the run succeeded), ``"failed_again"`` or ``"not_applicable"``."""
     replaced: list[list[str]] = field(default_factory=list)
-    """The plan's steps the attempt changed, as they were (a splice's replaced steps; the step a substitution
-    renames from): a later refinement finds them again in a plan replayed from the start."""
+    """The plan's steps the attempt changed, as they were (a splice's replaced steps, the steps a backtrack or a
+    rewrite gives new arguments, the step a substitution renames from): a later refinement finds them again in a
+    plan replayed from the start."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

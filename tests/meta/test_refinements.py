@@ -247,6 +247,13 @@ def test_a_replay_plan_is_kept_only_when_no_other_plugin_changed_the_plan_before
     assert _replayed(spliced).plan == [*replay[:2], ["place", "s0", "2", "1"], ["place", "s1", "3", "1"]]
     later.replaced = [["place", "b9", "2", "1"]]  # not in the replay plan: the plan as run
     assert _replayed(spliced).plan == as_run
+    # a backtrack's new pose goes to the step it rewrote (magnetic s1 0016: turns, then the attach's pose)
+    moved = attempt(2, "pose_backtracking", "repaired", action="backtrack")
+    moved.proposal["changes"] = {"to_step": 5, "args": {"5": ["held:ref:0:0:0.05:0:0:0"]}}
+    moved.replaced = [["place", "b7", "2", "1"]]
+    backtracked = RunReport("success", "H", attempts=[attempt(1, "reorientation", "failed_again", replay), moved],
+                            plan=as_run)
+    assert _replayed(backtracked).plan == [*replay[:2], ["place", "held:ref:0:0:0.05:0:0:0"]]
     renamed = attempt(2, "object_substitution", "repaired", action="substitute")
     renamed.proposal["changes"] = {"mapping": {"b7": "s0"}}
     renamed.replaced = [["place", "b1", "0", "1"]]

@@ -184,8 +184,7 @@ def compare(expectation: Expectation, observations: dict[str, Any]) -> Compariso
     except KeypointError as error:
         return Comparison(matched=False, message=f"{expectation.description}: {error}",
                           evidence={"error": str(error)})
-    e = data["expected"]
-    expected = KeypointExpectation(e["r_p"], e["r_n"], e["n"], e["r_p_std"], e["r_n_std"])
+    expected = KeypointExpectation.from_dict(data["expected"])
     verdict = judge(observed, expected, position_tolerance=data["position_tolerance"],
                     angle_tolerance=data["angle_tolerance"])
     evidence = {**verdict.as_dict(), "active": active, "reference": reference,
@@ -195,7 +194,9 @@ def compare(expectation: Expectation, observations: dict[str, Any]) -> Compariso
         return Comparison(matched=True, evidence=evidence)
     parts = []
     if "r_p" in verdict.failed:
-        parts.append(f"R_p {observed.r_p * 1000:.1f} mm, expected {expected.r_p * 1000:.1f} mm")
+        offset = (f"; the attachment points {verdict.delta_offset * 1000:.1f} mm from where they were, in the "
+                  "reference's frame" if verdict.delta_offset is not None else "")
+        parts.append(f"R_p {observed.r_p * 1000:.1f} mm, expected {expected.r_p * 1000:.1f} mm{offset}")
     if "r_n" in verdict.failed:
         parts.append(f"R_n {math.degrees(observed.r_n):.1f} deg, expected {math.degrees(expected.r_n):.1f} deg")
     return Comparison(matched=False, message=f"{expectation.description}: {'; '.join(parts)}", evidence=evidence)

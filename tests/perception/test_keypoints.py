@@ -99,3 +99,25 @@ def test_simulator_states_separate_upright_from_on_side():
         on_side = relation(sim.object_state("active"), sim.object_state("reference"))
     assert upright.r_n == pytest.approx(math.pi, abs=0.01)
     assert on_side.r_n == pytest.approx(math.pi / 2, abs=0.02)
+
+
+def test_the_offset_in_the_reference_s_frame_tells_a_part_beside_the_reference_from_a_joined_one():
+    """Joined: the attachment points 1 cm apart along the normal. Put down 1.2 cm beside the reference (it had
+    moved from where the absolute poses expect it; generated magnetic s1 0031): as far apart, sideways -- R_p
+    agrees, the offset does not. Both shifted and turned together, nothing changes."""
+    turned = math.radians(30.0)
+    pose = [0.6, -0.1, -0.18, 0.0, 0.0, turned]
+    reference = {"ap": [0.6, -0.1, -0.16], "an": [0, 0, 1], "pose": pose}
+    joined = {"ap": [0.6, -0.1, -0.15], "an": [0, 0, -1]}
+    expected = expected_relation([(joined, reference)] * 3)
+    assert expected.offset == pytest.approx((0.0, 0.0, 0.01))
+    beside = relation({"ap": [0.612, -0.1, -0.16], "an": [0, 0, -1]}, reference)
+    assert beside.r_p == pytest.approx(expected.r_p, abs=0.003)  # the paper's R_p cannot tell
+    verdict = judge(beside, expected)
+    assert not verdict.matched and verdict.failed == ("r_p",)
+    assert verdict.delta_offset == pytest.approx(0.0156, abs=1e-3)
+    # the pair shifted and turned about the vertical: the offset in the reference's frame is the same
+    moved = {"ap": [0.7, 0.0, -0.16], "an": [0, 0, 1], "pose": [0.7, 0.0, -0.18, 0.0, 0.0, turned + 0.5]}
+    assert judge(relation({"ap": [0.7, 0.0, -0.15], "an": [0, 0, -1]}, moved), expected).matched
+    # a reference without a pose: no offset, the paper's R_p alone
+    assert relation(joined, {"ap": [0.6, -0.1, -0.16], "an": [0, 0, 1]}).offset is None

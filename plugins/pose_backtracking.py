@@ -528,10 +528,6 @@ def _check_motion(world: Any, arm: str, target: np.ndarray, q_start: np.ndarray 
             owner = getattr(world, "contact_object", lambda name: name)
             contact = next((c for c in collision.all_contacts(q)
                             if released not in (owner(c.pair[0]), owner(c.pair[1]))), None)
-        if contact is not None and released is None and hasattr(world, "sim"):
-            around = _move_to_fallbacks(world, arm, target, q_start)
-            if around is not None:  # the skill will take its straight line, a lift first or a planned path
-                return None, around
         if contact is not None:
             pair = [str(n) for n in contact.pair]
             return {"kind": FailureKind.COLLISION.value, "pair": pair,
@@ -539,19 +535,6 @@ def _check_motion(world: Any, arm: str, target: np.ndarray, q_start: np.ndarray 
                     "objects": [world.contact_object(n) for n in pair] if hasattr(world, "contact_object") else pair,
                     "waypoint": k, "waypoints": count, "ik": "path collides"}, None
     return None, result.q
-
-
-def _move_to_fallbacks(world: Any, arm: str, target: np.ndarray, q_start: np.ndarray) -> np.ndarray | None:
-    """The goal configuration of the way the MoveTo skill takes from ``q_start`` when its joint-space line
-    collides (:meth:`~bt_meta.world.skills.move_to.MoveTo.plan_from`), or ``None`` when it would fail."""
-    from bt_meta.world.skills.base import SkillAbort
-    from bt_meta.world.skills.move_to import MoveTo
-
-    try:
-        waypoints = MoveTo(world, arm).begin(target, "replay check").plan_from(q_start)
-    except SkillAbort:
-        return None
-    return waypoints[-1] if waypoints else None
 
 
 def _jsonable(value: Any) -> bool:

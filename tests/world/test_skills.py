@@ -175,21 +175,3 @@ def test_a_part_out_of_reach_where_it_lies_is_named_in_the_failure(fresh):
     skill = MoveTo(fresh).begin(down(2.0, -0.2, 0.1), "far away")
     assert skill.tick() == FAILURE and "out_of_reach" not in skill.failure.evidence
 
-
-def test_a_move_planned_dry_from_another_configuration_is_the_move_the_skill_makes(fresh):
-    """``MoveTo.plan_from``: what a repair plugin asks of a replay (would the move get there from where a replay
-    starts it?) -- the same waypoints the skill drives from where the arm is; a pose out of reach raises."""
-    from bt_meta.world.skills.base import SkillAbort
-
-    x, y = fresh.sim.object_pose("active")[:2]
-    target = down(x, y, fresh.object_top("active") + 0.1)
-    fresh.sync_collision()
-    dry = MoveTo(fresh).begin(target).plan_from(fresh.current_q())
-    skill = MoveTo(fresh).begin(target)
-    assert run(skill)[0] == SUCCESS
-    assert skill.info["waypoints"] == len(dry)
-    indices = fresh.kin.arm_indices("right")
-    assert np.allclose(fresh.current_q()[indices], dry[-1][indices], atol=0.02)
-    with pytest.raises(SkillAbort) as failed:
-        MoveTo(fresh).begin(down(2.0, 0.0, 0.2)).plan_from(fresh.current_q())
-    assert failed.value.kind == "reachability"

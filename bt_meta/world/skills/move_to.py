@@ -141,19 +141,10 @@ class MoveTo(SimSkill):
         return self.world.joint_speed * self.speed * self.world.tick_seconds
 
     def _plan(self) -> None:
-        self.world.sync_collision()
-        waypoints = self.plan_from(self.world.current_q())
-        indices = self.world.kin.arm_indices(self.arm)
-        self._waypoints = [q[indices] for q in waypoints]
-        self.info["waypoints"] = len(waypoints)
-
-    def plan_from(self, q_now: np.ndarray) -> list[np.ndarray]:
-        """The waypoints (full configurations) this move would drive through from ``q_now``: IK, the joint-space
-        line, else its fallbacks (the gripper's straight line, a lift first, a planned path). Raises
-        :class:`SkillAbort` as the move would fail. Also a dry run: a repair plugin asks whether a replay of its
-        plan would get there from another configuration (the world's collision scene must be synced)."""
         world = self.world
         assert self.target is not None
+        world.sync_collision()
+        q_now = world.current_q()
         started = time.perf_counter()
         result = world.ik.solve(self.arm, pin.SE3(self.target[:3, :3], self.target[:3, 3]), q_now, seed=world.seed)
         self.info["ik_time_ms"] = round((time.perf_counter() - started) * 1000.0, 3)
@@ -192,8 +183,9 @@ class MoveTo(SimSkill):
                          "planner": self.info.get("planner")},
                     )
                 waypoints, self.info["path"] = around
+        self._waypoints = [q[indices] for q in waypoints]
+        self.info["waypoints"] = len(waypoints)
         self.info["q_goal"] = rounded(goal)
-        return waypoints
 
     def _around(self, q_now: np.ndarray, q_goal: np.ndarray, count: int) -> tuple[list[np.ndarray], str] | None:
         """Waypoints that do not collide where the joint-space line does, and which way they go: the straight
@@ -250,7 +242,7 @@ class MoveTo(SimSkill):
         the lift or the target has no IK solution."""
         world = self.world
         assert self.target is not None
-        start = self._gripper_at(q_now)
+        start = world.sim.link_transform(world.end_effector(self.arm))
         height = max(clearance, float(self.target[2, 3] - start[2, 3]))
         indices = world.kin.arm_indices(self.arm)
         out, q = [], q_now.copy()
@@ -280,7 +272,7 @@ class MoveTo(SimSkill):
         when a waypoint has no solution."""
         world = self.world
         assert self.target is not None
-        start = self._gripper_at(q_now)
+        start = world.sim.link_transform(world.end_effector(self.arm))
         rotation = pin.log3(start[:3, :3].T @ self.target[:3, :3])
         steps = max(count, math.ceil(float(np.linalg.norm(self.target[:3, 3] - start[:3, 3])) / 0.01))
         indices = world.kin.arm_indices(self.arm)
@@ -296,14 +288,6 @@ class MoveTo(SimSkill):
                 return None
             q = result.q
             out.append(q.copy())
-        return out
-
-    def _gripper_at(self, q: np.ndarray) -> np.ndarray:
-        """The gripper frame's pose (4x4) at configuration ``q`` (forward kinematics: the simulator's link pose
-        when ``q`` is where the arm is)."""
-        pose = self.world.kin.frame_pose(q, self.world.end_effector(self.arm))
-        out = np.eye(4)
-        out[:3, :3], out[:3, 3] = pose.rotation, pose.translation
         return out
 
     def _error(self) -> tuple[float, float]:

@@ -27,7 +27,8 @@ On a ``verification`` (or keypoint ``unexpected_configuration``) failure the plu
    pose through the grasp at the time of the move -- so a refinement that keeps it stays right when the reference
    has moved within the refinement's tolerance, or the part was picked a little differently (an absolute gripper
    pose ``pose:...`` keeps the first run's reference and grasp, and misses the joint); an absolute symbol only for a
-   world that does not ground held poses. Scored by how well the traces agree;
+   world that does not ground held poses. Scored by how well the traces agree, and lower (:data:`UNKEPT`) for a
+   chain no replay of the repaired plan reaches: below a repair that replays from the start;
    when no sampled pose at any remaining depth is feasible it answers with a ``collision`` or ``reachability``
    :class:`~bt_meta.bt.failures.Failure` carrying the evidence (the colliding pair, the unreachable target): the
    reasoner reports it and never loops on it.
@@ -72,6 +73,13 @@ __all__ = ["PoseBacktracking", "StepRelation", "configure", "good_object_poses",
 log = logging.getLogger("bt_meta.meta.pose_backtracking")
 
 STRATEGY = "pose_backtracking"
+
+UNKEPT = 0.55
+"""Score factor of a chain that works only from where the run stands (no replay of the repaired plan reaches it):
+at most 0.52, below a repair that replays from the start (a re-orientation, 0.6), so the robot first tries a repair
+it can keep. Magnetic s1 0030, 0038, 0042, 0043, 0051 (a part on its side): the backtrack through the grasp the
+failed attach left repaired them, and the second exposure repeated it; turned upright first, they keep the repair
+and replay it with zero attempts."""
 KINDS = (FailureKind.VERIFICATION, FailureKind.UNEXPECTED_CONFIGURATION)
 
 
@@ -242,8 +250,9 @@ class PoseBacktracking:
         elif not replayable:
             evidence["keep"] = False  # works from where this run stands, not in a replay from the start
             evidence["not_kept_because"] = next((item for item in limits if item.get("from")), {})
+        kept = replayable or "replay_plan" in evidence
         return [RepairProposal(
-            "backtrack", (0.35 + 0.6 * agreement) * (1.0 if replayable else 0.9),
+            "backtrack", (0.35 + 0.6 * agreement) * (1.0 if replayable else 0.9 if kept else UNKEPT),
             f"back to step {steps[0]}: {len(steps)} pose(s) of {active} from {len(traces)} successful trace(s), "
             f"turned into gripper poses through the current grasp",
             changes={"to_step": steps[0], "args": symbols}, evidence=evidence)]

@@ -264,3 +264,26 @@ def test_a_repair_its_plugin_says_does_not_replay_is_not_kept_as_a_refinement(bl
             "saved": False, "reason": "attempt(s) [1]: the proposing plugin says the repaired plan does not replay "
                                       "from the start"}
         assert store.list() == []
+
+
+def test_a_chain_that_works_only_from_where_the_run_stands_ranks_below_a_repair_that_replays():
+    """The same chain, scored as replayable, as kept through a replay of the moves the part was held in, and as
+    working only from here: the last ranks below a re-orientation's 0.6 (it replays from the start), so a part on
+    its side is turned upright first and the repair is kept (generated magnetic s1 0030, 0038, 0042, 0043, 0051)."""
+    from bt_meta_plugins.reorientation import Reorientation
+
+    class World:
+        def register_pose(self, symbol: str) -> bool:
+            return True
+
+    plugin = pb.PoseBacktracking()
+    chain = [(5, np.eye(4), {"relative": [0.0, 0.0, 0.05, 0.0, 0.0, 0.0]})]
+
+    def score(replayable: bool, replay_plan: list | None = None) -> float:
+        (proposal,) = plugin._proposal(World(), [5], chain, [], [], {"reference": "reference"}, "active", [1, 2, 3],
+                                       replayable, replay_plan)
+        return proposal.score
+
+    kept_through_moves = score(False, [(4, "MoveTo", ["joint_above"]), (5, "MoveTo", ["joint"])])
+    assert score(True) > kept_through_moves > score(False)
+    assert Reorientation().score > score(False) > 0.3  # still above a retry

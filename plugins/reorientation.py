@@ -22,13 +22,15 @@ down first) turns the part by the rotation between its last set-down pose and th
 world's pose grounding when it offers ``ground_pose``; else a quarter turn about the robot's x axis); the fewest
 runs that bring the normal within :data:`ALIGNED_ANGLE` of the demonstrated one.
 
-The proposal is a ``splice`` of the planned steps from the failed step on. Its evidence carries ``replay_plan``:
-the same re-orientation planned from the problem's initial state (the part's normal when the run started,
+The proposal is a ``splice`` of the planned steps from the failed step on. Its evidence carries ``replay_plan``: the
+same re-orientation planned from the problem's initial state (the part's normal when the run started,
 ``run.start_objects``; without the orientation facts sensing contradicted, which were no truer then), which the
 executor stores as the refinement (the failed attempt, its release and re-pick are not replayed on the next
-exposure). A held part whose method lets it go without a turn (a part jammed in an
-insertion) is only set down first (``keep_goal``: the goal is not rewritten): the turns are counted at the next
-failure, from how it landed. A settle, or a number of turns, the run's repair history already tried is not
+exposure). Mid-plan, where the turns go in before the rest of the failed plan and nothing that ran is redone, the
+evidence also says ``as_run_replays``: after another plugin's repair (a tiling), which the replay plan knows nothing
+of, the plan as run is kept instead (letters_H s1 0015). A held part whose method lets it go without a turn (a part
+jammed in an insertion) is only set down first (``keep_goal``: the goal is not rewritten): the turns are counted at
+the next failure, from how it landed. A settle, or a number of turns, the run's repair history already tried is not
 proposed again (the part lands the same way: proposing it from each new step spent the attempt budget).
 
 Offers:
@@ -242,6 +244,7 @@ class Reorientation:
                 log.info("reorientation: no number of %s brings the normal of %s to the demonstrated one", name, part)
                 continue
             now = self._plan(domain, problem, state, [(name, part)] * turns + [tuple(t) for t in problem.tasks], run)
+            as_run = now is None
             if now is None:  # the task network cannot be planned again from here (its blocks are placed): the turns,
                 now = self._before_rest(domain, problem, state, name, part, turns, failure, start, run)
             if now is None:  # then the rest of the plan as it was
@@ -261,6 +264,8 @@ class Reorientation:
                 log.info("reorientation: %d x %s of %s was tried and failed: not again", turns, name, part)
                 continue
             evidence.update(method_task=name, turns=turns, replay_plan=replay)
+            if as_run:  # turns put in before the failed step, nothing run redone: the plan as run replays as well
+                evidence["as_run_replays"] = True
             if back and now[:1] != back:
                 now = back + now
             return [RepairProposal(

@@ -274,10 +274,7 @@ class MetaExecutor:
         report.rebound = dict(plan_state.rebound)
         if report.status == "success" and report.attempts and self.refinements is not None and self.save_refinements:
             # a repair that only replays through its own replay plan must be the last one (whose plan is saved)
-            replaying = (_replaying(report.attempts) or (None,))[0]
-            unkept = [a.number for a in report.attempts if _survives(a, report.plan) and (
-                (a.proposal.get("evidence") or {}).get("keep") is False
-                or ((a.proposal.get("evidence") or {}).get("replay_plan") and a is not replaying))]
+            unkept = _unkept(report.attempts, report.plan)
             if unkept:  # a repair that worked from where this run stood, not from the initial state
                 report.refinement_saved = {"saved": False, "reason": f"attempt(s) {unkept}: the proposing plugin says "
                                                                      "the repaired plan does not replay from the start"}
@@ -503,6 +500,22 @@ def _rebind(world: Any, before: dict[str, str], after: dict[str, str]) -> None:
             rebind(symbol, name)
 
 
+def _unkept(attempts: list[Attempt], plan: list[list[str]]) -> list[int]:
+    """The attempts (numbers) whose repair does not replay from the start as the run's refinement would: marked
+    ``keep: False`` by their plugin, or with a ``replay_plan`` that is not the one replayed (:func:`_replaying`)
+    unless the plan as run replays as well (``as_run_replays``); attempts a later one undid do not count."""
+    replaying = (_replaying(attempts) or (None,))[0]
+    out = []
+    for attempt in attempts:
+        evidence = attempt.proposal.get("evidence") or {}
+        if not _survives(attempt, plan):
+            continue
+        if evidence.get("keep") is False or (evidence.get("replay_plan") and attempt is not replaying
+                                             and not evidence.get("as_run_replays")):
+            out.append(attempt.number)
+    return out
+
+
 def _replayed(report: RunReport) -> RunReport:
     """``report`` with the plan a refinement should replay: a ``replay_plan`` its plugin planned from the initial
     state (a re-orientation: not the failed attach, its release and the re-pick), with the repairs made after it
@@ -529,7 +542,7 @@ def _replaying(attempts: list[Attempt]) -> tuple[Attempt, list[list[str]]] | Non
         return None
     first = attempts[index]
     if any(a.proposal.get("plugin") != first.proposal.get("plugin") for a in attempts[:index]):
-        return None
+        return None  # (an attempt whose evidence says ``as_run_replays`` then leaves the plan as run to be kept)
     plan: list[list[str]] | None = [[str(a) for a in step] for step in first.proposal["evidence"]["replay_plan"]]
     for later in attempts[index + 1:]:
         plan = _carried_over(plan, later)

@@ -214,7 +214,7 @@ def test_a_replay_plan_is_kept_only_when_no_other_plugin_changed_the_plan_before
     """A re-orientation's replay plan is planned from the problem's initial state: kept as the refinement's plan
     when it made the run's only repairs; after another plugin's splice (a tiling of a 1x2 where two 1x1 were), it
     knows nothing of that change, and the plan as run is kept."""
-    from bt_meta.meta.executor import RunReport, _replayed
+    from bt_meta.meta.executor import RunReport, _replayed, _unkept
     from bt_meta.meta.reasoner import Attempt
 
     def attempt(number: int, plugin: str, outcome: str, replay: list | None = None, action: str = "splice"
@@ -254,6 +254,14 @@ def test_a_replay_plan_is_kept_only_when_no_other_plugin_changed_the_plan_before
     backtracked = RunReport("success", "H", attempts=[attempt(1, "reorientation", "failed_again", replay), moved],
                             plan=as_run)
     assert _replayed(backtracked).plan == [*replay[:2], ["place", "held:ref:0:0:0.05:0:0:0"]]
+    # mid-plan, turns put in before the rest of the failed plan after a tiling: the plan as run is the refinement
+    midway = attempt(2, "reorientation", "repaired", replay)
+    midway.proposal["evidence"]["as_run_replays"] = True
+    tiled_then_turned = RunReport("success", "H", attempts=[attempt(1, "object_substitution", "failed_again"),
+                                                             midway], plan=as_run)
+    assert _replayed(tiled_then_turned).plan == as_run and _unkept(tiled_then_turned.attempts, as_run) == []
+    del midway.proposal["evidence"]["as_run_replays"]  # a replay plan that cannot be used, the plan as run no good
+    assert _unkept(tiled_then_turned.attempts, as_run) == [2]
     renamed = attempt(2, "object_substitution", "repaired", action="substitute")
     renamed.proposal["changes"] = {"mapping": {"b7": "s0"}}
     renamed.replaced = [["place", "b1", "0", "1"]]

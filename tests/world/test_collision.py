@@ -166,3 +166,25 @@ def test_pose_helpers():
     assert np.allclose(pin.rpy.matrixToRpy(pose.rotation), [0.1, 0.2, 0.3])
     assert as_se3(pose.homogeneous).isApprox(pose)
     assert as_se3((1, 2, 3)).translation.tolist() == [1, 2, 3]
+
+
+def test_a_carried_object_may_press_a_little_into_a_movable_object_not_into_a_fixed_one(scene, kin):
+    """A negative clearance (the place skill's set-down beside nudged neighbours): 2 mm into another block is not a
+    collision within 3 mm; into the table or a fixed obstacle it still is."""
+    from bt_meta.world.kinematics.collision import TABLE
+
+    gripper = kin.end_effector_pose(kin.home, "right")
+    held_at = gripper * pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.1]))
+    scene.add_box("held", (0.04, 0.04, 0.04), held_at)
+    fingers = {c.first for c in scene.all_contacts(kin.home)}
+    scene.attach("held", "right_gripper", kin.home, allow=fingers)
+    scene.add_box("nudged", (0.04, 0.04, 0.04), held_at * pin.SE3(np.eye(3), np.array([0.038, 0.0, 0.0])))
+    contact = scene.check(kin.home)
+    assert contact is not None and set(contact.pair) == {"held", "nudged"}
+    assert scene.check(kin.home, carried_clearance=-0.003) is None
+    assert scene.check(kin.home, carried_clearance=-0.001) is not None  # deeper than allowed
+    scene.fix("nudged")  # a static obstacle is not pushed back
+    assert scene.check(kin.home, carried_clearance=-0.003) is not None
+    scene.remove("nudged")
+    scene.add_box(TABLE, (0.1, 0.1, 0.01), held_at.translation - np.array([0.0, 0.0, 0.02 + 0.005 - 0.002]))
+    assert scene.check(kin.home, carried_clearance=-0.003) is not None  # 2 mm into the table

@@ -107,6 +107,8 @@ class CollisionChecker:
         self._robot_geometries = self.geometry.ngeoms
         self._link_of = [model.frames[g.parentFrame].name for g in self.geometry.geometryObjects]
         self._objects: dict[str, SceneObject] = {}
+        self._fixed: set[str] = {TABLE}
+        """Scene objects nothing pushes aside (the table, static obstacles): a carried object never presses in."""
         self._allowed: set[frozenset[str]] = set()
         self._geometry_data: pin.GeometryData | None = None
         self._broadphase = None
@@ -170,7 +172,7 @@ class CollisionChecker:
         self._pairs = np.argwhere(np.triu(active, 1))  # setCollisionPairs adds them in this (row-major) order
         self._pair_kinds = ["self" if second < n_robot else "scene" for second in self._pairs[:, 1].tolist()]
         self._masks = {}
-        self._carried: list[int] | None = None
+        self._carried: dict[bool, list[int]] | None = None
         self._geometry_data = None
         self._broadphase = None
 
@@ -354,11 +356,14 @@ class CollisionChecker:
         ``carried_clearance`` (m): a carried object closer than this to another scene object collides with it (a
         block carried past others must not graze them: the shapes here are a little smaller than the simulated
         ones, so that blocks set side by side do not collide, and a graze in the simulator tips the other over).
+        Negative, it may press that far into another object before it collides (a block set down snug between
+        neighbours that were nudged a few millimetres its way: the simulator pushes them back). The table is
+        never in these pairs.
         """
         q = self.kinematics.check_q(q)
         key = (scene, self_collision, arm)
         data, mask = self._activate(key)
-        margins = self._carried_pairs() if carried_clearance > 0.0 else []
+        margins = self._carried_pairs(movable_only=carried_clearance < 0.0) if carried_clearance != 0.0 else []
         # Broad phase first (AABB tree: ~25 us instead of ~110 us when nothing collides); it visits pairs in its
         # own order, so a collision is named by the ordered pass below.
         if (not margins and key == (True, True, None)
@@ -380,16 +385,25 @@ class CollisionChecker:
                 return self._contact(k, results[k])
         return None  # pragma: no cover - computeCollisions said there was one
 
-    def _carried_pairs(self) -> list[int]:
+    def fix(self, name: str) -> None:
+        """Mark scene object ``name`` as fixed (a static obstacle): a carried object may never press into it."""
+        self._fixed.add(name)
+        self._carried = None
+
+    def _carried_pairs(self, movable_only: bool = False) -> list[int]:
         """Indices of the pairs of a carried object and another scene object but the table (what it is lifted from
-        and lowered onto); found once per set of pairs (a move checks every waypoint, a planned path hundreds)."""
+        and lowered onto) -- with ``movable_only``, nor a fixed one (:meth:`fix`); found once per set of pairs (a
+        move checks every waypoint, a planned path hundreds)."""
         if self._carried is None:
             n_robot = self._robot_geometries
             objects = self.geometry.geometryObjects
-            self._carried = [k for k, (first, second) in enumerate(self._pairs.tolist())
-                             if first >= n_robot and second >= n_robot
-                             and TABLE not in (objects[first].name, objects[second].name)]
-        return self._carried
+            pairs = [(k, objects[first].name, objects[second].name)
+                     for k, (first, second) in enumerate(self._pairs.tolist())
+                     if first >= n_robot and second >= n_robot]
+            self._carried = {
+                False: [k for k, a, b in pairs if TABLE not in (a, b)],
+                True: [k for k, a, b in pairs if not ({a, b} & self._fixed)]}
+        return self._carried[movable_only]
 
     def all_contacts(self, q: np.ndarray) -> list[Contact]:
         """Every colliding pair at ``q`` (slower than :meth:`check`: no early stop)."""

@@ -247,15 +247,19 @@ class InverseKinematics:
         seed: int | None = None,
         frame: str | None = None,
         check_collisions: bool = True,
+        carried_clearance: float = 0.0,
     ) -> IKResult:
-        """Joint values putting ``frame`` (default the arm's end effector) at ``target`` in the base frame."""
+        """Joint values putting ``frame`` (default the arm's end effector) at ``target`` in the base frame; its
+        collision check keeps a carried object ``carried_clearance`` from other objects
+        (:meth:`~bt_meta.world.kinematics.collision.CollisionChecker.check`)."""
         started = time.perf_counter()
         kin = self.kinematics
         frame = frame or kin.end_effector(arm)
         solver = self._arm(arm)
         task, body = self._task(solver, arm, frame)
         base = kin.home.copy() if q_start is None else kin.check_q(q_start).copy()
-        run = _Run(self, arm, solver, task, body, frame, as_se3(target), base, seed, check_collisions)
+        run = _Run(self, arm, solver, task, body, frame, as_se3(target), base, seed, check_collisions,
+                   carried_clearance)
         result = run.solve()
         result.time = time.perf_counter() - started
         return result
@@ -276,8 +280,10 @@ class _Run:
         base: np.ndarray,
         seed: int | None,
         check_collisions: bool,
+        carried_clearance: float = 0.0,
     ) -> None:
         self.ik = ik
+        self.carried_clearance = carried_clearance
         self.arm = arm
         self.settings = ik.settings
         self.solver = solver
@@ -335,7 +341,8 @@ class _Run:
     def check(self) -> tuple[np.ndarray, Contact | None]:
         """The full configuration of the current (converged) arm configuration, and its first collision."""
         q = self.solver.mj.to_pinocchio(self.data.qpos, self.base)
-        return q, (self.collision.check(q) if self.collision is not None else None)
+        return q, (self.collision.check(q, carried_clearance=self.carried_clearance)
+                   if self.collision is not None else None)
 
     def escape(self, contact: Contact) -> np.ndarray | None:
         """Slide along the arm's self-motion (the null space of the frame's Jacobian) out of a collision.

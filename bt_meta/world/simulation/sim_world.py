@@ -398,6 +398,7 @@ class SimWorld:
             for k, (kind, dims, local) in enumerate(_collision_shapes(model)):
                 part = name if k == 0 else f"{name}{_PART}{k}"
                 self._add_shape(part, kind, dims, transform @ local)
+                self.collision.fix(part)
         self.sync_collision()
         self._state = initial_state(problem)
         self.executed: list[dict[str, Any]] = []

@@ -55,7 +55,8 @@ class MoveTo(SimSkill):
         self.speed = speed
         """Fraction of the world's joint speed the waypoints are cut for."""
         self.carried_clearance = carried_clearance
-        """A held object keeps this much (m) from every other object on the way (not from the table)."""
+        """A held object keeps this much (m) from every other object on the way (not from the table); negative, it
+        may press that far into one, at the goal too (a block set down snug beside others)."""
         self.position_tolerance = position_tolerance
         self.orientation_tolerance = orientation_tolerance
         self.settle_ticks = settle_ticks
@@ -146,7 +147,8 @@ class MoveTo(SimSkill):
         world.sync_collision()
         q_now = world.current_q()
         started = time.perf_counter()
-        result = world.ik.solve(self.arm, pin.SE3(self.target[:3, :3], self.target[:3, 3]), q_now, seed=world.seed)
+        result = world.ik.solve(self.arm, pin.SE3(self.target[:3, :3], self.target[:3, 3]), q_now, seed=world.seed,
+                                carried_clearance=min(self.carried_clearance, 0.0))
         self.info["ik_time_ms"] = round((time.perf_counter() - started) * 1000.0, 3)
         self.info["ik_attempts"] = result.attempts
         if not result.success:

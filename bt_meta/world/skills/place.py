@@ -72,6 +72,10 @@ SET_DOWN = 0.015
 next to the block on the cell above, it shoved that block 5 mm into the apex's way (generated letters_A s1 0046)."""
 BESIDE = 0.005
 """m: a block put down this close to another object is set down slowly."""
+SNUG = 0.003
+"""m a block lowered onto its target may press into a neighbour: placing the blocks beside it nudged them up to 3 mm
+its way, and the lowering then collided with the apex 0.3 mm deep in the checker (letters_A s0 0020); the
+simulator pushes the neighbour back. Not the table, not during the carry."""
 FLIP_AXES = ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0))
 """Turn axes tried for a block upside down (base frame)."""
 
@@ -179,7 +183,8 @@ class Place(PhasedSkill):
         self.block = block
         self.goal = goal
         self._yaw: float | None = None
-        self._beside: bool | None = None
+        self._beside = False
+        self._down: np.ndarray | None = None
         self.info.update(block=block, goal=rounded(goal))
         self.begin_phases()
         return self
@@ -233,7 +238,7 @@ class Place(PhasedSkill):
         return [
             *pick,
             ("carry", lambda: self._move(self._at_goal(self.approach_height), "above the target", CARRY_CLEARANCE)),
-            ("lower", lambda: self._move(self._at_goal(self._set_down_height()), "down at the target")),
+            ("lower", lambda: self._move(self._lowered(), "down at the target", -SNUG)),
             ("set down", self._set_down),
             ("release", lambda: Grasp(self.world, self.arm).begin(self.block, release=True)),
             ("retreat", lambda: self._move(self._lifted(), "retreat")),
@@ -266,18 +271,24 @@ class Place(PhasedSkill):
         others = [n for n in sim.object_names() if n != self.block]
         return bool(others) and bool(sim.box_clearances(high - low, centre, others, BESIDE))
 
-    def _set_down_height(self) -> float:
-        """How high over the target the lowering at full speed ends: :data:`SET_DOWN` beside other objects (the
-        rest is :meth:`_set_down`), else on the target."""
-        if self._beside is None:
-            self._beside = self._beside_others()
-        return SET_DOWN if self._beside else 0.0
+    def _lowered(self) -> np.ndarray:
+        """Where the lowering at full speed ends: :data:`SET_DOWN` over the target beside other objects (the rest
+        is :meth:`_set_down`), else on it. The gripper pose on the target is fixed here, through the grasp as it is
+        before anything is touched: a block brushing its neighbours on the way down sits a little differently in
+        the gripper, and the pose read from that put it 6.6 mm into the table (letters_A s0 0020, the apex)."""
+        self._down = self._at_goal(0.0)
+        self._beside = self._beside_others()
+        lowered = self._down.copy()
+        if self._beside:
+            lowered[2, 3] += SET_DOWN
+        return lowered
 
     def _set_down(self) -> MoveTo | None:
         """The last :data:`SET_DOWN` onto the target, slowly (:data:`WITHDRAW_SPEED`), beside other objects."""
-        if not self._beside:
+        if not self._beside or self._down is None:
             return None
-        return MoveTo(self.world, self.arm, speed=WITHDRAW_SPEED).begin(self._at_goal(0.0), "set down at the target")
+        return MoveTo(self.world, self.arm, speed=WITHDRAW_SPEED, carried_clearance=-SNUG).begin(
+            self._down, "set down at the target")
 
     def _over(self, pose: np.ndarray, heights: float = 1.0) -> np.ndarray:
         raised = np.asarray(pose, float).copy()

@@ -284,10 +284,13 @@ class Place(PhasedSkill):
         return lowered
 
     def _set_down(self) -> MoveTo | None:
-        """The last :data:`SET_DOWN` onto the target, slowly (:data:`WITHDRAW_SPEED`), beside other objects."""
+        """The last :data:`SET_DOWN` onto the target, slowly (:data:`WITHDRAW_SPEED`), beside other objects. The
+        place was checked from above (:data:`SNUG`); a block that brushed a neighbour on the way down may press
+        twice as far into it now (held by friction, it turns a little in the fingers: the Panda's letter H, b6
+        beside b1, 3.5 mm)."""
         if not self._beside or self._down is None:
             return None
-        return MoveTo(self.world, self.arm, speed=WITHDRAW_SPEED, carried_clearance=-SNUG).begin(
+        return MoveTo(self.world, self.arm, speed=WITHDRAW_SPEED, carried_clearance=-2.0 * SNUG).begin(
             self._down, "set down at the target")
 
     def _over(self, pose: np.ndarray, heights: float = 1.0) -> np.ndarray:

@@ -48,7 +48,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["OUTCOMES", "Label", "Labeller", "letter_cells", "letters_feasible", "max_pairs"]
+__all__ = ["OUTCOMES", "Label", "Labeller", "letter_cells", "letters_feasible", "max_pairs", "place_overlap"]
 
 OUTCOMES = ("nominal_equivalent", "repairable", "limit:reachability", "limit:collision", "unrepairable")
 
@@ -63,9 +63,6 @@ PATH_STEPS = 24
 """Waypoints checked on a joint-space line (move_to checks one per tick: about as many for these motions)."""
 CANDIDATES = 3
 """Objects tried per place before it counts as blocked (the nominal one first)."""
-PLACE_OVERLAP = 0.0005
-"""A letter cell is occupied when an object reaches this deep (m) into its footprint (blocks are exactly LB wide:
-a neighbour that only touches the cell's edge does not count)."""
 PROBE_HEIGHT = 0.02
 """Height (m) of the footprint probe above a letter cell, from just above the table: anything resting there."""
 REORIENT_PREFIX = "Reorient"
@@ -77,6 +74,19 @@ class Label:
     expected: str
     reason: str
     evidence: dict[str, Any] = field(default_factory=dict)
+
+
+def place_overlap() -> float:
+    """How deep (m) an object may reach into a letter cell's footprint before the cell is occupied: 6 mm, what the
+    place skill's lowering takes as room -- the collision shapes are ``SHRINK`` smaller on every side than the
+    simulated ones (blocks side by side touch exactly), and a block set down may press ``SNUG`` into a movable
+    neighbour, which the simulator pushes aside. At 0.5 mm a distractor reaching 0.7 to 3.8 mm into a cell was
+    labelled a limit, and the place skill, setting the block down, pushed it away (generated letters_A s1 0088 0091
+    0113, letters_H s1 0027)."""
+    from bt_meta.world.simulation.sim_world import SHRINK
+    from bt_meta.world.skills.place import SNUG
+
+    return 2.0 * SHRINK + SNUG
 
 
 def letter_cells(plan: Iterable[Any], shapes: dict[str, str]) -> list[tuple[float, float]]:
@@ -223,7 +233,7 @@ class Labeller:
 
     def _occupied_cell(self, world: Any, names: Sequence[str]) -> Label | None:
         """``limit:collision`` when an object reaches into a letter cell's footprint (deeper than
-        :data:`PLACE_OVERLAP`): with its centre further than :data:`BLOCKING_RADIUS` away, a block turned or longer
+        :func:`place_overlap`): with its centre further than :data:`BLOCKING_RADIUS` away, a block turned or longer
         than a cell still takes room the placed block needs. Ground truth: the simulator's closest points."""
         from bt_meta.world.simulation.objects import LB
 
@@ -231,6 +241,7 @@ class Labeller:
         if frame is None:
             return None
         sim = world.sim
+        overlap = place_overlap()
         for step, action in enumerate(self.plan):
             if action.name != "place":
                 continue
@@ -243,7 +254,7 @@ class Labeller:
                 pose[:2, :2] = [[c, -s_], [s_, c]]
                 pose[:3, 3] = (gx, gy, sim.table.top_z + 0.002 + PROBE_HEIGHT / 2.0)
                 near = {n: d for n, d in sim.box_clearances((LB, LB, PROBE_HEIGHT), pose, names, 0.0).items()
-                        if d < -PLACE_OVERLAP and n != str(action.args[0])}  # a block on its own cell is picked
+                        if d < -overlap and n != str(action.args[0])}  # a block on its own cell is picked
                 if near:
                     name, gap = min(near.items(), key=lambda item: item[1])
                     return Label("limit:collision", f"{name} reaches into the cell ({x + dx:g}, {y:g}) where the "

@@ -67,9 +67,12 @@ LETTER_CASES = {
     "named_block_on_a_cell": ("repairable", "override: {b5: {pose: [0.55, 0.10, table, 0, 0, 0]}}"),
     "cell_blocked": ("limit:collision",
                      "add: [{name: d, type: megablok_1x1, colour: green, pose: [0.55, 0.10, table, 0, 0, 0]}]"),
-    # Its centre is 55 mm from the nearest cell's (further than BLOCKING_RADIUS), its long side 6 mm into it.
+    # Its centre is 50 mm from the nearest cell's (further than BLOCKING_RADIUS), its long side 11 mm into it.
     "bar_reaching_into_a_cell": ("limit:collision", "add: [{name: d, type: megablok_1x2, colour: green, "
-                                 "pose: [0.55, 0.155, table, 0, 0, 0]}]"),
+                                 "pose: [0.55, 0.150, table, 0, 0, 0]}]"),
+    # 3 mm into the cell: the place skill's set-down takes that as room and pushes the bar aside (place_overlap).
+    "bar_grazing_a_cell": ("nominal_equivalent", "add: [{name: d, type: megablok_1x2, colour: green, "
+                           "pose: [0.55, 0.158, table, 0, 0, 0]}]"),
 }
 
 
@@ -110,7 +113,7 @@ def test_letters_labels(letters_labeller, tmp_path, case):
     label = letters_labeller.label(path, "perturbed")
     assert label.expected == expected, label.reason
     if case == "bar_reaching_into_a_cell":
-        assert "reaches into the cell (0, 0)" in label.reason and label.evidence["gap"] < -0.004
+        assert "reaches into the cell (0, 0)" in label.reason and label.evidence["gap"] < -0.009
 
 
 @pytest.mark.slow

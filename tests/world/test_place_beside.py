@@ -81,3 +81,29 @@ def test_a_placement_run_again_with_its_block_still_held_carries_it_from_where_i
     assert sim.held("right") is None
     target = np.array(world.ground_cell("letter", "5", "1")[:2])
     assert np.linalg.norm(xy(world, "b3") - target) < 0.01
+
+
+def test_a_block_set_down_where_a_distractor_reaches_a_few_millimetres_in_pushes_it_aside(world):
+    """A green bar reaching 3 mm into cell (0, 0): b0 goes down there and the bar is pushed away (what the
+    campaign labeller's ``place_overlap`` counts as room); 11 mm in, the lowering collides with it."""
+    from bt_meta.campaign.labeller import place_overlap
+    from bt_meta.world.simulation.objects import LB, megablok
+
+    sim = world.sim
+    cell = np.array(world.ground_cell("letter", "0", "0")[:2])
+    reach = 0.003
+    sim.spawn("d", megablok("1x2", "green"), (cell[0], cell[1] + LB - reach, 0, 0, 0, 0), on_table=True)
+    sim.settle(60)
+    world.sync_collision()
+    before = xy(world, "d")
+    status, skill = place(world, "b0", "0", "0")
+    assert status == "SUCCESS", skill.info
+    assert np.linalg.norm(xy(world, "b0") - cell) < 0.005
+    assert xy(world, "d")[1] > before[1] + 0.001  # pushed aside
+    assert reach < place_overlap()
+    far = np.array(world.ground_cell("letter", "3", "0")[:2])
+    sim.spawn("deep", megablok("1x2", "green"), (far[0], far[1] - LB + 0.011, 0, 0, 0, 0), on_table=True)
+    sim.settle(60)
+    world.sync_collision()
+    status, skill = place(world, "b2", "3", "0")
+    assert status == "FAILURE" and skill.record()["failure"]["kind"] == "collision", skill.info

@@ -199,20 +199,14 @@ class Place(PhasedSkill):
             held = self.world.sim.held(self.arm) == self.block
             picked = (getattr(self.world, "grasp_poses", None) or {}).get(self.block) if held else None
             if not held:
-                pick = [
-                    ("approach", lambda: self._move(self._over_block(self.approach_height), "above " + self.block)),
-                    ("descend", self._descend),
-                    ("grasp", self._grasp),
-                    ("withdraw", self._withdraw),
-                    ("lift", lambda: self._move(self._lifted(), "lift " + self.block)),
-                ]
+                pick = self._pick_phases()
             elif picked is not None:
                 # A block a failed place left in the gripper was carried with the wrist tilted to stand it up
                 # (picked on its side): turned from there, the wrist sweeps it into the table. It is taken back
                 # over where it was picked, held as it was picked, and turned from there (TURN_RISE).
                 pick = [("back", lambda: self._move(self._over(picked, 2.0), f"back over where {self.block} lay"))]
             else:  # held, not picked by this world's place: turned from where it is held
-                pick = [("lift", lambda: self._move(self._lifted(), "lift " + self.block))]
+                pick = self._pick_phases(held=True)
             return [
                 *pick,
                 ("half turn", lambda: self._move(self._half_turned(), "half turn " + self.block)),
@@ -224,24 +218,27 @@ class Place(PhasedSkill):
                 # hand through the blocks beside the one to pick (letters_H s0 0024, a kept turn replayed first)
                 ("square", lambda: self._move(self._squared(), "wrist top-down")),
             ]
-        if self.world.sim.held(self.arm) == self.block:
-            # still held from a placement that failed on the way (a repair runs it again): carried from here
-            pick = [("lift", lambda: self._move(self._lifted(), "lift " + self.block))]
-        else:
-            pick = [
-                ("approach", lambda: self._move(self._over_block(self.approach_height), "above " + self.block)),
-                ("descend", self._descend),
-                ("grasp", self._grasp),
-                ("withdraw", self._withdraw),
-                ("lift", lambda: self._move(self._lifted(), "lift " + self.block)),
-            ]
+        # a block still held from a placement that failed on the way (a repair runs it again) is carried from there
         return [
-            *pick,
+            *self._pick_phases(held=self.world.sim.held(self.arm) == self.block),
             ("carry", lambda: self._move(self._at_goal(self.approach_height), "above the target", CARRY_CLEARANCE)),
             ("lower", lambda: self._move(self._lowered(), "down at the target", -SNUG)),
             ("set down", self._set_down),
             ("release", lambda: Grasp(self.world, self.arm).begin(self.block, release=True)),
             ("retreat", lambda: self._move(self._lifted(), "retreat")),
+        ]
+
+    def _pick_phases(self, held: bool = False) -> list[tuple[str, Any]]:
+        """Approach, descend, grasp, withdraw, lift -- or only the lift for a block already held."""
+        lift = ("lift", lambda: self._move(self._lifted(), "lift " + self.block))
+        if held:
+            return [lift]
+        return [
+            ("approach", lambda: self._move(self._over_block(self.approach_height), "above " + self.block)),
+            ("descend", self._descend),
+            ("grasp", self._grasp),
+            ("withdraw", self._withdraw),
+            lift,
         ]
 
     def _grasp(self) -> Grasp:

@@ -174,4 +174,3 @@ def test_a_part_out_of_reach_where_it_lies_is_named_in_the_failure(fresh):
     # a motion that fails on the way to a target (not to the part where it lies) names nothing out of reach
     skill = MoveTo(fresh).begin(down(2.0, -0.2, 0.1), "far away")
     assert skill.tick() == FAILURE and "out_of_reach" not in skill.failure.evidence
-

@@ -75,11 +75,12 @@ log = logging.getLogger("bt_meta.meta.pose_backtracking")
 STRATEGY = "pose_backtracking"
 
 UNKEPT = 0.55
-"""Score factor of a chain that works only from where the run stands (no replay of the repaired plan reaches it):
-at most 0.52, below a repair that replays from the start (a re-orientation, 0.6), so the robot first tries a repair
-it can keep. Magnetic s1 0030, 0038, 0042, 0043, 0051 (a part on its side): the backtrack through the grasp the
-failed attach left repaired them, and the second exposure repeated it; turned upright first, they keep the repair
-and replay it with zero attempts."""
+"""Score factor of a chain that works only from where the run stands (no replay of the repaired plan reaches it),
+as the run's first repair: at most 0.52, below a repair that replays from the start (a re-orientation, 0.6), so the
+robot first tries a repair it can keep. Magnetic s1 0030, 0038, 0042, 0043, 0051 (a part on its side): the
+backtrack through the grasp the failed attach left repaired them, and the second exposure repeated it; turned
+upright first, they keep the repair and replay it with zero attempts. After a failed repair it is scored as any
+other (magnetic s0 0055: turned twice and still not joined, a third turn instead of the backtrack failed)."""
 KINDS = (FailureKind.VERIFICATION, FailureKind.UNEXPECTED_CONFIGURATION)
 
 
@@ -221,6 +222,7 @@ class PoseBacktracking:
             return self._proposal(world, steps, chain, rows, limits, evidence, active, traces, True)
         if fallback is not None:
             replay_plan = self._replay_through(plan, fallback[0][0], failed, failure.kind)
+            evidence["first_repair"] = not failure.evidence.get("repair_history")
             return self._proposal(world, *fallback, rows, limits, evidence, active, traces, False, replay_plan)
         return [self._limit(limits, window, evidence)]
 
@@ -250,7 +252,9 @@ class PoseBacktracking:
         elif not replayable:
             evidence["keep"] = False  # works from where this run stands, not in a replay from the start
             evidence["not_kept_because"] = next((item for item in limits if item.get("from")), {})
-        kept = replayable or "replay_plan" in evidence
+        # a repair that cannot be kept yields to one that can only as the run's first: once repairs have failed,
+        # the one that works from here goes first (magnetic s0 0055: turned twice, still not joined)
+        kept = replayable or "replay_plan" in evidence or not evidence.get("first_repair", True)
         return [RepairProposal(
             "backtrack", (0.35 + 0.6 * agreement) * (1.0 if replayable else 0.9 if kept else UNKEPT),
             f"back to step {steps[0]}: {len(steps)} pose(s) of {active} from {len(traces)} successful trace(s), "

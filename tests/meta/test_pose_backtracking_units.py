@@ -287,3 +287,7 @@ def test_a_chain_that_works_only_from_where_the_run_stands_ranks_below_a_repair_
     kept_through_moves = score(False, [(4, "MoveTo", ["joint_above"]), (5, "MoveTo", ["joint"])])
     assert score(True) > kept_through_moves > score(False)
     assert Reorientation().score > score(False) > 0.3  # still above a retry
+    # after a failed repair (a re-orientation that did not join the parts) it ranks as a kept one would
+    (later,) = plugin._proposal(World(), [5], chain, [], [], {"reference": "reference", "first_repair": False},
+                                "active", [1, 2, 3], False, None)
+    assert later.score == kept_through_moves

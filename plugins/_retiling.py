@@ -12,8 +12,13 @@ is taken (the search's order breaks ties). Every other tile gets a block -- the 
 first, since they must leave them anyway (a placed block the new tiling moves, the block the failed step put down),
 then the plan's, then the rest -- and the tiles are put in an order where no block is put down on a cell another
 block still lies on. A binding whose order would need a cycle (b1 must leave the cell b2 goes to, and b2 the one b1
-goes to) is replaced by the next; a block lying on the drawing that no tile can take (a shape the drawing has no
-room for) leaves the tiling without a proposal: nothing here sets a block aside.
+goes to) is replaced by the next. A block of the plan lying on the drawing that no tile is left for (more blocks
+than the new tiling uses: the apex found out of reach only once the letter was drawn, and a 1x2 stand-in for it
+makes two 1x2 across the leg tops, so one drawn 1x1 is one too many -- generated letters_A s1 0106) is set aside
+first: at the nearest grid point of the drawing's frame with a free cell between it and the drawing, clear of every
+other object, where the world says it can be put down (``world.put_down_problem``: clear of static obstacles and
+reachable). A block the plan does not name (a distractor) lying there that no tile takes leaves no proposal: what
+the task does not name is not moved off the drawing.
 
 The proposal is a ``splice`` of the remaining steps with these placements, scored :data:`SCORE` (below a tiling of
 the remaining cells alone, which moves nothing drawn). Its ``facts`` undo, when it is applied, the executed
@@ -29,7 +34,8 @@ Offers:
 from __future__ import annotations
 
 import itertools
-from collections.abc import Mapping, Sequence
+import math
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from bt_meta_plugins._tilings import (
@@ -39,9 +45,11 @@ from bt_meta_plugins._tilings import (
     cells_in_the_way,
     coordinate_text,
     footprint,
+    frame_inverse,
     read_drawing,
     tile,
     tilings,
+    unit_centres,
 )
 
 from bt_meta.bt.failures import RepairProposal
@@ -59,8 +67,17 @@ MAX_TILINGS = 200
 MAX_BINDINGS = 2000
 """Bindings of blocks to the tiles that move tried for an order without a cycle, per tiling."""
 
+ASIDE_RANGE = 4
+"""Cells around the drawing searched for a spot to set a block aside."""
+
+ASIDE_CHECKS = 12
+"""Nearest spots the world is asked about (each an IK solve or two) before giving up."""
+
 Tile = tuple[str, Cell, list[Cell]]
 """(shape, centre, cells)."""
+
+Found = tuple[dict[str, Tile], list[str], dict[str, Cell]]
+"""(block -> its tile, the order of the blocks that move onto tiles, block -> where it is set aside)."""
 
 
 def retiling_proposals(vector: Any, failure: Any, context: Any, colours: str = "prefer") -> list[RepairProposal]:
@@ -81,7 +98,7 @@ def retiling_proposals(vector: Any, failure: Any, context: Any, colours: str = "
     plan_blocks = [p[1] for p in placements]
     for wanted in dict.fromkeys([drawing.colour, None] if colours == "prefer" else [drawing.colour]):
         candidates = drawing.on_hand(wanted, seen, plan_blocks)
-        found = _best(drawing, placements, candidates, lying)
+        found = _best(drawing, placements, candidates, lying, set(plan_blocks))
         if found is not None:
             relaxed = drawing.colour if wanted is None and drawing.colour is not None else None
             return [_proposal(drawing, placements, found, lying, relaxed, context, vector)]
@@ -107,9 +124,9 @@ def _counts(drawing: Drawing, names: Sequence[str]) -> dict[str, int]:
 
 
 def _best(drawing: Drawing, placements: Sequence[tuple[int, str, list[Cell]]], candidates: list[str],
-          lying: Mapping[str, set[Cell]]) -> tuple[dict[str, Tile], list[str]] | None:
-    """(block -> its tile, the order of the blocks that move) for the tiling that moves the fewest blocks and has
-    a binding in an order without a cycle; ``None`` when none has."""
+          lying: Mapping[str, set[Cell]], asidable: set[str]) -> Found | None:
+    """(block -> its tile, the order of the blocks that move, block -> where it is set aside) for the tiling that
+    moves the fewest blocks and has a binding in an order without a cycle; ``None`` when none has."""
     seen = drawing.seen
     counts = _counts(drawing, candidates)
     # a placed block still covering just its own cells may stay; the search tries its shape there first
@@ -123,18 +140,24 @@ def _best(drawing: Drawing, placements: Sequence[tuple[int, str, list[Cell]]], c
                 if frozenset(cs) == own and str(seen[block]["shape"]) == shape}
         found.append((len(covers) - len(kept), len(found), covers, kept))
     step_of = {c: step for step, _, cs in placements for c in cs}
+    cells = [c for p in placements for c in p[2]]
+
+    def spot(block: str, taken: Sequence[Cell]) -> Cell | None:
+        return _aside_spot(drawing, block, cells, taken)
+
+    owner = {c: block for _, block, cs in placements for c in cs}
     for _, _, covers, kept in sorted(found, key=lambda f: (f[0], f[1])):
-        owner = {c: block for _, block, cs in placements for c in cs}
-        bound = _bind(covers, kept, candidates, lying, seen, step_of, owner)
+        bound = _bind(covers, kept, candidates, lying, seen, step_of, owner, asidable, spot)
         if bound is not None:
             return bound
     return None
 
 
 def _bind(covers: list[Tile], kept: Mapping[str, int], candidates: list[str], lying: Mapping[str, set[Cell]],
-          seen: Mapping[str, Mapping[str, Any]], step_of: Mapping[Cell, int], owner: Mapping[Cell, str]
-          ) -> tuple[dict[str, Tile], list[str]] | None:
-    """Blocks for the tiles no placed block keeps, in an order where none lands on a block still to move."""
+          seen: Mapping[str, Mapping[str, Any]], step_of: Mapping[Cell, int], owner: Mapping[Cell, str],
+          asidable: set[str], spot: Callable[[str, Sequence[Cell]], Cell | None]) -> Found | None:
+    """Blocks for the tiles no placed block keeps, in an order where none lands on a block still to move; a block
+    of the plan lying on the drawing that no tile of its shape is left for is set aside first, at a ``spot``."""
     taken = set(kept.values())
     moving = [i for i in range(len(covers)) if i not in taken]
     movers = sorted(b for b in lying if b not in kept)
@@ -145,39 +168,99 @@ def _bind(covers: list[Tile], kept: Mapping[str, int], candidates: list[str], ly
     for i in moving:
         by_shape.setdefault(covers[i][0], []).append(i)
     per_shape = []
-    for shape, tiles in by_shape.items():
+    for shape in {*by_shape, *(str(seen[b]["shape"]) for b in movers)}:
+        tiles = by_shape.get(shape, [])
         mine = [b for b in movers if str(seen[b]["shape"]) == shape]
         rest = [b for b in others if str(seen[b]["shape"]) == shape]
-        if len(mine) > len(tiles) or len(mine) + len(rest) < len(tiles):
+        if len(mine) + len(rest) < len(tiles):
             return None
-        per_shape.append(_shape_bindings(tiles, mine, rest, covers, step_of, owner))
+        options = _shape_bindings(tiles, mine, rest, covers, step_of, owner, asidable)
+        if not options:
+            return None  # more blocks of this shape on the drawing than tiles, and one the plan does not name
+        per_shape.append(options)
     for tried, combination in enumerate(itertools.product(*per_shape)):
         if tried >= MAX_BINDINGS:
             return None
-        binding = {block: covers[i] for part in combination for i, block in part.items()}
-        order = acyclic_order(binding, lying, step_of)
-        if order is not None:
-            return {**binding, **{block: covers[i] for block, i in kept.items()}}, order
+        binding = {block: covers[i] for part, _ in combination for i, block in part.items()}
+        aside = [block for _, blocks in combination for block in blocks]
+        order = acyclic_order(binding, {b: c for b, c in lying.items() if b not in aside}, step_of)
+        if order is None:
+            continue
+        spots: dict[str, Cell] = {}
+        for block in aside:
+            where = spot(block, list(spots.values()))
+            if where is None:
+                break
+            spots[block] = where
+        else:
+            return {**binding, **{block: covers[i] for block, i in kept.items()}}, order, spots
     return None
 
 
 def _shape_bindings(tiles: list[int], movers: list[str], rest: list[str], covers: list[Tile],
-                    step_of: Mapping[Cell, int], owner: Mapping[Cell, str]) -> list[dict[int, str]]:
+                    step_of: Mapping[Cell, int], owner: Mapping[Cell, str], asidable: set[str]
+                    ) -> list[tuple[dict[int, str], list[str]]]:
     """Every way to give ``tiles`` (of one shape) the ``movers``, the other tiles blocks of ``rest`` (in their
-    order; a tile the plan meant one of them for takes that one): tile index -> block."""
-    out = []
-    for chosen in itertools.permutations(tiles, len(movers)):
-        binding = dict(zip(chosen, movers, strict=True))
+    order; a tile the plan meant one of them for takes that one): (tile index -> block, the movers set aside --
+    when there are more than tiles, only blocks of ``asidable``)."""
+    out: list[tuple[dict[int, str], list[str]]] = []
+    if len(movers) > len(tiles):
+        for chosen in itertools.permutations(movers, len(tiles)):
+            aside = [b for b in movers if b not in chosen]
+            if all(b in asidable for b in aside):
+                out.append((dict(zip(tiles, chosen, strict=True)), aside))
+            if len(out) >= MAX_BINDINGS:
+                break
+        return out
+    for placed in itertools.permutations(tiles, len(movers)):
+        binding = dict(zip(placed, movers, strict=True))
         left = list(rest)
         for i in sorted((i for i in tiles if i not in binding), key=lambda i: min(step_of[c] for c in covers[i][2])):
             planned = [b for b in left if b in {owner.get(c) for c in covers[i][2]}]
             block = (planned or left)[0]
             left.remove(block)
             binding[i] = block
-        out.append(binding)
+        out.append((binding, []))
         if len(out) >= MAX_BINDINGS:
             break
     return out
+
+
+def _aside_spot(drawing: Drawing, block: str, cells: Sequence[Cell], taken: Sequence[Cell]) -> Cell | None:
+    """Where to set ``block`` aside, in the drawing's frame: the nearest grid point to where it lies whose
+    footprint keeps a free cell between it and the drawing and a cell from every other object and spot ``taken``,
+    where the world says it can be put down (``world.put_down_problem``: clear of static obstacles, reachable);
+    ``None`` when no point within :data:`ASIDE_RANGE` cells of the drawing is."""
+    world, frame = drawing.world, str(drawing.frame)
+    to_frame = frame_inverse(world, frame)
+    state = drawing.seen.get(block) or {}
+    pose = state.get("pose") or []
+    shape = str(state.get("shape"))
+    if to_frame is None or len(pose) < 2 or footprint(shape, 0.0, 0.0) is None:
+        return None
+    here = to_frame(float(pose[0]), float(pose[1]))
+    units = [u for name, other in drawing.seen.items() if name != block for u in unit_centres(other, to_frame)]
+    width = len(footprint(shape, 0.0, 0.0) or [])
+    xs, ys = [c[0] for c in cells], [c[1] for c in cells]
+    points = []
+    for cy in range(math.floor(min(ys)) - ASIDE_RANGE, math.ceil(max(ys)) + ASIDE_RANGE + 1):
+        for cx in range(math.floor(min(xs)) - ASIDE_RANGE, math.ceil(max(xs)) + ASIDE_RANGE + 1):
+            centre = (cx + (width - 1) / 2.0, float(cy))
+            covered = footprint(shape, *centre) or []
+            if any(_chebyshev(f, c) < 2.0 for f in covered for c in cells):
+                continue  # on the drawing or right beside it
+            if any(_chebyshev(f, u) < 1.2 for f in covered for u in [*units, *taken]):
+                continue
+            points.append((math.hypot(centre[0] - here[0], centre[1] - here[1]), centre))
+    check = getattr(world, "put_down_problem", None)
+    for _, centre in sorted(points)[:ASIDE_CHECKS]:
+        if check is None or check(block, frame, centre[0], centre[1]) is None:
+            return centre
+    return None
+
+
+def _chebyshev(a: Cell, b: Cell) -> float:
+    return max(abs(a[0] - b[0]), abs(a[1] - b[1]))
 
 
 def acyclic_order(binding: Mapping[str, Tile], lying: Mapping[str, set[Cell]], step_of: Mapping[Cell, int]
@@ -198,14 +281,15 @@ def acyclic_order(binding: Mapping[str, Tile], lying: Mapping[str, set[Cell]], s
     return order
 
 
-def _proposal(drawing: Drawing, placements: Sequence[tuple[int, str, list[Cell]]],
-              found: tuple[dict[str, Tile], list[str]], lying: Mapping[str, set[Cell]], relaxed: str | None,
-              context: Any, vector: Any) -> RepairProposal:
-    binding, moves = found
+def _proposal(drawing: Drawing, placements: Sequence[tuple[int, str, list[Cell]]], found: Found,
+              lying: Mapping[str, set[Cell]], relaxed: str | None, context: Any, vector: Any) -> RepairProposal:
+    binding, moves, aside = found
     step_of = {c: step for step, _, cs in placements for c in cs}
     done = {block for _, block, _ in drawing.done}
-    actions = [[drawing.action, b, coordinate_text(binding[b][1][0]), coordinate_text(binding[b][1][1])] for b in moves]
-    moved = sorted(b for b in moves if b in done)
+    actions = [[drawing.action, b, coordinate_text(aside[b][0]), coordinate_text(aside[b][1])] for b in aside]
+    actions += [[drawing.action, b, coordinate_text(binding[b][1][0]), coordinate_text(binding[b][1][1])]
+                for b in moves]
+    moved = sorted(b for b in [*aside, *moves] if b in done)
     start, end = drawing.todo[0][0], drawing.todo[-1][0] + 1
     other = sorted(b for b in binding if relaxed is not None and b not in {p[1] for p in placements}
                    and drawing.seen[b].get("colour") != relaxed)
@@ -215,6 +299,7 @@ def _proposal(drawing: Drawing, placements: Sequence[tuple[int, str, list[Cell]]
         "matcher": "tiling", "retiling": True, "vector": vector.to_dict() if hasattr(vector, "to_dict") else None,
         "cells": [list(c) for p in placements for c in p[2]], "moved": moved,
         "kept": sorted(b for b in binding if b not in moves),
+        "set_aside": {b: list(where) for b, where in aside.items()},
         "in_the_way": {n: sorted(list(c) for c in v) for n, v in lying.items()},
         "colour_required": drawing.colour, "other_colour": other}
     replay = _replay_plan(drawing, binding, step_of, context)
@@ -224,8 +309,8 @@ def _proposal(drawing: Drawing, placements: Sequence[tuple[int, str, list[Cell]]
         evidence["keep"] = False  # the repaired plan places a block twice: it does not replay from the start
     return RepairProposal(
         SPLICE, round(SCORE - (OTHER_COLOUR if other else 0.0), 4),
-        f"the drawing's {len(step_of)} cells tiled anew, moving {', '.join(moved) or 'no'} placed block(s): "
-        f"{shown}{note}",
+        f"the drawing's {len(step_of)} cells tiled anew, moving {', '.join(moved) or 'no'} placed block(s)"
+        + (f", setting {', '.join(aside)} aside" if aside else "") + f": {shown}{note}",
         changes={"start": start, "end": end, "actions": actions, "facts": _undone(drawing, moved, context)},
         evidence=evidence)
 

@@ -36,6 +36,7 @@ Offers:
 * :func:`tiling_proposals` -- the ``splice`` proposal for a failure, when a tiling differs from the plan
 * :func:`cells_in_the_way` -- the cells of a frame each object's current pose covers in part
 * :func:`coordinate_text` -- a coordinate as a task file writes it
+* :func:`frame_inverse`, :func:`unit_centres` -- table points into a frame; where a block's units lie in it
 * :func:`lands_on_a_block` -- whether a failed placement run again with stand-ins would put its block on another
 * :func:`covers_the_same_cells` -- whether a splice's placements cover the cells of the steps it replaces (a
   remembered decomposition that draws another part of the letter does not)
@@ -78,11 +79,13 @@ __all__ = [
     "coordinate_text",
     "covers_the_same_cells",
     "footprint",
+    "frame_inverse",
     "lands_on_a_block",
     "read_drawing",
     "tile",
     "tiling_proposals",
     "tilings",
+    "unit_centres",
 ]
 
 
@@ -181,7 +184,7 @@ def covers_the_same_cells(proposal: RepairProposal, plan: Sequence[Mapping[str, 
     return sorted(before) == sorted(after)
 
 
-def _frame_inverse(world: Any, frame: str) -> Callable[[float, float], Cell] | None:
+def frame_inverse(world: Any, frame: str) -> Callable[[float, float], Cell] | None:
     """Table (X, Y) -> the frame's (x, y), from the world's own mapping of three frame points; ``None`` when the
     world does not ground the frame."""
     ground = getattr(world, "ground_cell", None)
@@ -203,7 +206,7 @@ def _frame_inverse(world: Any, frame: str) -> Callable[[float, float], Cell] | N
     return to_frame
 
 
-def _unit_centres(state: Mapping[str, Any], to_frame: Callable[[float, float], Cell]) -> list[Cell]:
+def unit_centres(state: Mapping[str, Any], to_frame: Callable[[float, float], Cell]) -> list[Cell]:
     """The frame coordinates of the unit centres of a one-row block lying with ``state["pose"]``: along its long
     axis as the table sees it (a block standing on its end is one unit over its centre)."""
     pose = [float(v) for v in state.get("pose") or []]
@@ -224,14 +227,14 @@ def cells_in_the_way(world: Any, frame: str, objects: Mapping[str, Mapping[str, 
                      ) -> dict[str, set[Cell]]:
     """Object name -> the ``cells`` (of ``frame``) its current pose covers in part; objects held or covering
     none are left out."""
-    to_frame = _frame_inverse(world, frame)
+    to_frame = frame_inverse(world, frame)
     if to_frame is None:
         return {}
     out: dict[str, set[Cell]] = {}
     for name, state in objects.items():
         if state.get("held_by"):
             continue
-        units = _unit_centres(state, to_frame)
+        units = unit_centres(state, to_frame)
         hit = {c for c in cells for u in units if abs(u[0] - c[0]) < IN_THE_WAY and abs(u[1] - c[1]) < IN_THE_WAY}
         if hit:
             out[name] = hit

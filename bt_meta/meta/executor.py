@@ -213,6 +213,7 @@ class MetaExecutor:
         registry = domain_registry(domain, self.plugins)
         tried: set[str] = set()
         effects: dict[str, int] = {}  # an applied attempt's effect (plan_effect) -> its number
+        undone: list[tuple[str, ...]] = []  # facts applied proposals made false on purpose (changes["facts"])
         while True:
             failures, status = self._segment(run, plan_state, registry, domain, report, started)
             if status is Status.SUCCESS:
@@ -250,7 +251,7 @@ class MetaExecutor:
                 break
             skipped: list[dict[str, Any]] = []
             applied = self._apply(decision.proposals, diagnosis, plan_state, run, domain, report, tried, started,
-                                  effects, skipped, anchored)
+                                  effects, skipped, anchored, undone)
             if applied is None:
                 report.stop_reason = _unapplied_reason(diagnosis, skipped)
                 report.reported.append(_with_tried(self.reasoner.report_entry(diagnosis), report.attempts,
@@ -268,7 +269,7 @@ class MetaExecutor:
                 goal = rewrite_goal(domain, base_goal, report.initial_plan,
                                     [[a, *args] for a, args in plan_state.full_plan()], start_state,
                                     start_state.apply(add=anchored[0], delete=anchored[1]),
-                                    self.plugins.external_predicate)
+                                    self.plugins.external_predicate, undone=_still_undone(domain, undone, plan_state))
                 run.problem = dataclasses.replace(run.problem, goal=goal)
         report.plan = [[a, *args] for a, args in plan_state.full_plan()]
         report.rebound = dict(plan_state.rebound)
@@ -281,8 +282,16 @@ class MetaExecutor:
             else:
                 # kept: how what was perceived differs from what the problem assumed at the start
                 facts = ({f for f in anchored[0] if f not in assumed}, {f for f in anchored[1] if f in assumed})
-                report.refinement_saved = self._save_refinement(domain, _replayed(report), start_objects, facts,
-                                                                list(getattr(run.problem, "goal", None) or []),
+                replayed = _replayed(report)
+                goal = list(getattr(run.problem, "goal", None) or [])
+                if replayed.plan != report.plan and base_goal:
+                    # the goal the replayed plan reaches: a block a repair set aside is not moved in a replay
+                    from bt_meta.meta.refinements import rewrite_goal
+
+                    goal = rewrite_goal(domain, base_goal, report.initial_plan, replayed.plan, start_state,
+                                        start_state.apply(add=anchored[0], delete=anchored[1]),
+                                        self.plugins.external_predicate)
+                report.refinement_saved = self._save_refinement(domain, replayed, start_objects, facts, goal,
                                                                 report.rebound)
         return self._finish(report, run, wall_started)
 
@@ -386,7 +395,8 @@ class MetaExecutor:
     def _apply(self, proposals: list[Any], diagnosis: Diagnosis, plan_state: PlanState, run: RunContext,
                domain: Any, report: RunReport, tried: set[str], started: float, effects: dict[str, int],
                skipped: list[dict[str, Any]],
-               anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]]) -> PlanState | None:
+               anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]],
+               undone: list[tuple[str, ...]]) -> PlanState | None:
         """The plan state of the first proposal that applies and does something no earlier attempt did;
         ``skipped`` receives the others with why (not applicable, or equivalent to attempt N). The applied
         proposal's ``facts`` (:func:`_apply_facts`) join the world's symbolic state and ``anchored``."""
@@ -429,7 +439,7 @@ class MetaExecutor:
             log.info("meta: attempt %d: %s (%s, score %.2f, %s) -> %s", attempt.number, proposal.action,
                      proposal.plugin, proposal.score, proposal.description, change)
             run.emit("repair", outcome="applied", attempt=attempt.to_dict())
-            if _apply_facts(self.world, proposal, anchored) and symbolic is not None:
+            if _apply_facts(self.world, proposal, anchored, undone) and symbolic is not None:
                 run.state = symbolic()
             return new_state
         return None
@@ -458,7 +468,8 @@ class MetaExecutor:
         return report
 
 
-def _apply_facts(world: Any, proposal: Any, anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]]) -> bool:
+def _apply_facts(world: Any, proposal: Any, anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]],
+                 undone: list[tuple[str, ...]] | None = None) -> bool:
     """Make a proposal's ``changes["facts"]`` (``{"add": [atom, ...], "delete": [...]}``) true in the world's
     symbolic state (``world.apply_symbolic``) as it is applied -- not when it is proposed, since a proposal that is
     never applied must leave the belief alone (a re-tiling takes placed blocks back off the drawing) -- and note
@@ -474,7 +485,26 @@ def _apply_facts(world: Any, proposal: Any, anchored: tuple[set[tuple[str, ...]]
     before = _symbolic(world)
     apply(add=add, delete=delete)
     _note_changes(anchored, before, _symbolic(world))
+    if undone is not None:
+        undone[:] = [f for f in undone if f not in add] + [f for f in delete if f not in undone]
     return True
+
+
+def _still_undone(domain: Any, undone: list[tuple[str, ...]], plan_state: PlanState) -> list[tuple[str, ...]]:
+    """The facts repairs made false (``undone``) that no step still to run makes true again."""
+    if not undone:
+        return []
+    again: set[tuple[str, ...]] = set()
+    for node in plan_state.steps()[plan_state.cursor:]:
+        primitive = domain.primitives.get(str(node.task[0]))
+        if primitive is None:
+            continue
+        try:
+            added, _ = primitive.effects(primitive.ground([str(a) for a in node.task[1:]]).bindings)
+        except (BtMetaError, KeyError, TypeError, ValueError):  # effects that need the state: none known
+            continue
+        again |= {tuple(str(a) for a in f) for f in added}
+    return [f for f in undone if f not in again]
 
 
 def _survives(attempt: Attempt, plan: list[list[str]]) -> bool:

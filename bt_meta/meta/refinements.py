@@ -188,18 +188,23 @@ def _final_state(domain: Any, steps: Sequence[Sequence[str]], state: Any, extern
 
 
 def rewrite_goal(domain: Any, goal: Sequence[Sequence[str]], old_plan: Sequence[Sequence[str]],
-                 new_plan: Sequence[Sequence[str]], old_start: Any, new_start: Any, external: Any = None
-                 ) -> list[tuple[str, ...]]:
+                 new_plan: Sequence[Sequence[str]], old_start: Any, new_start: Any, external: Any = None,
+                 undone: Iterable[Sequence[str]] = ()) -> list[tuple[str, ...]]:
     """The goal a repaired plan is verified against: goal facts the original plan achieved (from ``old_start``)
     but the repaired one does not (from ``new_start``, the state with the repair's perceived facts) are replaced
     by what only the repaired plan achieves. A spliced ``place(b5, 1.5, 1)`` -> ``place(b5, 1, 1), place(b6, 2,
     1)`` turns ``at(b5, 1.5, 1)`` into ``at(b5, 1, 1), at(b6, 2, 1)``; a repair that keeps every goal fact (a new
-    approach pose) leaves the goal as it is."""
+    approach pose) leaves the goal as it is. ``undone``: facts a repair made false on purpose mid-plan (a re-tiling
+    takes a drawn block off the drawing, ``changes["facts"]``) that no later step makes true again: they do not
+    hold after the repaired plan."""
     goal = [tuple(str(a) for a in g) for g in goal]
     if not goal or [list(s) for s in old_plan] == [list(s) for s in new_plan]:
         return goal
     old_final = _final_state(domain, old_plan, old_start, external)
     new_final = _final_state(domain, new_plan, new_start, external)
+    undone = [tuple(str(a) for a in f) for f in undone]
+    if undone:
+        new_final = new_final.apply(delete=[f for f in undone if f in new_final])
     dropped = [g for g in goal if g in old_final and g not in new_final]
     if not dropped:
         return goal

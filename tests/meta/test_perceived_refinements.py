@@ -138,6 +138,12 @@ def test_rewrite_goal_replaces_what_the_repaired_plan_no_longer_achieves(letters
     assert rewrite_goal(domain, problem.goal, old, other, problem.state, problem.state) == [("at", "b5", "1.5", "1")]
     assert rewrite_goal(domain, problem.goal, old, old, problem.state, problem.state) == [("at", "b5", "1.5", "1")]
     assert rewrite_goal(domain, [], old, new, problem.state, start_new) == []
+    # a re-tiling took the drawn bar off its place mid-plan (its at fact undone) and laid it elsewhere: the undone
+    # fact no longer counts as achieved, and the goal becomes what the re-tiled plan achieves
+    retiled = [["place", "b5", "1.5", "1"], ["place", "b5", "0.5", "1"], ["place", "b4", "1.5", "2"]]
+    assert rewrite_goal(domain, problem.goal, old, retiled, problem.state, problem.state) == [("at", "b5", "1.5", "1")]
+    assert rewrite_goal(domain, problem.goal, old, retiled, problem.state, problem.state,
+                        undone=[("at", "b5", "1.5", "1")]) == [("at", "b5", "0.5", "1")]
 
 
 def test_a_domain_already_using_seen_cannot_take_refinements(letters):

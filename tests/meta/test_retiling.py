@@ -141,3 +141,48 @@ def test_a_proposal_s_facts_join_the_world_only_when_it_is_applied():
     state = world.symbolic_state()
     assert ("on_table", "b9") in state and ("on_table", "b2") not in state
     assert ("on_table", "never") not in state
+
+
+def test_a_drawn_block_no_tile_is_left_for_is_set_aside_first(letters):
+    """A drawn but for its apex; b4, the apex, out of reach (found only now), a green 1x2 the only stand-in: the
+    letter's one tiling with the 1x2 lays two across the leg tops and the bar cells, so one drawn 1x1 is one too
+    many. It is set aside first, off the drawing with a free cell between, and the rest is re-tiled (generated
+    letters_A s1 0106). The replay plan draws the new tiling from the start and never moves the block set aside."""
+    table = LetterTable({})
+    for block, (x, y) in {"b0": (0, 0), "b1": (0, 1), "b2": (3, 0), "b3": (3, 1)}.items():
+        table.objects[block] = table.at("1x1", x, y)
+    table.objects["b5"] = table.at("1x2", 1.5, 1)
+    table.objects["d"] = {**table.at("1x2", 9, 6), "colour": "green"}
+    start = {**table.objects, "b0": table.at("1x1", 7, 0), "b1": table.at("1x1", 7, 2),
+             "b2": table.at("1x1", 8, 0), "b3": table.at("1x1", 8, 2), "b5": table.at("1x2", 7, 4)}
+    plan = [{"step": i, "action": "place", "args": [b, x, y], "done": i < 5}
+            for i, (b, x, y, *_) in enumerate(A_STEPS)]
+    failure = Failure(kind=FailureKind.REACHABILITY, message="b4 out of reach", step=5, action="place",
+                      args=tuple(plan[5]["args"]), evidence={"plan": plan, "out_of_reach": "b4"})
+    vector = SimpleNamespace(to_dict=lambda: {}, unusable=("b4",))
+    (proposal,) = retiling_proposals(vector, failure, _context(letters, table, start))
+    aside = proposal.evidence["set_aside"]
+    assert len(aside) == 1 and set(aside) <= {"b1", "b3"}
+    block, spot = next(iter(aside.items()))
+    actions = proposal.changes["actions"]
+    assert actions[0] == ["place", block, *(str(int(v)) if float(v).is_integer() else str(v) for v in spot)]
+    assert min(max(abs(spot[0] - cx), abs(spot[1] - cy)) for cx, cy in A_CELLS) >= 2.0  # a free cell between
+    drawn = [c for _, b, x, y in actions[1:] for c in footprint(table.objects[b]["shape"], float(x), float(y))]
+    kept = [c for b in proposal.evidence["kept"] for c in {"b0": [(0.0, 0.0)], "b2": [(3.0, 0.0)]}.get(b, [])]
+    assert sorted(drawn + kept) == sorted(A_CELLS) and "d" in {a[1] for a in actions}
+    assert ["at", block, *plan[[p["args"][0] for p in plan].index(block)]["args"][1:]] in \
+        proposal.changes["facts"]["delete"]
+    replay = proposal.evidence["replay_plan"]
+    assert block not in {step[1] for step in replay} and len(replay) == 5
+
+
+def test_only_a_block_the_plan_names_is_set_aside():
+    """Two 1x1 lying on the drawing for one 1x1 tile: one of them goes aside -- never one the task does not name
+    (a distractor on a cell is the task's limit, not something a repair moves off the drawing)."""
+    from bt_meta_plugins._retiling import _shape_bindings
+
+    covers = [("1x1", (1.5, 2.0), [(1.5, 2.0)])]
+    step_of, owner = {(1.5, 2.0): 5}, {(1.5, 2.0): "b4"}
+    options = _shape_bindings([0], ["b1", "x"], [], covers, step_of, owner, asidable={"b1", "b3"})
+    assert options == [({0: "x"}, ["b1"])]
+    assert _shape_bindings([0], ["x", "y"], [], covers, step_of, owner, asidable={"b1"}) == []

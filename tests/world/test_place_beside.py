@@ -107,3 +107,14 @@ def test_a_block_set_down_where_a_distractor_reaches_a_few_millimetres_in_pushes
     world.sync_collision()
     status, skill = place(world, "b2", "3", "0")
     assert status == "FAILURE" and skill.record()["failure"]["kind"] == "collision", skill.info
+
+
+def test_the_world_says_where_a_block_can_be_put_down(world):
+    """``SimWorld.put_down_problem``, what a re-tiling asks before it sets a block aside: a free, reachable cell is
+    fine; one another block lies on, or out of the arm's reach, is not, and the answer says why."""
+    assert world.put_down_problem("b0", "letter", 5, 0) is None
+    origin = np.array(world.ground_cell("letter", "0", "0")[:2])
+    axes = np.column_stack([np.array(world.ground_cell("letter", *p)[:2]) - origin for p in (("1", "0"), ("0", "1"))])
+    u, v = np.linalg.solve(axes, world.sim.object_transform("b1")[:2, 3] - origin)  # b1 where it lies, in the frame
+    assert "b1 within 1 cm" in world.put_down_problem("b0", "letter", round(float(u), 3), round(float(v), 3))
+    assert "no IK solution" in world.put_down_problem("b0", "letter", -8, 0)

@@ -757,8 +757,8 @@ class Simulation:
     def box_clearances(self, size: Sequence[float], pose: np.ndarray, names: Iterable[str],
                        within: float) -> dict[str, float]:
         """Ground-truth distance (m, negative: overlap) from a box of full ``size`` at the 4x4 ``pose`` to each named
-        object closer than ``within``: would something put there touch them? The box is a probe, never simulated
-        (made and removed here, no step in between)."""
+        object (or static obstacle) closer than ``within``: would something put there touch them? The box is a
+        probe, never simulated (made and removed here, no step in between)."""
         half = [float(v) / 2.0 for v in size]
         shape = pybullet.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half, physicsClientId=self.client)
         pose = np.asarray(pose, dtype=float)
@@ -767,8 +767,8 @@ class Simulation:
         try:
             out = {}
             for name in names:
-                points = pybullet.getClosestPoints(probe, self._body(name).body_id, float(within),
-                                                   physicsClientId=self.client)
+                body = self._obstacles[name] if name in self._obstacles else self._body(name)
+                points = pybullet.getClosestPoints(probe, body.body_id, float(within), physicsClientId=self.client)
                 if points:
                     out[name] = min(float(point[8]) for point in points)
             return out

@@ -853,6 +853,31 @@ class SimWorld:
         c, s = math.cos(yaw), math.sin(yaw)
         return ox + unit * (c * u - s * v), oy + unit * (s * u + c * v), yaw
 
+    def put_down_problem(self, name: str, frame: str, x: float, y: float, clearance: float = 0.01) -> str | None:
+        """Why object ``name`` could not be put down at point (x, y) of ``frame`` as the place skill lays it (its
+        axes along the frame's, on the table), or ``None`` when it could: another object or a static obstacle
+        closer than ``clearance`` to where it would lie, or no IK solution for the top-down gripper over it or
+        down at it. What a repair asks before it sets a block aside."""
+        import pinocchio as pin
+
+        sim = self.sim
+        gx, gy, yaw = self.ground_cell(frame, str(x), str(y))
+        low, high = sim.object_model(name).extent()
+        size = np.asarray(high, dtype=float) - np.asarray(low, dtype=float)
+        pose = pose_to_matrix((gx, gy, sim.table.top_z + size[2] / 2.0 + 0.002, 0.0, 0.0, yaw))
+        others = [n for n in sim.object_names() if n != name and n not in {sim.held(a) for a in sim.robot.arms}]
+        near = sim.box_clearances(size, pose, [*others, *sim.obstacles()], clearance)
+        if near:
+            closest = min(near, key=lambda n: near[n])
+            return f"{closest} within {clearance * 100:.0f} cm of ({x:g}, {y:g})"
+        arm = self.default_arm
+        rotation = rpy_to_matrix(math.pi, 0.0, sim.robot.arm(arm).top_down_yaw)
+        for height in (size[2] + 0.08, size[2] - 0.004):
+            target = pin.SE3(rotation, np.array([gx, gy, sim.table.top_z + height]))
+            if not self.ik.solve(arm, target, self.current_q(), seed=self.seed).success:
+                return f"no IK solution for the gripper over ({x:g}, {y:g})"
+        return None
+
     # -- internals ----------------------------------------------------------------------------------------------
 
     def _check_objects(self, problem_name: str) -> None:

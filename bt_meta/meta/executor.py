@@ -47,6 +47,7 @@ from bt_meta.bt.domain_nodes import domain_registry
 from bt_meta.bt.failures import Failure, FailureKind
 from bt_meta.errors import BtMetaError, PluginError, UnknownWorldError
 from bt_meta.htn.state import atom_text
+from bt_meta.meta.kept_plan import replaced_steps, replayed, unkept_attempts
 from bt_meta.meta.proposals import PlanState, ProposalError, apply_proposal, plan_effect
 from bt_meta.meta.reasoner import Attempt, Decision, Diagnosis, Limits, MetaReasoner
 
@@ -264,34 +265,28 @@ class MetaExecutor:
             keep_goal = bool((report.attempts[-1].proposal.get("evidence") or {}).get("keep_goal"))
             if base_goal and not keep_goal:  # the goal as the repair rewrote it (spliced placements stand for the
                 # replaced ones); a proposal that only prepares a later repair (keep_goal) leaves the goal alone
-                from bt_meta.meta.refinements import rewrite_goal
-
-                goal = rewrite_goal(domain, base_goal, report.initial_plan,
-                                    [[a, *args] for a, args in plan_state.full_plan()], start_state,
-                                    start_state.apply(add=anchored[0], delete=anchored[1]),
-                                    self.plugins.external_predicate, undone=_still_undone(domain, undone, plan_state))
+                goal = self._rewritten_goal(domain, base_goal, report.initial_plan,
+                                            [[a, *args] for a, args in plan_state.full_plan()], start_state, anchored,
+                                            _still_undone(domain, undone, plan_state))
                 run.problem = dataclasses.replace(run.problem, goal=goal)
         report.plan = [[a, *args] for a, args in plan_state.full_plan()]
         report.rebound = dict(plan_state.rebound)
         if report.status == "success" and report.attempts and self.refinements is not None and self.save_refinements:
-            # a repair that only replays through its own replay plan must be the last one (whose plan is saved)
-            unkept = _unkept(report.attempts, report.plan)
+            # kept unless a repair says its plan does not replay from the start (bt_meta.meta.kept_plan)
+            unkept = unkept_attempts(report.attempts, report.plan)
             if unkept:  # a repair that worked from where this run stood, not from the initial state
                 report.refinement_saved = {"saved": False, "reason": f"attempt(s) {unkept}: the proposing plugin says "
                                                                      "the repaired plan does not replay from the start"}
             else:
                 # kept: how what was perceived differs from what the problem assumed at the start
                 facts = ({f for f in anchored[0] if f not in assumed}, {f for f in anchored[1] if f in assumed})
-                replayed = _replayed(report)
+                replayed_report = replayed(report)
                 goal = list(getattr(run.problem, "goal", None) or [])
-                if replayed.plan != report.plan and base_goal:
+                if replayed_report.plan != report.plan and base_goal:
                     # the goal the replayed plan reaches: a block a repair set aside is not moved in a replay
-                    from bt_meta.meta.refinements import rewrite_goal
-
-                    goal = rewrite_goal(domain, base_goal, report.initial_plan, replayed.plan, start_state,
-                                        start_state.apply(add=anchored[0], delete=anchored[1]),
-                                        self.plugins.external_predicate)
-                report.refinement_saved = self._save_refinement(domain, replayed, start_objects, facts, goal,
+                    goal = self._rewritten_goal(domain, base_goal, report.initial_plan, replayed_report.plan,
+                                                start_state, anchored)
+                report.refinement_saved = self._save_refinement(domain, replayed_report, start_objects, facts, goal,
                                                                 report.rebound)
         return self._finish(report, run, wall_started)
 
@@ -431,7 +426,7 @@ class MetaExecutor:
             attempt = Attempt(number=len(report.attempts) + 1, failure=diagnosis.failure.to_dict(),
                               kind=diagnosis.kind.value, proposal=proposal.to_dict(), change=change,
                               step=diagnosis.step, seconds=round(time.perf_counter() - attempt_started, 6),
-                              replaced=_replaced_steps(proposal, plan_state, diagnosis.step))
+                              replaced=replaced_steps(proposal, plan_state, diagnosis.step))
             attempt.failure.pop("evidence", None)
             attempt.failure["evidence_keys"] = sorted(diagnosis.failure.evidence)
             report.attempts.append(attempt)
@@ -443,6 +438,17 @@ class MetaExecutor:
                 run.state = symbolic()
             return new_state
         return None
+
+    def _rewritten_goal(self, domain: Any, goal: list[Any], initial_plan: list[list[str]], plan: list[list[str]],
+                        start_state: Any, anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]],
+                        undone: Iterable[tuple[str, ...]] = ()) -> list[tuple[str, ...]]:
+        """The goal ``plan`` reaches where ``initial_plan`` reached ``goal`` (:func:`rewrite_goal`), from the start
+        state with the anchored facts."""
+        from bt_meta.meta.refinements import rewrite_goal
+
+        return rewrite_goal(domain, goal, initial_plan, plan, start_state,
+                            start_state.apply(add=anchored[0], delete=anchored[1]), self.plugins.external_predicate,
+                            undone=undone)
 
     def _save_refinement(self, domain: Any, report: RunReport, start_objects: dict[str, Any],
                          anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]],
@@ -507,131 +513,12 @@ def _still_undone(domain: Any, undone: list[tuple[str, ...]], plan_state: PlanSt
     return [f for f in undone if f not in again]
 
 
-def _survives(attempt: Attempt, plan: list[list[str]]) -> bool:
-    """Whether what ``attempt`` changed is still in the final ``plan``: a backtrack whose new arguments a later
-    attempt rewrote again (a deeper backtrack) left nothing of itself there. Other kinds are assumed to survive."""
-    proposal = attempt.proposal or {}
-    changes = proposal.get("changes") or {}
-    if proposal.get("action") not in ("backtrack", "rewrite_args"):
-        return True
-    args = changes.get("args") or {}
-    values = [a for group in (args.values() if isinstance(args, dict) else [args]) for a in group]
-    if not values:
-        return True
-    used = {str(a) for step in plan for a in step[1:]}
-    return any(str(v) in used for v in values)
-
-
 def _rebind(world: Any, before: dict[str, str], after: dict[str, str]) -> None:
     """Tell the world the grounding symbols ``after`` binds differently from ``before`` (``rebind_object``)."""
     rebind = getattr(world, "rebind_object", None)
     for symbol, name in after.items():
         if before.get(symbol) != name and rebind is not None:
             rebind(symbol, name)
-
-
-def _unkept(attempts: list[Attempt], plan: list[list[str]]) -> list[int]:
-    """The attempts (numbers) whose repair does not replay from the start as the run's refinement would: marked
-    ``keep: False`` by their plugin, or with a ``replay_plan`` that is not the one replayed (:func:`_replaying`)
-    unless the plan as run replays as well (``as_run_replays``); attempts a later one undid do not count."""
-    replaying = (_replaying(attempts) or (None,))[0]
-    out = []
-    for attempt in attempts:
-        evidence = attempt.proposal.get("evidence") or {}
-        if not _survives(attempt, plan):
-            continue
-        if evidence.get("keep") is False or (evidence.get("replay_plan") and attempt is not replaying
-                                             and not evidence.get("as_run_replays")):
-            out.append(attempt.number)
-    return out
-
-
-def _replayed(report: RunReport) -> RunReport:
-    """``report`` with the plan a refinement should replay: a ``replay_plan`` its plugin planned from the initial
-    state (a re-orientation: not the failed attach, its release and the re-pick), with the repairs made after it
-    carried over (:func:`_replaying`), else the plan as run."""
-    found = _replaying(report.attempts)
-    if found is None or report.attempts[-1].outcome != "repaired":
-        return report
-    return dataclasses.replace(report, plan=found[1])
-
-
-def _replaying(attempts: list[Attempt]) -> tuple[Attempt, list[list[str]]] | None:
-    """The last attempt with a ``replay_plan`` and that plan with every later attempt's change made again in it:
-    a rebinding changes no step; a splice replaces the steps it replaced (found by what they are, once); a
-    backtrack or an argument rewrite gives each step it rewrote (found once) its new arguments (magnetic s1 0016:
-    three turns, then the attach's pose); a substitution renames from the step it renamed from (letters_A s1 0118:
-    b2 turned, then two blocks for the bar b5 out of reach). ``None`` when there is none, when another plugin's
-    attempt came before it -- the replay plan, planned from the problem's initial state, knows nothing of what that
-    changed (a letters block turned after a tiling replaced two 1x1 by a 1x2: replayed, the nominal 1x1 placements
-    failed, letters_H s0 0005 0023 0056) --
-    or when a later change cannot be found in it."""
-    index = next((i for i in range(len(attempts) - 1, -1, -1)
-                  if (attempts[i].proposal.get("evidence") or {}).get("replay_plan")), None)
-    if index is None:
-        return None
-    first = attempts[index]
-    if any(a.proposal.get("plugin") != first.proposal.get("plugin") for a in attempts[:index]):
-        return None  # (an attempt whose evidence says ``as_run_replays`` then leaves the plan as run to be kept)
-    plan: list[list[str]] | None = [[str(a) for a in step] for step in first.proposal["evidence"]["replay_plan"]]
-    for later in attempts[index + 1:]:
-        plan = _carried_over(plan, later)
-        if plan is None:
-            return None
-    return first, plan
-
-
-def _carried_over(plan: list[list[str]], attempt: Attempt) -> list[list[str]] | None:
-    """``plan`` with ``attempt``'s change made in it (see :func:`_replaying`), or ``None``."""
-    action = attempt.proposal.get("action")
-    changes = attempt.proposal.get("changes") or {}
-    if action == "rebind":
-        return plan
-    if action in ("backtrack", "rewrite_args"):  # each rewritten step found once, its arguments replaced
-        rewritten = changes.get("args") or {}
-        new_args = ([rewritten[k] for k in sorted(rewritten, key=int)] if isinstance(rewritten, dict)
-                    else [rewritten])
-        if len(new_args) != len(attempt.replaced) or not attempt.replaced:
-            return None
-        out = [list(step) for step in plan]
-        for old, args in zip(attempt.replaced, new_args, strict=True):
-            found = [i for i, step in enumerate(plan) if step == old]
-            if len(found) != 1:
-                return None
-            out[found[0]] = [old[0], *(str(a) for a in args)]
-        return out
-    where = [i for i in range(len(plan) - len(attempt.replaced) + 1)
-             if attempt.replaced and plan[i:i + len(attempt.replaced)] == attempt.replaced]
-    if len(where) != 1:
-        return None
-    at = where[0]
-    if action == "splice":
-        actions = [[str(a) for a in call] for call in changes.get("actions") or []]
-        return [*plan[:at], *actions, *plan[at + len(attempt.replaced):]]
-    if action == "substitute":
-        mapping = {str(k): str(v) for k, v in (changes.get("mapping") or {}).items()}
-        return [*plan[:at], *([step[0], *(mapping.get(a, a) for a in step[1:])] for step in plan[at:])]
-    return None
-
-
-def _replaced_steps(proposal: Any, plan_state: PlanState, failed_step: int) -> list[list[str]]:
-    """The steps ``proposal`` changes, as they are before it applies (:attr:`Attempt.replaced`)."""
-    steps = plan_state.steps()
-    changes = getattr(proposal, "changes", None) or {}
-    try:
-        if proposal.action == "splice":
-            span = range(int(changes.get("start", failed_step)), int(changes.get("end", failed_step + 1)))
-        elif proposal.action == "substitute":
-            span = range(int(changes.get("from_step", failed_step)), int(changes.get("from_step", failed_step)) + 1)
-        elif proposal.action == "backtrack":
-            span = sorted(int(k) for k in (changes.get("args") or {}))
-        elif proposal.action == "rewrite_args":
-            span = [int(changes.get("step", failed_step))]
-        else:
-            return []
-    except (TypeError, ValueError):
-        return []
-    return [[str(a) for a in steps[i].task] for i in span if 0 <= i < len(steps)]
 
 
 def _with_tried(entry: dict[str, Any], attempts: list[Attempt], diagnosis: Diagnosis,

@@ -308,7 +308,7 @@ def test_a_replan_that_yields_the_failed_plan_again_is_not_applied_twice(blocks)
 def test_an_unkept_attempt_a_later_one_overwrote_does_not_block_the_refinement():
     """``keep: False`` says the attempt's plan does not replay from the start; once a deeper backtrack rewrote its
     poses, nothing of it is in the final plan, and it no longer stops the refinement from being saved."""
-    from bt_meta.meta.executor import _survives
+    from bt_meta.meta.kept_plan import survives as _survives
     from bt_meta.meta.reasoner import Attempt
 
     def attempt(action: str, changes: dict) -> Attempt:

@@ -214,7 +214,9 @@ def test_a_replay_plan_is_kept_only_when_no_other_plugin_changed_the_plan_before
     """A re-orientation's replay plan is planned from the problem's initial state: kept as the refinement's plan
     when it made the run's only repairs; after another plugin's splice (a tiling of a 1x2 where two 1x1 were), it
     knows nothing of that change, and the plan as run is kept."""
-    from bt_meta.meta.executor import RunReport, _replayed, _unkept
+    from bt_meta.meta.executor import RunReport
+    from bt_meta.meta.kept_plan import replayed as _replayed
+    from bt_meta.meta.kept_plan import unkept_attempts as _unkept
     from bt_meta.meta.reasoner import Attempt
 
     def attempt(number: int, plugin: str, outcome: str, replay: list | None = None, action: str = "splice"

@@ -9,7 +9,8 @@ Offers (each in its own module):
 * :class:`RepairProposal`, :class:`PlanState`, :func:`apply_proposal`, :data:`PROPOSAL_KINDS`,
   :class:`ProposalError` -- what a repair may change and how it is applied (``proposals``)
 * :class:`Refinement`, :class:`RefinementStore`, :func:`with_refinements`, :func:`task_file_yaml` -- learned
-  method refinements in the memory file, exportable as task-file YAML (``refinements``)
+  method refinements in the memory file, exportable as task-file YAML (``refinements``); which plan a repaired run
+  keeps, with later repairs carried into a plugin's replay plan (``kept_plan``)
 * :data:`MOTION_LIMITS`, :func:`is_motion_limit` -- how the reasoner treats taxonomy kinds (``taxonomy``)
 
 The taxonomy rules, the retry baseline and the pose-tolerance predicate are plugins: ``bt_meta_plugins.

@@ -48,7 +48,7 @@ from bt_meta.bt.failures import Failure, FailureKind
 from bt_meta.errors import BtMetaError, PluginError, UnknownWorldError
 from bt_meta.htn.state import atom_text
 from bt_meta.meta.kept_plan import replaced_steps, replayed, unkept_attempts
-from bt_meta.meta.proposals import PlanState, ProposalError, apply_proposal, plan_effect
+from bt_meta.meta.proposals import PlanState, ProposalError, apply_proposal, plan_effect, proposal_facts
 from bt_meta.meta.reasoner import Attempt, Decision, Diagnosis, Limits, MetaReasoner
 
 __all__ = ["MetaExecutor", "RunReport", "Verifier", "goal_verifier", "run_task_file"]
@@ -480,13 +480,9 @@ def _apply_facts(world: Any, proposal: Any, anchored: tuple[set[tuple[str, ...]]
     symbolic state (``world.apply_symbolic``) as it is applied -- not when it is proposed, since a proposal that is
     never applied must leave the belief alone (a re-tiling takes placed blocks back off the drawing) -- and note
     them with the anchored facts. Whether anything changed."""
-    facts = (getattr(proposal, "changes", None) or {}).get("facts")
+    add, delete = proposal_facts(getattr(proposal, "changes", None) or {})  # checked when it was applied
     apply = getattr(world, "apply_symbolic", None)
-    if not isinstance(facts, dict) or apply is None:
-        return False
-    add = [tuple(str(a) for a in atom) for atom in facts.get("add") or []]
-    delete = [tuple(str(a) for a in atom) for atom in facts.get("delete") or []]
-    if not (add or delete):
+    if apply is None or not (add or delete):
         return False
     before = _symbolic(world)
     apply(add=add, delete=delete)

@@ -53,7 +53,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -77,6 +77,7 @@ __all__ = [
     "RepairProposal",
     "apply_proposal",
     "plan_effect",
+    "proposal_facts",
     "proposal_key",
 ]
 
@@ -93,6 +94,30 @@ PROPOSAL_KINDS: tuple[str, ...] = (RETRY, REWRITE_ARGS, SUBSTITUTE, BACKTRACK, S
 
 class ProposalError(BtMetaError):
     """A repair proposal that cannot be applied to the current plan."""
+
+
+def proposal_facts(changes: Any) -> tuple[list[tuple[str, ...]], list[tuple[str, ...]]]:
+    """(add, delete) atoms of a proposal's ``changes["facts"]`` (``{"add": [[predicate, arg, ...], ...],
+    "delete": [...]}``: what the repair makes true or false when it is applied); ``([], [])`` without. Raises
+    :class:`ProposalError` naming what is wrong with malformed facts (a plugin's, not to crash the run)."""
+    facts = (changes or {}).get("facts") if isinstance(changes, Mapping) else None
+    if facts is None:
+        return [], []
+    if not isinstance(facts, Mapping) or set(facts) - {"add", "delete"}:
+        raise ProposalError(f"facts must be a mapping with 'add' and/or 'delete', got {facts!r}")
+    out: list[list[tuple[str, ...]]] = []
+    for key in ("add", "delete"):
+        atoms = facts.get(key) or []
+        if isinstance(atoms, (str, bytes)) or not isinstance(atoms, Sequence):
+            raise ProposalError(f"facts[{key!r}] must be a list of atoms, got {atoms!r}")
+        parsed = []
+        for atom in atoms:
+            if isinstance(atom, (str, bytes)) or not isinstance(atom, Sequence) or not atom \
+                    or not all(isinstance(a, (str, int, float)) for a in atom):
+                raise ProposalError(f"facts[{key!r}]: an atom is a list [predicate, arg, ...], got {atom!r}")
+            parsed.append(tuple(str(a) for a in atom))
+        out.append(parsed)
+    return out[0], out[1]
 
 
 Step = tuple[str, tuple[str, ...]]
@@ -247,6 +272,7 @@ def apply_proposal(
     """
     kind = proposal.action
     changes = proposal.changes or {}
+    proposal_facts(changes)  # malformed facts make the proposal inapplicable, before anything changes
     steps = plan_state.steps()
     if kind == RETRY:
         return dataclasses.replace(plan_state, cursor=failed_step), f"retry step {failed_step}"

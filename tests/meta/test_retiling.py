@@ -186,3 +186,31 @@ def test_only_a_block_the_plan_names_is_set_aside():
     options = _shape_bindings([0], ["b1", "x"], [], covers, step_of, owner, asidable={"b1", "b3"})
     assert options == [({0: "x"}, ["b1"])]
     assert _shape_bindings([0], ["x", "y"], [], covers, step_of, owner, asidable={"b1"}) == []
+
+
+class _MalformedFacts:
+    """A plugin whose proposal carries facts of the wrong shape (then a good one)."""
+
+    @hookimpl
+    def bt_meta_propose_repairs(self, failure, context):
+        return [RepairProposal("retry", 0.95, "bad facts", changes={"facts": {"add": "on_table(b9)"}}),
+                RepairProposal("retry", 0.9, "good", changes={"attempt": 2})]
+
+
+def test_a_proposal_with_malformed_facts_is_not_applicable_and_says_why():
+    from bt_meta.htn import load_task_text
+    from bt_meta.meta.proposals import ProposalError, proposal_facts
+
+    from .conftest import BLOCKS
+
+    assert proposal_facts({"facts": {"add": [["on_table", "b9"]]}}) == ([("on_table", "b9")], [])
+    for bad, words in [({"add": "on_table(b9)"}, "must be a list of atoms"), ({"put": []}, "'add' and/or 'delete'"),
+                       ({"delete": [[]]}, "an atom is a list"), ([1, 2], "must be a mapping")]:
+        with pytest.raises(ProposalError, match=words):
+            proposal_facts({"facts": bad})
+    blocks = load_task_text(BLOCKS, "<blocks>")
+    problem = blocks.problem("two")
+    world = FakeWorld(blocks.domain, problem, faults=["put(b0, 0, 0)#1=fail:physical"])
+    report = MetaExecutor(blocks.domain, problem, world, make_host(("malformed", _MalformedFacts()))).run()
+    assert report.ok and [a.proposal["description"] for a in report.attempts] == ["good"]
+    assert ("on_table", "b9") not in world.symbolic_state()

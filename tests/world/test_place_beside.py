@@ -118,3 +118,11 @@ def test_the_world_says_where_a_block_can_be_put_down(world):
     u, v = np.linalg.solve(axes, world.sim.object_transform("b1")[:2, 3] - origin)  # b1 where it lies, in the frame
     assert "b1 within 1 cm" in world.put_down_problem("b0", "letter", round(float(u), 3), round(float(v), 3))
     assert "no IK solution" in world.put_down_problem("b0", "letter", -8, 0)
+
+
+def test_a_move_slower_than_nothing_or_faster_than_the_arm_is_refused(world):
+    from bt_meta.world.skills import MoveTo
+
+    for speed in (0.0, -0.5, 1.5):
+        with pytest.raises(ValueError, match="speed must be in"):
+            MoveTo(world, speed=speed)

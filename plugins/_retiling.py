@@ -236,11 +236,12 @@ def _aside_spot(drawing: Drawing, block: str, cells: Sequence[Cell], taken: Sequ
     state = drawing.seen.get(block) or {}
     pose = state.get("pose") or []
     shape = str(state.get("shape"))
-    if to_frame is None or len(pose) < 2 or footprint(shape, 0.0, 0.0) is None:
+    unit_cells = footprint(shape, 0.0, 0.0)
+    if to_frame is None or len(pose) < 2 or unit_cells is None:
         return None
     here = to_frame(float(pose[0]), float(pose[1]))
     units = [u for name, other in drawing.seen.items() if name != block for u in unit_centres(other, to_frame)]
-    width = len(footprint(shape, 0.0, 0.0) or [])
+    width = len(unit_cells)
     xs, ys = [c[0] for c in cells], [c[1] for c in cells]
     points = []
     for cy in range(math.floor(min(ys)) - ASIDE_RANGE, math.ceil(max(ys)) + ASIDE_RANGE + 1):
@@ -286,12 +287,11 @@ def _proposal(drawing: Drawing, placements: Sequence[tuple[int, str, list[Cell]]
     binding, moves, aside = found
     step_of = {c: step for step, _, cs in placements for c in cs}
     done = {block for _, block, _ in drawing.done}
-    actions = [[drawing.action, b, coordinate_text(aside[b][0]), coordinate_text(aside[b][1])] for b in aside]
-    actions += [[drawing.action, b, coordinate_text(binding[b][1][0]), coordinate_text(binding[b][1][1])]
-                for b in moves]
+    actions = [_place(drawing, b, aside[b]) for b in aside] + [_place(drawing, b, binding[b][1]) for b in moves]
     moved = sorted(b for b in [*aside, *moves] if b in done)
     start, end = drawing.todo[0][0], drawing.todo[-1][0] + 1
-    other = sorted(b for b in binding if relaxed is not None and b not in {p[1] for p in placements}
+    planned = {p[1] for p in placements}
+    other = sorted(b for b in binding if relaxed is not None and b not in planned
                    and drawing.seen[b].get("colour") != relaxed)
     shown = "; ".join(f"{a[0]}({', '.join(a[1:])})" for a in actions)
     note = f" ({', '.join(other)} not {relaxed}: no {relaxed} block can stand in)" if other else ""
@@ -350,4 +350,9 @@ def _replay_plan(drawing: Drawing, binding: Mapping[str, Tile], step_of: Mapping
     order = acyclic_order(binding, lying, step_of)
     if order is None:
         return None
-    return [[drawing.action, b, coordinate_text(binding[b][1][0]), coordinate_text(binding[b][1][1])] for b in order]
+    return [_place(drawing, b, binding[b][1]) for b in order]
+
+
+def _place(drawing: Drawing, block: str, centre: Cell) -> list[str]:
+    """The drawing's placement of ``block`` with its centroid at ``centre``, as a plan step."""
+    return [drawing.action, block, coordinate_text(centre[0]), coordinate_text(centre[1])]

@@ -475,11 +475,11 @@ class MetaExecutor:
 
 
 def _apply_facts(world: Any, proposal: Any, anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]],
-                 undone: list[tuple[str, ...]] | None = None) -> bool:
+                 undone: list[tuple[str, ...]]) -> bool:
     """Make a proposal's ``changes["facts"]`` (``{"add": [atom, ...], "delete": [...]}``) true in the world's
     symbolic state (``world.apply_symbolic``) as it is applied -- not when it is proposed, since a proposal that is
     never applied must leave the belief alone (a re-tiling takes placed blocks back off the drawing) -- and note
-    them with the anchored facts. Whether anything changed."""
+    them with the anchored facts, and the deleted ones in ``undone``. Whether anything changed."""
     add, delete = proposal_facts(getattr(proposal, "changes", None) or {})  # checked when it was applied
     apply = getattr(world, "apply_symbolic", None)
     if apply is None or not (add or delete):
@@ -487,8 +487,7 @@ def _apply_facts(world: Any, proposal: Any, anchored: tuple[set[tuple[str, ...]]
     before = _symbolic(world)
     apply(add=add, delete=delete)
     _note_changes(anchored, before, _symbolic(world))
-    if undone is not None:
-        undone[:] = [f for f in undone if f not in add] + [f for f in delete if f not in undone]
+    undone[:] = [f for f in undone if f not in add] + [f for f in delete if f not in undone]
     return True
 
 

@@ -266,7 +266,7 @@ class Place(PhasedSkill):
         centre = self._goal_block().copy()
         centre[:3, 3] += centre[:3, :3] @ ((low + high) / 2.0)
         others = [n for n in sim.object_names() if n != self.block]
-        return bool(others) and bool(sim.box_clearances(high - low, centre, others, BESIDE))
+        return bool(sim.box_clearances(high - low, centre, others, BESIDE))
 
     def _lowered(self) -> np.ndarray:
         """Where the lowering at full speed ends: :data:`SET_DOWN` over the target beside other objects (the rest

@@ -8,7 +8,10 @@ ask for a shape; a method that binds the entity without conditions on it takes a
 colour the methods name is a preference (``colours="prefer"``, the default): when no spare has it, the spares
 that meet the conditions but for their colour are proposed, scored lower, saying so -- the drawing is its cells,
 as the paper's red bar standing in for the blue one is (section 6.4). ``colours="require"`` never does. An object
-a failure of the run found out of reach where it lies (the vector's ``unusable``) is no spare.
+a failure of the run found out of reach where it lies (the vector's ``unusable``) is no spare. Among spares
+that fit alike, one lying on a cell a placement still to run fills is taken first: it must be moved anyway, and as
+the stand-in it clears the way (a green 1x1 on the cell of A's b3 when b0 is missing and the other green 1x1 lies
+off the drawing: letters_A s0 0101 was repaired only because the names happened to sort that way).
 
 A spare is an object the world reports (``observe()["objects"]`` with a ``shape``) that no step of the plan uses
 and that is not itself missing; unknown objects (not in the problem) get the missing entity's unary facts
@@ -24,6 +27,8 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
+
+from bt_meta_plugins._tilings import cells_in_the_way, read_drawing
 
 from bt_meta.bt.failures import RepairProposal
 from bt_meta.errors import BtMetaError
@@ -70,6 +75,14 @@ def _undo_steps(state: Any, domain: Any, plan: Sequence[Mapping[str, Any]], step
             continue
         state = state.apply(add=[tuple(f) for f in delete], delete=[tuple(f) for f in add])
     return state
+
+
+def _in_the_way(vector: Any, failure: Any, context: Any, spares: Mapping[str, Mapping[str, Any]]) -> set[str]:
+    """The ``spares`` lying on a cell a placement still to run fills (none when the steps left are no drawing)."""
+    drawing = read_drawing(vector, failure, context)
+    if drawing is None or drawing.frame is None:
+        return set()
+    return set(cells_in_the_way(drawing.world, drawing.frame, spares, drawing.cells))
 
 
 def spare_fits(spare: str, missing: str, facts: Sequence[tuple[str, ...]], methods: Sequence[Mapping[str, Any]],
@@ -139,6 +152,8 @@ def spare_proposals(vector: Any, failure: Any, context: Any, limit: int = 3, col
     wanted = [e.name for e in vector.missing if any(e.name in map(str, p["args"]) for p in todo)]
     if not wanted or not spares:
         return []
+    lying = _in_the_way(vector, failure, context, {n: seen[n] for n in spares})
+    spares.sort(key=lambda n: n not in lying)  # stable: by name within
     first = {m: min(int(p["step"]) for p in todo if m in map(str, p["args"])) for m in wanted}
     known = {str(f[1]) for f in initial if len(f) >= 2}
 

@@ -17,7 +17,9 @@ The variant's scene is built in pybullet and settled; then, in this order (the f
    (``reachability`` beats ``collision``). A place
    where the task puts something that an object the task does not name occupies (its centre near; for a letter
    cell, any part of it inside the cell's footprint): ``limit:collision``; a block the task names lying on another
-   block's cell is moved by the plan: ``repairable`` (step 3). When several limits apply and the plan
+   block's cell is moved by the plan: ``repairable`` (step 3), and so is a letters block the run takes for a missing
+   one (of the missing block's shape; of its colour first where the task's symbols name colours, then one lying on
+   a cell, then by name: as the substitution chooses). When several limits apply and the plan
    step each stops is known (letters), the label is the one the plan meets first (an obstacle at the fourth
    placement before a block out of reach at the fifth); otherwise the first found in this order.
 3. ``repairable`` -- the goal can be reached but not by the nominal plan: a needed object is missing or of
@@ -304,8 +306,9 @@ class Labeller:
         if limit is not None:
             limits.append(limit)
         fixtures = {n for n in self.needed if self.family.grasped is not None and n not in self.family.grasped}
-        # only what the task does not name blocks a place: an object the plan uses is picked up by the plan
-        named = set(self.needed)
+        # only what the task does not name blocks a place: an object the plan uses is picked up by the plan, and
+        # so is one it takes for a missing block
+        named = set(self.needed) | self._stand_ins(world, present)
         steps = self._target_steps()
         for index, (tx, ty, _) in enumerate(self.targets):
             blocking = next((name for name in present if name not in fixtures and name not in named and math.hypot(
@@ -382,6 +385,26 @@ class Labeller:
             if grasped is not None and name in grasped:
                 roles[name] = candidates
         return roles
+
+    def _stand_ins(self, world: Any, present: dict[str, Any]) -> set[str]:
+        """Letters: the blocks the task does not name that the run takes for its missing ones, as the substitution
+        chooses -- for each missing block (by name) one of its shape, of its colour first where the task's symbols
+        name colours, then one lying on a letter cell (it must be moved anyway; as the stand-in it clears the
+        cell), then by name. The plan picks them up, so a cell one lies on is not occupied (letters_A s0 0101: a
+        green 1x1 on b3's cell stands in for the missing b0)."""
+        if self.family.truth != "letters":
+            return set()
+        unnamed = sorted(n for n, m in present.items() if n not in self.needed and m.shape in ("1x1", "1x2"))
+        occupying = {n for n in unnamed if self._occupied_cell(world, [n]) is not None}
+        taken: set[str] = set()
+        for name in sorted(n for n in self.needed if n not in present):
+            nominal = self.nominal.get(name)
+            colour = nominal.colour if nominal is not None and name in self.colour_symbols else None
+            fits = [n for n in unnamed if n not in taken and present[n].shape == self.shapes.get(name)]
+            if fits:
+                taken.add(min(fits, key=lambda n: (colour is not None and present[n].colour != colour,
+                                                   n not in occupying, n)))
+        return taken
 
     def _step_of(self, name: str) -> int | None:
         """The first step of the nominal plan whose arguments name ``name``."""

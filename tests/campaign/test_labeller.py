@@ -67,6 +67,15 @@ LETTER_CASES = {
     "named_block_on_a_cell": ("repairable", "override: {b5: {pose: [0.55, 0.10, table, 0, 0, 0]}}"),
     "cell_blocked": ("limit:collision",
                      "add: [{name: d, type: megablok_1x1, colour: green, pose: [0.55, 0.10, table, 0, 0, 0]}]"),
+    # b0 missing: the green 1x1 on b3's cell (3, 1) is the stand-in the substitution takes first (it clears the
+    # cell) -- unless a blue 1x1 is there, the colour the task's symbols name; then the green one stays in the way.
+    "cell_blocked_by_the_stand_in": ("repairable", "remove: [b0]\n    add: [{name: d, type: megablok_1x1, colour: "
+                                     "green, pose: [0.611, -0.083, table, 0, 0, 0]}, {name: a, type: megablok_1x1, "
+                                     "colour: green, pose: [0.72, -0.52, table, 0, 0, 0]}]"),
+    "cell_blocked_beside_a_stand_in_of_the_colour": ("limit:collision", "remove: [b0]\n    add: [{name: d, type: "
+                                                     "megablok_1x1, colour: green, pose: [0.611, -0.083, table, 0, 0, "
+                                                     "0]}, {name: s, type: megablok_1x1, colour: blue, pose: [0.72, "
+                                                     "-0.52, table, 0, 0, 0]}]"),
     # Its centre is 50 mm from the nearest cell's (further than BLOCKING_RADIUS), its long side 11 mm into it.
     "bar_reaching_into_a_cell": ("limit:collision", "add: [{name: d, type: megablok_1x2, colour: green, "
                                  "pose: [0.55, 0.150, table, 0, 0, 0]}]"),

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from types import SimpleNamespace
+from typing import Any
 
 import pytest
 from bt_meta_plugins._tilings import (
@@ -19,10 +20,11 @@ from bt_meta_plugins._tilings import (
 
 from bt_meta.bt.failures import Failure, FailureKind, RepairProposal
 from bt_meta.htn import load_task_file
+from bt_meta.meta import Limits, MetaExecutor
 from bt_meta.resources import trees_dir
 
 from .test_object_substitution import A_STEPS
-from .test_spare_substitution import NOMINAL_A, _run
+from .test_spare_substitution import NOMINAL_A, SceneWorld, _run, host
 
 A_CELLS = [(0.0, 0.0), (0.0, 1.0), (3.0, 0.0), (3.0, 1.0), (1.0, 1.0), (2.0, 1.0), (1.5, 2.0)]
 
@@ -241,3 +243,41 @@ def test_steps_an_earlier_repair_planned_are_read_with_the_shapes_it_anchored(le
     assert sorted(map(tuple, proposal.evidence["cells"])) == [(0.0, 1.0), (1.0, 1.0), (2.0, 1.0), (3.0, 0.0),
                                                                (3.0, 1.0), (3.0, 2.0)]
     assert "b4" not in {a[1] for a in proposal.changes["actions"]}
+
+
+class LetterScene(SceneWorld):
+    """A :class:`SceneWorld` whose blocks lie at poses in the letters' frame, as the tilings read them
+    (:class:`LetterTable`): a block lying on a cell is in the way of the placement that fills it."""
+
+    def __init__(self, domain: Any, problem: Any, objects: dict[str, tuple[str, str]],
+                 at: dict[str, tuple[float, float]]) -> None:
+        super().__init__(domain, problem, objects)
+        self.table = LetterTable({})
+        self.grounding = self.table.grounding
+        self.poses = {n: self.table.at(objects[n][0], *xy)["pose"] for n, xy in at.items()}
+
+    def ground_cell(self, frame: str, x: str, y: str) -> tuple[float, float, float]:
+        return self.table.ground_cell(frame, x, y)
+
+    def observe(self) -> dict[str, Any]:
+        seen = super().observe()
+        for name, state in seen["objects"].items():
+            state["pose"] = self.poses[name]
+        return seen
+
+
+def test_a_spare_lying_on_a_cell_still_to_fill_stands_in_before_one_off_the_drawing(letters):
+    """b0 missing, two green 1x1 and no blue one: ``s_a`` off the drawing, ``s_z`` lying on b3's cell (3, 1). The
+    spare in the way stands in although its name sorts last: placed at b0's cell, it leaves b3's cell free
+    (letters_A s0 0101). Off the drawing both, the name order decides."""
+    objects = {n: v for n, v in NOMINAL_A.items() if n != "b0"}
+    objects.update({"s_a": ("1x1", "green"), "s_z": ("1x1", "green")})
+    away = {n: (8.0 + i, 6.0) for i, n in enumerate(sorted(objects))}
+    for s_z_at, expected in (((3.0, 1.0), "s_z"), ((9.0, 8.0), "s_a")):
+        world = LetterScene(letters.domain, letters.problem("A"), objects, {**away, "s_z": s_z_at})
+        report = MetaExecutor(letters.domain, letters.problem("A"), world, host(),
+                              limits=Limits(max_attempts=3)).run()
+        assert report.ok, report.stop_reason
+        (attempt,) = report.attempts
+        assert attempt.proposal["action"] == "substitute"
+        assert attempt.proposal["changes"]["mapping"] == {"b0": expected}, attempt.proposal

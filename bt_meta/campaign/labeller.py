@@ -18,8 +18,9 @@ The variant's scene is built in pybullet and settled; then, in this order (the f
    where the task puts something that an object the task does not name occupies (its centre near; for a letter
    cell, any part of it inside the cell's footprint): ``limit:collision``; a block the task names lying on another
    block's cell is moved by the plan: ``repairable`` (step 3), and so is a letters block the run takes for a missing
-   one (of the missing block's shape; of its colour first where the task's symbols name colours, then one lying on
-   a cell, then by name: as the substitution chooses). When several limits apply and the plan
+   one when the named blocks cannot draw the letter (of the missing block's shape; of its colour first where the
+   task's symbols name colours, then one lying on a cell, then by name: as the substitution chooses) and its cell
+   is filled after the missing block's step. When several limits apply and the plan
    step each stops is known (letters), the label is the one the plan meets first (an obstacle at the fourth
    placement before a block out of reach at the fifth); otherwise the first found in this order.
 3. ``repairable`` -- the goal can be reached but not by the nominal plan: a needed object is missing or of
@@ -388,23 +389,31 @@ class Labeller:
 
     def _stand_ins(self, world: Any, present: dict[str, Any]) -> set[str]:
         """Letters: the blocks the task does not name that the run takes for its missing ones, as the substitution
-        chooses -- for each missing block (by name) one of its shape, of its colour first where the task's symbols
-        name colours, then one lying on a letter cell (it must be moved anyway; as the stand-in it clears the
-        cell), then by name. The plan picks them up, so a cell one lies on is not occupied (letters_A s0 0101: a
-        green 1x1 on b3's cell stands in for the missing b0)."""
+        chooses. Only when the blocks the task names cannot draw the letter (a 1x2 standing in for two 1x1 needs no
+        stand-in: the tiling lays it). For each missing block (by name) one of its shape, of its colour first where
+        the task's symbols name colours, then one lying on a letter cell, then by name. The plan picks them up, so
+        a cell one lies on is not occupied -- when that cell is filled after the missing block's step, which is
+        where the stand-in is taken (letters_A s0 0101: a green 1x1 on b3's cell stands in for the missing b0)."""
         if self.family.truth != "letters":
             return set()
+        named = [m.shape for n, m in present.items() if n in self.needed]
+        if letters_feasible(len(self.cells), max_pairs(self.cells), named.count("1x1"), named.count("1x2")):
+            return set()
         unnamed = sorted(n for n, m in present.items() if n not in self.needed and m.shape in ("1x1", "1x2"))
-        occupying = {n for n in unnamed if self._occupied_cell(world, [n]) is not None}
+        occupied = {n: label.evidence["step"] for n in unnamed if (label := self._occupied_cell(world, [n]))}
         taken: set[str] = set()
+        cleared: set[str] = set()
         for name in sorted(n for n in self.needed if n not in present):
             nominal = self.nominal.get(name)
             colour = nominal.colour if nominal is not None and name in self.colour_symbols else None
             fits = [n for n in unnamed if n not in taken and present[n].shape == self.shapes.get(name)]
-            if fits:
-                taken.add(min(fits, key=lambda n: (colour is not None and present[n].colour != colour,
-                                                   n not in occupying, n)))
-        return taken
+            if not fits:
+                continue
+            best = min(fits, key=lambda n: (colour is not None and present[n].colour != colour, n not in occupied, n))
+            taken.add(best)
+            if best not in occupied or occupied[best] >= (self._step_of(name) or 0):
+                cleared.add(best)
+        return cleared
 
     def _step_of(self, name: str) -> int | None:
         """The first step of the nominal plan whose arguments name ``name``."""

@@ -76,6 +76,14 @@ LETTER_CASES = {
                                                      "megablok_1x1, colour: green, pose: [0.611, -0.083, table, 0, 0, "
                                                      "0]}, {name: s, type: megablok_1x1, colour: blue, pose: [0.72, "
                                                      "-0.52, table, 0, 0, 0]}]"),
+    # b1 and b2 became one 1x2: the named blocks still draw A, so nothing stands in and the green 1x1 on b3's cell
+    # stays in the way.
+    "cell_blocked_when_a_1x2_stands_in": ("limit:collision", "remove: [b1, b2]\n    add: [{name: b2, type: "
+                                          "megablok_1x2, colour: blue, pose: [0.72, -0.40, table, 0, 0, 0]}, {name: d, "
+                                          "type: megablok_1x1, colour: green, pose: [0.611, -0.083, table, 0, 0, 0]}]"),
+    # b3 missing; the only stand-in lies on b0's cell, filled at step 0 before b3's step 3: the run meets it first.
+    "cell_blocked_by_a_stand_in_too_late": ("limit:collision", "remove: [b3]\n    add: [{name: d, type: "
+                                            "megablok_1x1, colour: green, pose: [0.55, 0.10, table, 0, 0, 0]}]"),
     # Its centre is 50 mm from the nearest cell's (further than BLOCKING_RADIUS), its long side 11 mm into it.
     "bar_reaching_into_a_cell": ("limit:collision", "add: [{name: d, type: megablok_1x2, colour: green, "
                                  "pose: [0.55, 0.150, table, 0, 0, 0]}]"),

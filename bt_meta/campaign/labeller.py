@@ -51,7 +51,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["OUTCOMES", "Label", "Labeller", "letter_cells", "letters_feasible", "max_pairs", "place_overlap"]
+__all__ = ["OUTCOMES", "Label", "Labeller", "letter_cells", "letters_feasible", "max_pairs"]
 
 OUTCOMES = ("nominal_equivalent", "repairable", "limit:reachability", "limit:collision", "unrepairable")
 
@@ -77,19 +77,6 @@ class Label:
     expected: str
     reason: str
     evidence: dict[str, Any] = field(default_factory=dict)
-
-
-def place_overlap() -> float:
-    """How deep (m) an object may reach into a letter cell's footprint before the cell is occupied: 6 mm, what the
-    place skill's lowering takes as room -- the collision shapes are ``SHRINK`` smaller on every side than the
-    simulated ones (blocks side by side touch exactly), and a block set down may press ``SNUG`` into a movable
-    neighbour, which the simulator pushes aside. At 0.5 mm a distractor reaching 0.7 to 3.8 mm into a cell was
-    labelled a limit, and the place skill, setting the block down, pushed it away (generated letters_A s1 0088 0091
-    0113, letters_H s1 0027)."""
-    from bt_meta.world.simulation.sim_world import SHRINK
-    from bt_meta.world.skills.place import SNUG
-
-    return 2.0 * SHRINK + SNUG
 
 
 def letter_cells(plan: Iterable[Any], shapes: dict[str, str]) -> list[tuple[float, float]]:
@@ -236,7 +223,7 @@ class Labeller:
 
     def _occupied_cell(self, world: Any, names: Sequence[str]) -> Label | None:
         """``limit:collision`` when an object reaches into a letter cell's footprint (deeper than
-        :func:`place_overlap`): with its centre further than :data:`BLOCKING_RADIUS` away, a block turned or longer
+        the place skill's :func:`~bt_meta.world.skills.place.place_overlap`, where it fails): with its centre further than :data:`BLOCKING_RADIUS` away, a block turned or longer
         than a cell still takes room the placed block needs. Ground truth: the simulator's closest points."""
         from bt_meta.world.simulation.objects import LB
 
@@ -244,6 +231,8 @@ class Labeller:
         if frame is None:
             return None
         sim = world.sim
+        from bt_meta.world.skills.place import place_overlap
+
         overlap = place_overlap()
         for step, action in enumerate(self.plan):
             if action.name != "place":

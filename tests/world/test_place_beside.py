@@ -85,9 +85,9 @@ def test_a_placement_run_again_with_its_block_still_held_carries_it_from_where_i
 
 def test_a_block_set_down_where_a_distractor_reaches_a_few_millimetres_in_pushes_it_aside(world):
     """A green bar reaching 3 mm into cell (0, 0): b0 goes down there and the bar is pushed away (what the
-    campaign labeller's ``place_overlap`` counts as room); 11 mm in, the lowering collides with it."""
-    from bt_meta.campaign.labeller import place_overlap
+    skill's ``place_overlap`` counts as room); 11 mm in, the lowering collides with it."""
     from bt_meta.world.simulation.objects import LB, megablok
+    from bt_meta.world.skills.place import place_overlap
 
     sim = world.sim
     cell = np.array(world.ground_cell("letter", "0", "0")[:2])
@@ -107,6 +107,27 @@ def test_a_block_set_down_where_a_distractor_reaches_a_few_millimetres_in_pushes
     world.sync_collision()
     status, skill = place(world, "b2", "3", "0")
     assert status == "FAILURE" and skill.record()["failure"]["kind"] == "collision", skill.info
+
+
+def test_a_block_is_not_set_down_where_an_object_reaches_deeper_than_the_room_it_takes(world):
+    """A green bar reaching 7.5 mm into cell (0, 0), deeper than ``place_overlap`` (6 mm) and lower than where the
+    lowering beside others ends: the place fails before the lowering, ``collision`` with the pair, and the bar is
+    where it was (generated letters_H s1 0058: 6.5 mm in, the set-down shoved it aside)."""
+    from bt_meta.world.simulation.objects import LB, megablok
+    from bt_meta.world.skills.place import place_overlap
+
+    sim = world.sim
+    cell = np.array(world.ground_cell("letter", "0", "0")[:2])
+    reach = 0.0075
+    assert reach > place_overlap()
+    sim.spawn("d", megablok("1x2", "green"), (cell[0], cell[1] + LB - reach, 0, 0, 0, 0), on_table=True)
+    sim.settle(60)
+    world.sync_collision()
+    before = xy(world, "d")
+    status, skill = place(world, "b0", "0", "0")
+    assert status == "FAILURE" and skill.failure.kind == "collision", skill.info
+    assert skill.failure.evidence["failed_phase"] == "room" and skill.failure.evidence["objects"] == ["b0", "d"]
+    assert np.linalg.norm(xy(world, "d") - before) < 0.001
 
 
 def test_the_world_says_where_a_block_can_be_put_down(world):

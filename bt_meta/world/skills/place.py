@@ -25,6 +25,7 @@ Offers:
 * :func:`symmetry` -- the yaw period of an object's shape (1x1 block: 90 degrees, 1x2: 180 degrees)
 * :func:`nearest_yaw` -- the yaw equivalent to one under a symmetry nearest to a preferred yaw
 * :func:`turned_pose` -- the gripper pose that turns a held block toward standing on its base (mode ``turn``)
+* :func:`place_overlap` -- how deep another object may reach into where a block is put down
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ from bt_meta.world.skills.base import PhasedSkill, SkillAbort, rounded
 from bt_meta.world.skills.grasp import Grasp
 from bt_meta.world.skills.move_to import MoveTo
 
-__all__ = ["Place", "nearest_yaw", "symmetry", "top_down", "turned_pose"]
+__all__ = ["Place", "nearest_yaw", "place_overlap", "symmetry", "top_down", "turned_pose"]
 
 _PAD_THICKNESS = 0.016
 """Thickness (m) of a finger pad along the closing axis, for checking what the fingers would touch."""
@@ -78,6 +79,17 @@ its way, and the lowering then collided with the apex 0.3 mm deep in the checker
 simulator pushes the neighbour back. Not the table, not during the carry."""
 FLIP_AXES = ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0))
 """Turn axes tried for a block upside down (base frame)."""
+
+
+def place_overlap() -> float:
+    """How deep (m) another object may reach into a block's footprint at its target before the place fails
+    (``collision``, phase ``room``): 6 mm -- the collision shapes are ``SHRINK`` smaller on every side than the
+    simulated ones (blocks side by side touch exactly), and a block lowered onto its target may press :data:`SNUG`
+    into a movable neighbour, which the simulator pushes aside. The campaign labeller calls a letter cell occupied
+    by the same measure."""
+    from bt_meta.world.simulation.sim_world import SHRINK  # sim_world imports the skills
+
+    return 2.0 * SHRINK + SNUG
 
 
 def top_down(x: float, y: float, z: float, yaw: float) -> np.ndarray:
@@ -222,6 +234,7 @@ class Place(PhasedSkill):
         return [
             *self._pick_phases(held=self.world.sim.held(self.arm) == self.block),
             ("carry", lambda: self._move(self._at_goal(self.approach_height), "above the target", CARRY_CLEARANCE)),
+            ("room", self._check_room),
             ("lower", lambda: self._move(self._lowered(), "down at the target", -SNUG)),
             ("set down", self._set_down),
             ("release", lambda: Grasp(self.world, self.arm).begin(self.block, release=True)),
@@ -267,6 +280,25 @@ class Place(PhasedSkill):
         centre[:3, 3] += centre[:3, :3] @ ((low + high) / 2.0)
         others = [n for n in sim.object_names() if n != self.block]
         return bool(sim.box_clearances(high - low, centre, others, BESIDE))
+
+    def _check_room(self) -> None:
+        """Fail (``collision``, naming the pair) when another object reaches deeper than :func:`place_overlap` into
+        the block's footprint at the target. The lowering's own check ends :data:`SET_DOWN` over the target beside
+        others, above a neighbour lower than that, and the set-down allows twice :data:`SNUG` for brushing on the
+        way: a green 1x2 reaching 6.5 mm into a cell of H was shoved aside (generated letters_H s1 0058)."""
+        sim = self.world.sim
+        low, high = sim.object_model(self.block).extent()
+        centre = self._goal_block().copy()
+        centre[:3, 3] += centre[:3, :3] @ ((low + high) / 2.0)
+        others = [n for n in sim.object_names() if n != self.block and sim.held(self.arm) != n]
+        deep = {n: d for n, d in sim.box_clearances(high - low, centre, others, 0.0).items() if d < -place_overlap()}
+        if deep:
+            name, depth = min(deep.items(), key=lambda item: item[1])
+            raise SkillAbort(FailureKind.COLLISION, f"place {self.block}: {name} reaches {-depth * 1000:.1f} mm into "
+                             f"where it goes (more than the {place_overlap() * 1000:.0f} mm a block set down takes)",
+                             {"pair": [self.block, name], "objects": [self.block, name], "collision_kind": "object",
+                              "penetration": round(-depth, 5), "failed_phase": "room",
+                              "target": rounded(centre[:3, 3])})
 
     def _lowered(self) -> np.ndarray:
         """Where the lowering at full speed ends: :data:`SET_DOWN` over the target beside other objects (the rest

@@ -222,9 +222,10 @@ class Labeller:
         return out
 
     def _occupied_cell(self, world: Any, names: Sequence[str]) -> Label | None:
-        """``limit:collision`` when an object reaches into a letter cell's footprint (deeper than
-        the place skill's :func:`~bt_meta.world.skills.place.place_overlap`, where it fails): with its centre further than :data:`BLOCKING_RADIUS` away, a block turned or longer
-        than a cell still takes room the placed block needs. Ground truth: the simulator's closest points."""
+        """``limit:collision`` when an object reaches into a letter cell's footprint deeper than the place skill's
+        :func:`~bt_meta.world.skills.place.place_overlap` (where the place fails): with its centre further than
+        :data:`BLOCKING_RADIUS` away, a block turned or longer than a cell still takes room the placed block needs.
+        Ground truth: the simulator's closest points."""
         from bt_meta.world.simulation.objects import LB
 
         frame = next((spec.get("frame") for spec in self.grounding.skills.values() if spec.get("frame")), None)

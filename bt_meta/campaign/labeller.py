@@ -1,6 +1,8 @@
 """The expected outcome of a variant, decided from ground truth: the true scene in the simulator, not by hand.
 
-The variant's scene is built in pybullet and settled; then, in this order (the first that applies wins):
+The variant's scene is built in pybullet, moved by the start noise a campaign episode of seed :data:`START_SEED`
+applies (so the label is for the scene that episode runs) and settled; then, in this order (the first that applies
+wins):
 
 1. ``unrepairable`` -- the objects on the table cannot make the goal. Letters: the letter's cells (from the
    nominal plan: every ``place`` with its block's shape) need ``U`` units; with ``n1`` 1x1 and ``n2`` 1x2 blocks
@@ -68,6 +70,12 @@ CANDIDATES = 3
 """Objects tried per place before it counts as blocked (the nominal one first)."""
 PROBE_HEIGHT = 0.02
 """Height (m) of the footprint probe above a letter cell, from just above the table: anything resting there."""
+START_SEED = 0
+"""The seed of the start noise the labels describe: a campaign episode moves every object by the demo's seeded
+noise before it starts (:func:`bt_meta.demo.runner.jitter`, up to 3 mm and 2 degrees), and the label is for the
+scene the episode runs -- the first (by default the only) seed's. Labelled without it, a green 1x2 was 6.5 mm into a
+cell of H and 5.7 mm in the run, below what the place takes as room (generated letters_H s1 0058). ``None``: the
+scene exactly as written (hand-built cases)."""
 REORIENT_PREFIX = "Reorient"
 """Tasks so named re-orient a part by a regrasp (the ``reorientation`` repair plugin's convention)."""
 
@@ -121,7 +129,7 @@ def letters_feasible(units: int, pairs: int, n1: int, n2: int) -> bool:
 class Labeller:
     """Labels the variants of one family; owns one headless simulator reused for every variant."""
 
-    def __init__(self, family: Any, scene: Any) -> None:
+    def __init__(self, family: Any, scene: Any, start_seed: int | None = START_SEED) -> None:
         from bt_meta.campaign.families import needed_objects
         from bt_meta.htn import load_task_file
         from bt_meta.htn.planner import plan
@@ -130,6 +138,7 @@ class Labeller:
 
         self.family = family
         self.scene = scene
+        self.start_seed = start_seed
         task_path = family.task_path()
         self.task_file = load_task_file(task_path)
         self.problem = self.task_file.problem(family.problem)
@@ -195,7 +204,16 @@ class Labeller:
         grounding = dataclasses.replace(self.grounding, problems={**self.grounding.problems,
                                                                   self.problem.name: setup})
         with quiet_stdout():
-            return SimWorld(self.task_file.domain, self.problem, grounding, variant=variant, seed=0, sim=self.sim)
+            world = SimWorld(self.task_file.domain, self.problem, grounding, variant=variant, seed=0, sim=self.sim)
+        if self.start_seed is not None:
+            from bt_meta.demo.runner import jitter
+
+            try:
+                jitter(world, self.start_seed)
+            except BaseException:
+                world.close()
+                raise
+        return world
 
     def _targets(self, world: Any) -> list[tuple[float, float, float]]:
         """Where the task puts things (x, y, z): the letter's cells, or the feature / part the held one goes to."""

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 from bt_meta.campaign.labeller import letter_cells, letters_feasible, max_pairs
@@ -117,8 +118,8 @@ def letters_labeller():
     from bt_meta.campaign.labeller import Labeller
     from bt_meta.world.simulation.scenes import load_scene
 
-    with Labeller(family("letters_A"), load_scene("letters_A")) as labeller:
-        yield labeller
+    with Labeller(family("letters_A"), load_scene("letters_A"), start_seed=None) as labeller:
+        yield labeller  # the scenes exactly as written: the cases' millimetres are the rules' edges
 
 
 @pytest.mark.slow
@@ -181,12 +182,42 @@ def test_magnetic_labels(tmp_path):
     from bt_meta.campaign.labeller import Labeller
     from bt_meta.world.simulation.scenes import load_scene
 
-    with Labeller(family("magnetic"), load_scene("magnetic_attach")) as labeller:
+    with Labeller(family("magnetic"), load_scene("magnetic_attach"), start_seed=None) as labeller:
         for case, (expected, change) in MAGNETIC_CASES.items():
             path = tmp_path / f"{case}.yaml"
             path.write_text(NOMINAL_MAGNETIC + f"    {change}\n", encoding="utf-8")
             label = labeller.label(path, "perturbed")
             assert label.expected == expected, (case, label.reason)
+
+
+@pytest.mark.slow
+def test_the_labels_are_for_the_scene_the_episode_of_the_first_seed_runs(tmp_path):
+    """A campaign episode moves every object by its seed's start noise (up to 3 mm): the labeller's world is that
+    scene, object for object, and a distractor the noise moves across the room a placement takes changes label."""
+    from bt_meta.campaign.episode import variant_world
+    from bt_meta.campaign.families import family
+    from bt_meta.campaign.labeller import START_SEED, Labeller
+    from bt_meta.world.simulation.scenes import load_scene
+
+    chosen = family("letters_A")
+    path = tmp_path / "distractor.yaml"
+    # 6 mm into cell (0, 0), at the edge of what the place takes as room
+    path.write_text(NOMINAL_A + "    add: [{name: d, type: megablok_1x2, colour: green, pose: [0.55, 0.155, table, 0, "
+                    "0, 0]}]\n", encoding="utf-8")
+    with Labeller(chosen, load_scene("letters_A")) as labeller:
+        world = labeller._world(path, "perturbed")
+        seen = {n: world.sim.object_transform(n) for n in world.sim.object_names()}
+        world.close()
+        noisy = labeller.label(path, "perturbed")
+    _, _, episode = variant_world(chosen.task_path(), chosen.problem, path, "perturbed", START_SEED)
+    try:
+        for name, transform in seen.items():
+            assert np.allclose(episode.sim.object_transform(name), transform, atol=1e-6), name
+    finally:
+        episode.close()
+    with Labeller(chosen, load_scene("letters_A"), start_seed=None) as labeller:
+        exact = labeller.label(path, "perturbed")
+    assert {noisy.expected, exact.expected} == {"nominal_equivalent", "limit:collision"}, (noisy, exact)
 
 
 @pytest.mark.slow

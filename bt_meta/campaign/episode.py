@@ -6,13 +6,16 @@ writer). The campaign's demonstration memory is copied into a private temporary 
 refinement goes into that copy, and a repaired variant is run a second time on it (the **second exposure**: a
 correct system needs zero attempts then). The world is the variant's scene file with the demo's seeded start-pose
 noise (:func:`bt_meta.demo.runner.jitter`); the task is done or not by the simulator's ground truth
-(:mod:`bt_meta.demo.truth`).
+(:mod:`bt_meta.demo.truth`). The manifest's expected outcomes are for the start noise of
+:data:`~bt_meta.campaign.labeller.START_SEED`; an episode of another seed labels its variant again for its own
+(:func:`seed_label`), keeping the manifest's as ``expected_as_generated``.
 
 Offers:
 
 * :func:`episode_task` -- the dict an episode needs
 * :func:`run_episode` -- run it; returns the row the database stores
 * :func:`variant_world` -- the :class:`~bt_meta.world.simulation.sim_world.SimWorld` of a variant scene file
+* :func:`seed_label` -- a variant's expected outcome for an episode's own start noise
 * :data:`MAX_ATTEMPTS` -- the repair attempt budget of an episode
 """
 
@@ -26,7 +29,7 @@ import traceback
 from pathlib import Path
 from typing import Any
 
-__all__ = ["MAX_ATTEMPTS", "episode_task", "run_episode", "variant_world"]
+__all__ = ["MAX_ATTEMPTS", "episode_task", "run_episode", "seed_label", "variant_world"]
 
 MAX_ATTEMPTS = 6
 MAX_SECONDS = 90.0
@@ -39,7 +42,32 @@ def episode_task(folder: str | Path, manifest: dict[str, Any], variant: dict[str
     return {"folder": str(folder), "family": manifest["family"], "task_file": manifest["task_file"],
             "problem": manifest["problem"], "variant": variant["name"], "scene": str(folder / variant["file"]),
             "expected": variant["expected"], "configuration": configuration, "seed": int(seed),
-            "memory": str(folder / "memory.sqlite"), "perfect_sensing": perfect_sensing}
+            "memory": str(folder / "memory.sqlite"), "perfect_sensing": perfect_sensing,
+            "base_scene": manifest.get("scene")}
+
+
+def seed_label(task: dict[str, Any]) -> Any:
+    """The variant's :class:`~bt_meta.campaign.labeller.Label` for the start noise of the episode's seed, or
+    ``None`` for the seed the manifest's labels describe: another seed starts every object up to 3 mm and 2 degrees
+    elsewhere, which can carry one across a threshold of the labeller's (a distractor's reach into a letter cell).
+    The family's scene stands in for a base scene path that another install of bt-meta wrote (the same file name);
+    another missing one is an error naming it."""
+    from bt_meta.campaign.families import family
+    from bt_meta.campaign.generator import VARIANT_NAME
+    from bt_meta.campaign.labeller import START_SEED, Labeller
+    from bt_meta.errors import ConfigError
+    from bt_meta.world.simulation.scenes import load_scene
+
+    if int(task["seed"]) == START_SEED:
+        return None
+    chosen = family(task["family"])
+    base = task.get("base_scene") or chosen.scene
+    if not Path(base).exists() and Path(base).suffix:
+        if Path(base).stem != Path(str(chosen.scene)).stem:
+            raise ConfigError(f"campaign.json: the base scene {base} is not there (labelling seed {task['seed']})")
+        base = chosen.scene
+    with Labeller(chosen, load_scene(base), start_seed=int(task["seed"])) as labeller:
+        return labeller.label(task["scene"], task.get("scene_variant", VARIANT_NAME))
 
 
 def variant_world(task_path: Path, problem_name: str, scene: str | Path, variant: str | None, seed: int) -> Any:
@@ -111,6 +139,10 @@ def run_episode(task: dict[str, Any]) -> dict[str, Any]:
         copy = Path(scratch) / "memory.sqlite"
         try:
             shutil.copyfile(task["memory"], copy)
+            label = seed_label(task)
+            if label is not None:
+                row.update(expected_as_generated=row["expected"], expected=label.expected,
+                           expected_reason=label.reason)
             report = _one_run(task, copy, save=True)
             attempts = list(report.get("attempts") or [])
             success = report.get("status") == "success" and report.get("achieved") is not False

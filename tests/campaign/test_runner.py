@@ -89,6 +89,31 @@ def test_a_two_worker_pool_finishes_cleanly_with_json(campaign, tmp_path):
     assert len(payload["episodes"]) == 2 and len(_rows(folder)) == 2
 
 
+def test_episodes_of_a_second_seed_are_judged_by_the_label_of_their_own_start_noise(campaign, tmp_path):
+    """``--seeds 2``: the manifest's labels are seed 0's; each seed-1 episode labels its variant again and keeps the
+    manifest's as ``expected_as_generated``."""
+    from bt_meta.campaign.episode import episode_task, seed_label
+    from bt_meta.campaign.manifest import read_manifest
+
+    folder = tmp_path / "C"
+    shutil.copytree(campaign, folder)
+    result = subprocess.run(_cli("run", str(folder), "--configurations", "retry", "--seeds", "2", "--workers", "1",
+                                 "--no-progress"), capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-2000:]
+    manifest = read_manifest(folder)
+    variants = {v["name"]: v for v in manifest["variants"]}
+    with sqlite3.connect(folder / "campaign.sqlite") as connection:
+        rows = [json.loads(text) for (text,) in connection.execute("SELECT result FROM episodes")]
+    assert sorted((r["variant"], r["seed"]) for r in rows) == sorted((v, s) for v in variants for s in (0, 1))
+    for row in rows:
+        generated = variants[row["variant"]]["expected"]
+        if row["seed"] == 0:
+            assert row["expected"] == generated and "expected_as_generated" not in row
+        else:
+            own = seed_label(episode_task(folder, manifest, variants[row["variant"]], "retry", 1))
+            assert row["expected_as_generated"] == generated and row["expected"] == own.expected
+
+
 def test_ray_gives_the_same_outcomes_as_the_pool(campaign, tmp_path):
     pytest.importorskip("ray")
     from bt_meta.campaign.runner import run_campaign

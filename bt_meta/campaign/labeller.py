@@ -245,13 +245,12 @@ class Labeller:
         :data:`BLOCKING_RADIUS` away, a block turned or longer than a cell still takes room the placed block needs.
         Ground truth: the simulator's closest points."""
         from bt_meta.world.simulation.objects import LB
+        from bt_meta.world.skills.place import place_overlap
 
         frame = next((spec.get("frame") for spec in self.grounding.skills.values() if spec.get("frame")), None)
         if frame is None:
             return None
         sim = world.sim
-        from bt_meta.world.skills.place import place_overlap
-
         overlap = place_overlap()
         for step, action in enumerate(self.plan):
             if action.name != "place":

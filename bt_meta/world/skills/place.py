@@ -272,26 +272,28 @@ class Place(PhasedSkill):
         raised[2, 3] += float(np.max(high - low)) + 0.005
         return MoveTo(self.world, self.arm, speed=WITHDRAW_SPEED).begin(raised, "withdraw " + self.block)
 
-    def _beside_others(self) -> bool:
-        """Whether the block, put down at the target, would come within :data:`BESIDE` of another object."""
+    def _clearances_at_goal(self, within: float) -> tuple[dict[str, float], np.ndarray]:
+        """(object -> distance closer than ``within``, negative: overlap) of the block's box put down at the target
+        to every other object not held, and the box's centre pose; the simulator's closest points."""
         sim = self.world.sim
         low, high = sim.object_model(self.block).extent()
         centre = self._goal_block().copy()
         centre[:3, 3] += centre[:3, :3] @ ((low + high) / 2.0)
-        others = [n for n in sim.object_names() if n != self.block]
-        return bool(sim.box_clearances(high - low, centre, others, BESIDE))
+        held = sim.held(self.arm)
+        others = [n for n in sim.object_names() if n != self.block and n != held]
+        return sim.box_clearances(high - low, centre, others, within), centre
+
+    def _beside_others(self) -> bool:
+        """Whether the block, put down at the target, would come within :data:`BESIDE` of another object."""
+        return bool(self._clearances_at_goal(BESIDE)[0])
 
     def _check_room(self) -> None:
         """Fail (``collision``, naming the pair) when another object reaches deeper than :func:`place_overlap` into
         the block's footprint at the target. The lowering's own check ends :data:`SET_DOWN` over the target beside
         others, above a neighbour lower than that, and the set-down allows twice :data:`SNUG` for brushing on the
         way: a green 1x2 reaching 6.5 mm into a cell of H was shoved aside (generated letters_H s1 0058)."""
-        sim = self.world.sim
-        low, high = sim.object_model(self.block).extent()
-        centre = self._goal_block().copy()
-        centre[:3, 3] += centre[:3, :3] @ ((low + high) / 2.0)
-        others = [n for n in sim.object_names() if n != self.block and sim.held(self.arm) != n]
-        deep = {n: d for n, d in sim.box_clearances(high - low, centre, others, 0.0).items() if d < -place_overlap()}
+        clearances, centre = self._clearances_at_goal(0.0)
+        deep = {n: d for n, d in clearances.items() if d < -place_overlap()}
         if deep:
             name, depth = min(deep.items(), key=lambda item: item[1])
             raise SkillAbort(FailureKind.COLLISION, f"place {self.block}: {name} reaches {-depth * 1000:.1f} mm into "

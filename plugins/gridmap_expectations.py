@@ -123,6 +123,8 @@ class GridMapExpectations:
                         ) -> Comparison | None:
         run = getattr(context, "run", None)
         before = self._view[1] if run is not None and self._view is not None and self._view[0] == id(run) else None
+        if before is None and run is not None:  # the run's first step: the world as the run found it
+            before = (getattr(run, "start_observations", None) or {}).get("image")
         result = compare(expectation, observations, before=before)
         if run is not None and observations.get("image") is not None:
             self._view = (id(run), observations["image"])
@@ -278,7 +280,8 @@ def symbol_colours(context: Any) -> dict[str, str]:
 
 def compare(expectation: Expectation, observations: dict[str, Any], before: Any = None) -> Comparison | None:
     """Compare a ``"gridmap"`` expectation with the top view in ``observations["image"]`` (``None`` without);
-    ``before``, the top view the previous step left, when known: a cell memory expected empty that was occupied
+    ``before``, the top view the previous step left (for the run's first step, the one it started with:
+    ``RunContext.start_observations``), when known: a cell memory expected empty that was occupied
     then and still is holds a block an earlier step put there, not the step's doing."""
     if expectation.kind != KIND:
         return None

@@ -75,6 +75,10 @@ class RunContext:
         self.failure_records: list[dict[str, Any]] = []
         self.tick_count = 0
         self.steps_started = 0
+        # What the observe plugins reported just before the run's first monitored step started (taken only when
+        # some plugin compares expectations): the world as the run found it, so the first step's comparison can
+        # tell what was already there from what the step did. None until then.
+        self.start_observations: dict[str, Any] | None = None
         # Which hooks anyone implements, fixed for the run: monitors skip the others without asking.
         self.hooks: frozenset[str] = frozenset() if plugins is None else plugins.implemented_hooks()
         self._trace = "bt_meta_trace_event" in self.hooks

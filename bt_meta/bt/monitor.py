@@ -2,7 +2,8 @@
 
 Every primitive of a compiled or loaded tree runs inside a Monitor (section 3 of the paper). Before its child
 starts, the monitor checks the primitive's precondition against the run's belief state (kind ``precondition``
-on failure; the child is not started). When the child succeeds it gathers observations (``bt_meta_observe``),
+on failure; the child is not started; before the run's first step starts it also keeps what the observe plugins
+report then, ``RunContext.start_observations``). When the child succeeds it gathers observations (``bt_meta_observe``),
 asks for expectations (``bt_meta_expectations``) and compares each (``bt_meta_compare``); a mismatch turns
 SUCCESS into FAILURE with a structured :class:`~bt_meta.bt.failures.Failure` on ``/bt_meta/failures`` and in the
 run log, after which the meta-reasoner hook runs. A failing child's own failure (its skill's kind) is recorded the
@@ -111,6 +112,9 @@ class Monitor(py_trees.decorators.Decorator):
                 self._finish(_FAILURE)
                 yield self
                 return
+            if run is not None and run.start_observations is None and "bt_meta_observe" in run.hooks \
+                    and "bt_meta_compare" in run.hooks:
+                run.start_observations = self._observe(run, self._step_context(run))[0]
         child = self.decorated
         if self._inline:
             if child.status is not _RUNNING:

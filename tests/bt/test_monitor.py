@@ -173,6 +173,34 @@ def test_plugin_that_raises_fails_the_node_as_internal_and_the_tree_keeps_tickin
     assert len(h.failures) >= 2
 
 
+class Counting:
+    """Observes by counting its calls and what the world had done by then; compares nothing."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[str | None, int]] = []
+
+    @hookimpl
+    def bt_meta_observe(self, world, context):
+        self.calls.append((context.action, len(world.executed)))
+        return {"call": len(self.calls)}
+
+    @hookimpl
+    def bt_meta_compare(self, expectation, observations, context):
+        return None
+
+
+def test_the_run_keeps_what_was_observed_before_its_first_step_started(harness):
+    """``RunContext.start_observations``: the observe plugins called once before the first step runs (the world as
+    the run found it, for comparisons that must tell what was already there), then after each step."""
+    counting = Counting()
+    h = harness(extra_plugins=[("counting", counting)])
+    assert h.run.start_observations is None
+    assert h.tick_until("done") is Status.SUCCESS
+    assert h.run.start_observations["call"] == 1
+    assert counting.calls[0] == ("pick", 0)  # before anything ran
+    assert [n for _, n in counting.calls[1:]] == [1, 2, 3, 4]  # then after each of the four steps
+
+
 class Classifier:
     @hookimpl(tryfirst=True)
     def bt_meta_classify_failure(self, failure, mismatches, context):

@@ -669,3 +669,23 @@ def test_gridmap_compares_the_cells_the_steps_block_can_cover(observed, matched)
         "rotations": False, "recentre_radius": 0.25 * LB, "parent_task": "draw_A_bar", "task_end": True})
     comparison = gridmap_plugin.compare(expectation, {"image": WindowView(observed)})
     assert comparison.matched is matched, comparison.evidence
+
+
+def test_gridmap_tells_what_was_there_before_the_run_s_first_step(letters_memory):
+    """The first step of a run has no top view of an earlier step: one of the block's colour touching it is a
+    mismatch -- unless the view the run started with (``RunContext.start_observations``) already showed it there
+    (generated letters_A s2 0124: a yellow 1x2 beside the cell of b0, recoloured yellow)."""
+    expected = GridMap(WindowView(EXPECTED_LEG).occupancy, object_name="b5", colour="blue", shape="1x1",
+                       centroid=(0.672, -0.083))
+    expectation = Expectation(kind=gridmap_plugin.KIND, description="grid-maps after place(b5, 3, 2)", data={
+        "traces": [{"episode": 1, "maps": [expected]}], "max_cells": 2, "compare_colour": False,
+        "rotations": False, "recentre_radius": 0.25 * LB, "parent_task": "draw_tall_leg", "task_end": True})
+    after = {"image": WindowView(["...###", "...###", "..bb..", "..bb..", "..bb..", "..bb.."])}
+    started = {"image": WindowView(["...###", "...###", "......", "......", "..bb..", "..bb.."])}
+    for start, matched in ((None, False), (started, True)):
+        run = letters_run(None)
+        run.start_observations = start
+        plugin = gridmap_plugin.GridMapExpectations()
+        verdict = plugin.bt_meta_compare(expectation, after, make_context(run, 0, "place", ("b5", "3", "2")))
+        assert verdict.matched is matched, verdict.evidence
+

@@ -10,6 +10,7 @@ Offers:
 * :func:`pose_from_xyz_rpy` -- a pose from position and roll/pitch/yaw, the form object states use
 * :func:`as_se3` -- a pose from an SE3, a 4x4 matrix, (x, y, z) or (x, y, z, roll, pitch, yaw)
 * :data:`TABLE` -- the name of the table top among the scene objects
+* :data:`SHRINK` -- how much smaller than the simulated objects the worlds make their collision shapes
 
 Robot geometries are reported by link name (``right_gripper_base_link``); scene objects by their own name.
 Pairs checked: robot against robot (minus the SRDF's and rigidly joined ones), robot against every scene object,
@@ -34,10 +35,15 @@ from bt_meta.errors import KinematicsError
 from bt_meta.model_cache import cached, file_signature
 from bt_meta.world.kinematics.forward import Kinematics, se3_from_matrix
 
-__all__ = ["TABLE", "CollisionChecker", "Contact", "SceneObject", "pose_from_xyz_rpy"]
+__all__ = ["SHRINK", "TABLE", "CollisionChecker", "Contact", "SceneObject", "pose_from_xyz_rpy"]
 
 Pose = pin.SE3 | np.ndarray | Sequence[float]
 
+
+SHRINK = 0.0015
+"""Collision shapes are this much (m) smaller on every side than the simulated ones (the simulated world builds them
+so): blocks placed side by side touch exactly, which is not a collision (pybullet, too, lets resting bodies overlap a
+little)."""
 
 TABLE = "table"
 """The scene object a world adds as the table top: carried objects keep no clearance from it (what they are lifted

@@ -49,6 +49,7 @@ from bt_meta.hookspecs import hookimpl
 from bt_meta.htn.state import State
 from bt_meta.resources import trees_dir
 from bt_meta.world.base import FAILURE, SUCCESS, Atom, SkillFailure, ground_effects
+from bt_meta.world.kinematics.collision import SHRINK
 from bt_meta.world.poses import axis_angle_matrix
 from bt_meta.world.simulation.objects import Box, Cylinder, Mesh, ObjectModel, pose_to_matrix, rpy_to_matrix
 from bt_meta.world.skills import SKILLS
@@ -956,9 +957,6 @@ class SimWorld:
                 checker.allow(part, self._geometry.get(b, []))
 
 
-SHRINK = 0.0015
-"""Collision shapes are this much (m) smaller on every side than the simulated ones: blocks placed side by side
-touch exactly, which is not a collision (pybullet, too, lets resting bodies overlap a little)."""
 
 
 def _collision_shapes(model: ObjectModel) -> list[tuple[str, tuple[float, ...], np.ndarray]]:

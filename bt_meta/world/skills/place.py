@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from bt_meta.bt.failures import FailureKind
+from bt_meta.world.kinematics.collision import SHRINK
 from bt_meta.world.poses import matrix_to_pose, pose_to_matrix
 from bt_meta.world.skills.base import PhasedSkill, SkillAbort, rounded
 from bt_meta.world.skills.grasp import Grasp
@@ -87,8 +88,6 @@ def place_overlap() -> float:
     simulated ones (blocks side by side touch exactly), and a block lowered onto its target may press :data:`SNUG`
     into a movable neighbour, which the simulator pushes aside. The campaign labeller calls a letter cell occupied
     by the same measure."""
-    from bt_meta.world.simulation.sim_world import SHRINK  # sim_world imports the skills
-
     return 2.0 * SHRINK + SNUG
 
 

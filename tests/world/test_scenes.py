@@ -12,6 +12,7 @@ import pytest
 from bt_meta.errors import ConfigError
 from bt_meta.htn.loader import load_task_file
 from bt_meta.resources import trees_dir
+from bt_meta.world.robot.description import available_robots, load_robot
 from bt_meta.world.simulation.objects import LB
 from bt_meta.world.simulation.scenes import load_scene, scene_names
 from bt_meta.world.simulation.sim import Simulation
@@ -310,3 +311,89 @@ def test_jitter_is_seeded_and_off_table_objects_are_located(sim, tmp_path):
         spec.build(sim, "off")
     assert info.value.line == 9
     sim.clear_objects()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("robot", available_robots())
+def test_jitter_keeps_the_robots_scene_offset_for_every_object(robot, tmp_path):
+    """Every object lands where the scene puts it in this robot's base frame, give or take the jitter.
+
+    The jitter's draw once reused the offset's names, so every object after the first lost the offset.
+    """
+    path = write(
+        tmp_path,
+        """
+        scene: s
+        jitter: {position: 0.004, yaw: 2}
+        objects:
+          - {name: b0, type: megablok_1x1, pose: [0.60, -0.30, table, 0, 0, 0]}
+          - {name: b1, type: megablok_1x1, pose: [0.60, -0.10, table, 0, 0, 0]}
+          - {name: b2, type: megablok_1x2, pose: [0.70, 0.00, table, 0, 0, 90]}
+          - {name: b3, type: megablok_1x1, pose: [0.55, 0.15, table, 0, 0, 0]}
+        """,
+    )
+    spec = load_scene(path)
+    description = load_robot(robot)
+    dx, dy, _ = description.scene_offset
+    with Simulation(seed=0, robot=description) as s:
+        spec.build(s, seed=3, settle_steps=0)
+        for obj in spec.objects:
+            x, y, _, _, _, yaw = s.object_pose(obj.name)
+            assert abs(x - (obj.position[0] + dx)) <= 0.004 + 1e-9, (robot, obj.name, x)
+            assert abs(y - (obj.position[1] + dy)) <= 0.004 + 1e-9, (robot, obj.name, y)
+            assert abs(math.remainder(yaw - obj.rpy[2], 2 * math.pi)) <= math.radians(2) + 1e-9
+
+
+def test_a_grounding_naming_an_anchor_the_scene_lacks_is_refused_at_its_line(tmp_path):
+    """The anchor is checked when the world is built, at the grounding's line, not in the middle of a repair."""
+    from bt_meta.world.simulation.sim_world import load_grounding
+
+    text = textwrap.dedent(
+        """
+        domain: d
+        problems:
+          p: {scene: scene.yaml}
+        skills:
+          MoveTo: {skill: move_to}
+        frames:
+          letter: {anchor: letter_origin, unit: 0.061}
+        poses:
+          turn_high: {anchor: set_down_spot, offset: [0, 0, 0.18]}
+        """
+    ).lstrip("\n")
+    grounding_path = tmp_path / "grounding.yaml"
+    grounding_path.write_text(text, encoding="utf-8")
+    grounding = load_grounding("d", path=grounding_path)
+    assert [(a, where) for a, where, _, _ in grounding.anchor_uses] == [
+        ("letter_origin", "frames.letter"),
+        ("set_down_spot", "poses.turn_high"),
+    ]
+    objects = "objects:\n  - {name: b0, type: megablok_1x1, pose: [0.6, -0.3, table, 0, 0, 0]}\n"
+    both = write(tmp_path, "scene: both\nanchors:\n  letter_origin: [0.55, 0.10, table, 0, 0, -90]\n"
+                           "  set_down_spot: [0.50, -0.28, table, 0, 0, 0]\n" + objects)
+    grounding.check_anchors(load_scene(both))
+    one = write(tmp_path, "scene: one\nanchors:\n  letter_origin: [0.55, 0.10, table, 0, 0, -90]\n" + objects)
+    refused = r"poses\.turn_high names anchor .set_down_spot..*anchors: letter_origin"
+    with pytest.raises(ConfigError, match=refused) as info:
+        grounding.check_anchors(load_scene(one))
+    line = text.splitlines().index("  turn_high: {anchor: set_down_spot, offset: [0, 0, 0.18]}") + 1
+    column = text.splitlines()[line - 1].index("set_down_spot") + 1
+    assert (info.value.path, info.value.line, info.value.column) == (str(grounding_path), line, column)
+
+
+@pytest.mark.slow
+def test_run_refuses_a_scene_without_the_groundings_anchor_before_any_motion(tmp_path):
+    """``bt-meta run`` on a scene lacking an anchor the shipped grounding names: exit 2, the grounding's line."""
+    import subprocess
+    import sys
+
+    scene = write(tmp_path, "scene: no_anchor\nobjects:\n"
+                            + "".join(f"  - {{name: b{i}, type: megablok_1x1, pose: [0.6, {-0.3 + 0.08 * i:.2f}, table,"
+                                      " 0, 0, 0]}\n" for i in range(5))
+                            + "  - {name: b5, type: megablok_1x2, pose: [0.7, 0.0, table, 0, 0, 0]}\n")
+    done = subprocess.run([sys.executable, "-m", "bt_meta.cli", "run", str(trees_dir() / "letters.yaml"), "--problem",
+                           "A", "--scene", str(scene)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2, done.stdout + done.stderr
+    grounding = trees_dir() / "poses" / "letters.yaml"
+    line = next(n for n, text in enumerate(grounding.read_text().splitlines(), 1) if "anchor: letter_origin" in text)
+    assert f"{grounding}:{line}:" in done.stderr and "letter_origin" in done.stderr, done.stderr

@@ -170,8 +170,9 @@ class Scene:
             x, y, z = x + dx, y + dy, None if z is None else z + dz
             roll, pitch, yaw = obj.rpy
             if self.jitter_position > 0.0 or self.jitter_yaw > 0.0:
-                dx, dy = rng.uniform(-self.jitter_position, self.jitter_position, size=2)
-                x, y = x + float(dx), y + float(dy)
+                # Names of their own: the offset above must stay the same for every object.
+                noise_x, noise_y = rng.uniform(-self.jitter_position, self.jitter_position, size=2)
+                x, y = x + float(noise_x), y + float(noise_y)
                 yaw += float(rng.uniform(-self.jitter_yaw, self.jitter_yaw))
             if not (x_lo <= x <= x_hi and y_lo <= y <= y_hi):
                 message = (

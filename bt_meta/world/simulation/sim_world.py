@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
 from bt_meta.bt.failures import FailureKind
 from bt_meta.errors import BtMetaError, ConfigError
@@ -163,6 +164,18 @@ class Grounding:
     robot: str | None = None
     """The robot the problems run on unless the caller chooses one: a shipped name or a path (resolved against
     the grounding file's folder)."""
+    anchor_uses: tuple[tuple[str, str, int | None, int | None], ...] = ()
+    """Every scene anchor the file names: (anchor, where -- ``poses.turn_high`` --, line, column), so a scene
+    without one is refused when the world is built, at the line that names it (:meth:`check_anchors`)."""
+
+    def check_anchors(self, scene: Any) -> None:
+        """Raise :class:`ConfigError` at the first line naming an anchor ``scene`` lacks (before any motion)."""
+        anchors = getattr(scene, "anchors", {}) or {}
+        for anchor, where, line, column in self.anchor_uses:
+            if anchor not in anchors:
+                known = ", ".join(anchors) or "none"
+                raise ConfigError(f"{where} names anchor {anchor!r}, which scene {scene.name!r} ({scene.path}) "
+                                  f"does not have; its anchors: {known}", self.path, line, column)
 
     def start_pose(self, robot: str) -> dict[str, float]:
         """Joint values replacing ``robot``'s home pose at the start: the file's ``robot_pose`` for that robot."""
@@ -202,8 +215,8 @@ def load_grounding(domain: str, task_file: str | Path | None = None, path: str |
     from bt_meta.safe_yaml import load_yaml
     from bt_meta.user_files import read_user_text
 
-    data = load_yaml(read_user_text(path, what="grounding file", error=ConfigError), str(path), ConfigError,
-                     syntax="not valid YAML")
+    text = read_user_text(path, what="grounding file", error=ConfigError)
+    data = load_yaml(text, str(path), ConfigError, syntax="not valid YAML")
     if not isinstance(data, dict):
         raise ConfigError("a grounding file is a mapping", path, 1, 1)
     unknown = set(data) - _TOP_KEYS
@@ -227,7 +240,32 @@ def load_grounding(domain: str, task_file: str | Path | None = None, path: str |
     return Grounding(path, str(data.get("domain", domain)), dict(data["problems"]), dict(data["skills"]),
                      dict(data.get("frames") or {}), dict(data.get("poses") or {}),
                      _robot_poses(data.get("robot_pose"), path), objects,
-                     {str(k): dict(v) for k, v in (data.get("features") or {}).items()}, robot)
+                     {str(k): dict(v) for k, v in (data.get("features") or {}).items()}, robot,
+                     _anchor_uses(text, path))
+
+
+def _anchor_uses(text: str, path: Path) -> tuple[tuple[str, str, int | None, int | None], ...]:
+    """Where the file names a scene anchor (``anchor:`` under ``frames`` and ``poses``), with its position."""
+    from bt_meta.safe_yaml import compose_yaml
+
+    root = compose_yaml(text, str(path), ConfigError, syntax="not valid YAML")  # the tree load_yaml composed
+    uses: list[tuple[str, str, int | None, int | None]] = []
+    for section, entries in _mapping_items(root):
+        if section.value not in ("frames", "poses"):
+            continue
+        for name, spec in _mapping_items(entries):
+            for key, value in _mapping_items(spec):
+                if key.value == "anchor" and isinstance(value, yaml.ScalarNode):
+                    mark = value.start_mark
+                    uses.append((str(value.value), f"{section.value}.{name.value}", mark.line + 1, mark.column + 1))
+    return tuple(uses)
+
+
+def _mapping_items(node: Any) -> list[tuple[Any, Any]]:
+    """A mapping node's (key, value) node pairs whose keys are scalars; nothing for any other node."""
+    if not isinstance(node, yaml.MappingNode):
+        return []
+    return [(k, v) for k, v in node.value if isinstance(k, yaml.ScalarNode)]
 
 
 def _robot_poses(value: Any, path: Path) -> dict[str, dict[str, float]]:
@@ -355,6 +393,7 @@ class SimWorld:
         if scene is None and str(scene_name).endswith((".yaml", ".yml")):
             scene_name = grounding.path.parent / str(scene_name)  # a path in the grounding file: beside it
         self.scene = load_scene(scene_name)
+        grounding.check_anchors(self.scene)
         if variant is None:
             variant = setup.get("variant")
         if variant is not None and variant != "nominal" and variant not in self.scene.variants:

@@ -147,6 +147,8 @@ def test_letters_obstacle_labels(letters_labeller, tmp_path, case):
 
 
 NOMINAL_MAGNETIC = """scene: hand
+anchors:
+  set_down_spot: [0.50, -0.28, table, 0, 0, 0]
 objects:
   - {name: reference, type: magnet_reference, pose: [0.62, -0.10, table, 0, 0, 0]}
   - {name: active, type: magnet_active, pose: [0.58, -0.40, table, 0, 0, 0]}

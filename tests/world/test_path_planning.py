@@ -80,6 +80,8 @@ def test_neither_end_is_checked():
 
 WALLED = """\
 scene: walled
+anchors:
+  set_down_spot: [0.50, -0.28, table, 0, 0, 0]
 objects:
   - {name: reference, type: magnet_reference, pose: [0.62, -0.10, table, 0, 0, 0]}
   - {name: active, type: magnet_active, pose: [0.58, -0.40, table, 0, 0, 0]}

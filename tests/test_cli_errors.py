@@ -218,13 +218,25 @@ def test_a_user_given_memory_folder_is_never_created(capsys, tmp_path):
 
 # -- signals and outcomes -----------------------------------------------------------------------------------------
 
+# Runs a command with SIGINT at its default disposition. A background job started by a non-interactive shell
+# inherits SIGINT ignored, exec keeps an ignored signal ignored, and Python then installs no Ctrl-C handler; the
+# test asserts what Ctrl-C does, so it gives the child the disposition a terminal would. (An exec wrapper rather
+# than ``preexec_fn``: nothing runs between fork and exec, which is safe with threads.)
+DEFAULT_SIGINT = [sys.executable, "-c", "import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_DFL); "
+                  "os.execvp(sys.argv[1], sys.argv[1:])"]
+IGNORED_SIGINT = [DEFAULT_SIGINT[0], "-c", DEFAULT_SIGINT[2].replace("SIG_DFL", "SIG_IGN")]
+
+
+def handled_signals(pid: int) -> int:
+    status = Path(f"/proc/{pid}/status").read_text()
+    return int(next(line for line in status.splitlines() if line.startswith("SigCgt:")).split()[1], 16)
+
+
 def wait_for_main(pid: int) -> None:
     """Until the CLI's main() runs (it catches SIGTERM from then on): a loaded machine may import slowly."""
     deadline = time.monotonic() + 90
     while time.monotonic() < deadline:
-        status = Path(f"/proc/{pid}/status").read_text()
-        caught = int(next(line for line in status.splitlines() if line.startswith("SigCgt:")).split()[1], 16)
-        if caught & (1 << (signal.SIGTERM - 1)):
+        if handled_signals(pid) & (1 << (signal.SIGTERM - 1)):
             return
         time.sleep(0.05)
     raise AssertionError("the CLI never started")
@@ -238,9 +250,10 @@ def test_signals_stop_the_cli_cleanly(tmp_path, signum, code, word):
     task.write_text(BLOCKS)
     script = Path(sys.executable).parent / "bt-meta"  # the console script a user runs, when installed beside python
     command = [str(script)] if script.exists() else [sys.executable, "-m", "bt_meta.cli"]
-    process = subprocess.Popen([*command, "plan", str(task), "--max-seconds", "100"],
+    process = subprocess.Popen([*DEFAULT_SIGINT, *command, "plan", str(task), "--max-seconds", "100"],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     wait_for_main(process.pid)
+    assert handled_signals(process.pid) & (1 << (signal.SIGINT - 1)), "the CLI does not catch SIGINT"
     time.sleep(1.0)  # planning the endless task
     process.send_signal(signum)
     _, err = process.communicate(timeout=60)
@@ -248,6 +261,27 @@ def test_signals_stop_the_cli_cleanly(tmp_path, signum, code, word):
     # by re-raising SIGINT after main() returned 130, so either form counts, with the one line printed.
     assert process.returncode in (code, -signum), err
     assert one_line(err) == f"bt-meta: {word}"
+
+
+@pytest.mark.timeout(120)
+def test_an_inherited_ignored_sigint_stays_ignored_and_sigterm_still_stops(tmp_path):
+    """Whoever started the CLI with SIGINT ignored (a shell's background job, a supervisor) asked it not to be
+    interrupted by Ctrl-C meant for the terminal: it keeps the disposition, as Unix programs do; SIGTERM stops it."""
+    task = tmp_path / "loop.yaml"
+    task.write_text(BLOCKS)
+    command = [*IGNORED_SIGINT, sys.executable, "-m", "bt_meta.cli", "plan", str(task), "--max-seconds", "100"]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_for_main(process.pid)
+        assert not handled_signals(process.pid) & (1 << (signal.SIGINT - 1))
+        process.send_signal(signal.SIGINT)
+        time.sleep(1.0)
+        assert process.poll() is None
+    finally:
+        process.send_signal(signal.SIGTERM)
+        _, err = process.communicate(timeout=60)
+    assert process.returncode in (143, -signal.SIGTERM), err
+    assert one_line(err) == "bt-meta: terminated"
 
 
 def test_plan_has_a_default_budget(capsys, tmp_path):

@@ -69,9 +69,16 @@ def trees_of(text: bytes) -> list[tuple]:
     return [canonical(tree) for tree in ET.fromstring(text).findall("BehaviorTree")]
 
 
+# Runs a command with SIGINT at its default disposition: a background job started by a non-interactive shell
+# inherits SIGINT ignored (exec keeps it so, and Python then installs no Ctrl-C handler), and the test asserts what
+# Ctrl-C does. An exec wrapper, not ``preexec_fn``: nothing runs between fork and exec, safe with zmq's threads.
+DEFAULT_SIGINT = [sys.executable, "-c", "import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_DFL); "
+                  "os.execvp(sys.argv[1], sys.argv[1:])"]
+
+
 def start_tick(tree: Path, port: int, *extra: str) -> subprocess.Popen:
-    command = [sys.executable, "-m", "bt_meta.cli", "tick", str(tree), "--world", "fake", "--ticks", "1",
-               "--groot2", str(port), "--groot2-host", "127.0.0.1", "--hold", *extra]
+    command = [*DEFAULT_SIGINT, sys.executable, "-m", "bt_meta.cli", "tick", str(tree), "--world", "fake",
+               "--ticks", "1", "--groot2", str(port), "--groot2-host", "127.0.0.1", "--hold", *extra]
     return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 

@@ -1,11 +1,13 @@
 """Our Groot2 server and ``.btlog`` writer against BehaviorTree.CPP's own (behaviortreepy 0.1.4 = BT.CPP 4.8.2).
 
 The seeded random trees of ``test_btcpp_conformance.py`` (every built-in bt-meta implements, SubTrees with
-remapping, autoremap and literals, ``{@key}``, scripted RUNNING/SUCCESS/FAILURE leaves) are loaded into both
-engines; BehaviorTree.CPP's ``Groot2Publisher`` and ours serve them on 127.0.0.1, and one client of ours sends both
-the same requests between the same ticks. STATUS and BLACKBOARD replies must be byte-identical, reply headers equal
-but for the random tree id, FULLTREE equal as XML trees (BehaviorTree.CPP orders ports by hash). ``FileLogger2``
-files must hold the same transitions (timestamps aside) and the same tree.
+remapping, autoremap and literals, ``{@key}``, scripted RUNNING/SUCCESS/FAILURE leaves), those of
+``test_btcpp_scripting.py`` (every pre/post-condition attribute) and one tree where every such attribute fires are
+loaded into both engines; BehaviorTree.CPP's ``Groot2Publisher`` and ours serve them on 127.0.0.1, and one client
+of ours sends both the same requests between the same ticks. STATUS and BLACKBOARD replies must be byte-identical,
+reply headers equal but for the random tree id, FULLTREE equal as XML trees (BehaviorTree.CPP orders ports by hash;
+pre/post conditions in its enum order). ``FileLogger2`` files must hold the same transitions (timestamps aside) and
+the same tree.
 """
 
 from __future__ import annotations
@@ -40,11 +42,11 @@ pytestmark = pytest.mark.usefixtures("clean_blackboard")
 TIMEOUT_MS = 3000
 
 
-def _conformance() -> ModuleType:
-    """The random tree generator and scripted leaves of the BT.CPP conformance test (one source of trees)."""
-    name = "bt_meta_tests_btcpp_conformance"
+def _test_module(filename: str) -> ModuleType:
+    """A sibling test module (its tree generator and scripted leaves: one source of trees)."""
+    name = "bt_meta_tests_" + Path(filename).stem
     if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, Path(__file__).with_name("test_btcpp_conformance.py"))
+        spec = importlib.util.spec_from_file_location(name, Path(__file__).with_name(filename))
         assert spec is not None and spec.loader is not None
         module = importlib.util.module_from_spec(spec)
         sys.modules[name] = module
@@ -52,8 +54,74 @@ def _conformance() -> ModuleType:
     return sys.modules[name]
 
 
-conformance = _conformance()
+conformance = _test_module("test_btcpp_conformance.py")
+# Trees with every pre/post-condition attribute (``_skipIf`` ... ``_post``), scripts and the newer built-ins.
+scripting = _test_module("test_btcpp_scripting.py")
+CONDITIONS = (*scripting.PRE, *scripting.POST)
 
+
+# Every pre/post-condition attribute, on controls, decorators, leaves and a SubTree (evaluated in the parent's
+# blackboard), firing over a few ticks: a skip, an imposed SUCCESS and FAILURE, a halt (``_onHalted``), a ``_while``
+# that turns false on a RUNNING node, post scripts writing entries the BLACKBOARD reply shows. ``_onHalted`` reads
+# no entry: BT.CPP's Tree destructor halts every node, idle or not, before any entry may exist.
+EVERY_CONDITION = """<root BTCPP_format="4" main_tree_to_execute="Main">
+  <BehaviorTree ID="Main">
+    <Sequence name="top">
+      <Script code="a := 0; b := 0; t := 0; halted := -1"/>
+      <KeepRunningUntilFailure>
+       <Repeat num_cycles="3" _onSuccess="b := b + 100">
+        <ForceSuccess>
+        <ReactiveSequence name="watched" _onSuccess="b += 1" _onFailure="b += 10" _post="a += 1">
+          <Script name="count" code="t += 1"/>
+          <ScriptCondition name="gate" code="t != 9 &amp;&amp; t != 20"/>
+          <AlwaysSuccess name="skipped_leaf" _skipIf="true"/>
+          <AlwaysFailure name="made_to_succeed" _successIf="a &gt;= 0"/>
+          <Fallback name="halted_here" _failureIf="a == 5" _onHalted="halted := 1">
+            <L0 _while="t != 2 &amp;&amp; t != 7"/>
+            <L1 _onFailure="b += 2"/>
+          </Fallback>
+          <SubTree ID="Sub" name="sub" _skipIf="a == 3" _post="a := a" v="{a}"/>
+          <SkipUnlessUpdated entry="{@a}"><L2/></SkipUnlessUpdated>
+        </ReactiveSequence>
+        </ForceSuccess>
+       </Repeat>
+      </KeepRunningUntilFailure>
+    </Sequence>
+  </BehaviorTree>
+  <BehaviorTree ID="Sub">
+    <Inverter _onSuccess="w := 1" _onFailure="w := 2">
+      <ScriptCondition code="v &gt; 1" _while="true"/>
+    </Inverter>
+  </BehaviorTree>
+</root>
+"""
+EVERY_CONDITION_LEAVES = {"L0": ["RUNNING", "RUNNING", "FAILURE", "RUNNING", "SUCCESS"], "L1": ["FAILURE", "SUCCESS"],
+                          "L2": ["SUCCESS", "RUNNING"]}
+
+
+def generate(seed: int, kind: str, mode: str = "exactly_once"):
+    """A tree and its scripted leaves: seeded ``plain`` (built-ins, SubTree remapping) or ``conditions`` trees, or
+    the ``every_condition`` tree above."""
+    if kind == "every_condition":
+        return conformance.Generated(EVERY_CONDITION, EVERY_CONDITION_LEAVES)
+    if kind == "conditions":
+        xml, leaves, _kinds = scripting.generate_tree(seed)
+        return conformance.Generated(xml, leaves)
+    return conformance.generate(seed, forever=(mode == "exactly_once"), depth=4)
+
+
+def condition_seeds(count: int, mode: str, ticks: int, start: int = 0) -> list[int]:
+    """Seeds of ``conditions`` trees that BehaviorTree.CPP ticks ``ticks`` times without a script error (a tree
+    that throws has nothing to publish after the throw)."""
+    seeds: list[int] = []
+    seed = start
+    while len(seeds) < count:
+        xml, leaves, _kinds = scripting.generate_tree(seed)
+        step = scripting._btcpp_steps(xml, leaves, mode)
+        if all(step()[0] != "error" for _ in range(ticks)):
+            seeds.append(seed)
+        seed += 1
+    return seeds
 
 
 class Client:
@@ -79,13 +147,15 @@ class Client:
         self.socket.close(linger=0)
 
 
-def our_tree(generated):
+def our_tree(generated, kind: str = "plain"):
     registry = default_registry()
     log: list = []
     for name, script in generated.leaves.items():
         leaf = conformance.Leaf(name, script)
 
         def factory(*, name: str, ports: dict, children: list, leaf=leaf) -> py_trees.behaviour.Behaviour:
+            if kind != "plain":  # WhileDoElse re-ticks a finished condition: answer as BT.CPP's leaf does
+                return scripting._Leaf(name, leaf.script, log)
             return conformance.ScriptedBehaviour(name, leaf, log)
 
         registry.register(NodeType(name, "Action", [], factory))
@@ -97,14 +167,14 @@ def our_tree(generated):
 class Pair:
     """The same generated tree in BehaviorTree.CPP (with its Groot2Publisher) and in bt-meta (with ours)."""
 
-    def __init__(self, seed: int, context: zmq.Context, mode: str = "exactly_once") -> None:
-        self.generated = conformance.generate(seed, forever=(mode == "exactly_once"), depth=4)
+    def __init__(self, seed: int, context: zmq.Context, mode: str = "exactly_once", kind: str = "plain") -> None:
+        self.generated = generate(seed, kind, mode)
         self.mode = mode
         self.btcpp_step = conformance.btcpp_stepper(self.generated, mode)
         btcpp_port = free_groot2_port()
         self.publisher = btpy.Groot2Publisher(self.btcpp_step.tree, btcpp_port)
         py_trees.blackboard.Blackboard.storage.clear()
-        self.root, self.tree = our_tree(self.generated)
+        self.root, self.tree = our_tree(self.generated, kind)
         self.observer = StatusObserver(self.tree)
         self.server = Groot2Server(self.tree, self.observer, free_groot2_port(), seed=seed)
         self.btcpp = Client(context, btcpp_port)
@@ -138,7 +208,10 @@ def context():
 
 
 def canonical(element: ET.Element) -> tuple:
-    return element.tag, tuple(sorted(element.attrib.items())), tuple(canonical(child) for child in element)
+    """Attributes as a set (BT.CPP orders ports by hash) but pre/post conditions in order (BT.CPP's enum order)."""
+    conditions = tuple(name for name in element.attrib if name in CONDITIONS)
+    return (element.tag, tuple(sorted(element.attrib.items())), conditions,
+            tuple(canonical(child) for child in element))
 
 
 def split_full_tree(text: bytes) -> tuple[dict, list[tuple], dict[str, tuple]]:
@@ -157,8 +230,9 @@ def assert_same_headers(btcpp: list[bytes], ours: list[bytes]) -> None:
     assert ours[0][6 + 6] >> 4 == 4  # tree ids are random UUIDs v4 on both sides
 
 
-def compare_server(seed: int, context: zmq.Context, ticks: int = 6, mode: str = "exactly_once") -> None:
-    pair = Pair(seed, context, mode)
+def compare_server(seed: int, context: zmq.Context, ticks: int = 6, mode: str = "exactly_once",
+                   kind: str = "plain") -> None:
+    pair = Pair(seed, context, mode, kind)
     try:
         btcpp, ours = pair.both("T")
         assert_same_headers(btcpp, ours)
@@ -247,14 +321,14 @@ def read_flushed(path: Path, transitions: int) -> Btlog:
         time.sleep(0.01)
 
 
-def compare_btlog(seed: int, mode: str, folder: Path, ticks: int = 10) -> None:
-    generated = conformance.generate(seed, forever=(mode == "exactly_once"), depth=4)
+def compare_btlog(seed: int, mode: str, folder: Path, ticks: int = 10, kind: str = "plain") -> tuple[Btlog, Btlog]:
+    generated = generate(seed, kind, mode)
     step = conformance.btcpp_stepper(generated, mode)
-    theirs_path, ours_path = folder / f"btcpp{seed}{mode}.btlog", folder / f"ours{seed}{mode}.btlog"
+    theirs_path, ours_path = folder / f"btcpp{seed}{mode}{kind}.btlog", folder / f"ours{seed}{mode}{kind}.btlog"
     logger = btpy.FileLogger(step.tree, str(theirs_path))
     time.sleep(0.02)  # BT.CPP 4.8.2 drops transitions queued before its writer thread runs
     py_trees.blackboard.Blackboard.storage.clear()
-    root, tree = our_tree(generated)
+    root, tree = our_tree(generated, kind)
     tick = tick_exactly_once if mode == "exactly_once" else tick_once
     with StatusObserver(tree) as observer, BtlogWriter(ours_path, full_tree_xml(tree)) as writer:
         observer.subscribe(writer.record)
@@ -270,6 +344,7 @@ def compare_btlog(seed: int, mode: str, folder: Path, ticks: int = 10) -> None:
     assert split_full_tree(ours.tree_xml.encode())[:2] == split_full_tree(theirs.tree_xml.encode())[:2]
     stamps = [t.timestamp_usec for t in ours.transitions]
     assert stamps == sorted(stamps) and abs(ours.start_usec - theirs.start_usec) < 60_000_000
+    return ours, theirs
 
 
 @pytest.mark.parametrize("mode", ["exactly_once", "once"])
@@ -283,6 +358,68 @@ def test_btlog_transitions_equal_btcpp_file_logger(mode: str, tmp_path: Path) ->
 def test_btlog_transitions_equal_btcpp_file_logger_sweep(mode: str, tmp_path: Path) -> None:
     for seed in range(8, 200):
         compare_btlog(seed, mode, tmp_path)
+
+
+def tree_part(text: bytes | str) -> bytes:
+    """The ``<BehaviorTree>`` elements of a full-tree XML, as bytes (its ``<TreeNodesModel>`` cut off)."""
+    data = text.encode() if isinstance(text, str) else text
+    return data.split(b"<TreeNodesModel")[0]
+
+
+@pytest.mark.parametrize("mode", ["exactly_once", "once"])
+def test_a_tree_with_every_condition_attribute_is_served_and_logged_as_btcpp_does(mode: str, context: zmq.Context,
+                                                                                  tmp_path: Path) -> None:
+    """Skips, imposed statuses, a ``_while`` that halts a RUNNING leaf, ``_onHalted`` after a ReactiveSequence
+    halts a Fallback: FULLTREE byte for byte (no node has two ports, so BT.CPP's hash order cannot differ),
+    STATUS and BLACKBOARD after each of 24 ticks, and the ``.btlog`` (transitions and header)."""
+    assert used_conditions([0], "every_condition") == set(CONDITIONS)
+    compare_server(0, context, ticks=24, mode=mode, kind="every_condition")
+    ours, theirs = compare_btlog(0, mode, tmp_path, ticks=24, kind="every_condition")
+    assert tree_part(ours.tree_xml) == tree_part(theirs.tree_xml)
+    assert {t.status.name for t in ours.transitions} >= {"RUNNING", "SUCCESS", "FAILURE", "IDLE"}
+    pair = Pair(0, context, mode, "every_condition")
+    try:
+        btcpp, ours_reply = pair.both("T")
+        assert tree_part(ours_reply[1]) == tree_part(btcpp[1])
+        assert b' _skipIf="true"' in ours_reply[1]  # the issue's case: Groot2 sees why the node was skipped
+    finally:
+        pair.close()
+
+
+def used_conditions(seeds: list[int], kind: str = "conditions") -> set[str]:
+    return {name for seed in seeds for name in CONDITIONS if f" {name}=" in generate(seed, kind).xml}
+
+
+@pytest.mark.parametrize("mode", ["exactly_once", "once"])
+def test_trees_with_every_condition_attribute_serve_what_btcpp_serves(mode: str, context: zmq.Context) -> None:
+    """FULLTREE keeps ``_skipIf`` ... ``_post`` as BT.CPP's publisher does; STATUS shows what they made of the
+    ticks (SKIPPED included), BLACKBOARD the entries their scripts wrote."""
+    seeds = condition_seeds(8, mode, ticks=6)
+    for seed in seeds:
+        compare_server(seed, context, mode=mode, kind="conditions")
+    assert used_conditions(seeds) == set(CONDITIONS)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mode", ["exactly_once", "once"])
+def test_trees_with_every_condition_attribute_serve_what_btcpp_serves_sweep(mode: str, context: zmq.Context) -> None:
+    for seed in condition_seeds(60, mode, ticks=10, start=1000):
+        compare_server(seed, context, ticks=10, mode=mode, kind="conditions")
+
+
+@pytest.mark.parametrize("mode", ["exactly_once", "once"])
+def test_btlog_of_trees_with_every_condition_attribute_equals_btcpp_file_logger(mode: str, tmp_path: Path) -> None:
+    seeds = condition_seeds(8, mode, ticks=10)
+    for seed in seeds:
+        compare_btlog(seed, mode, tmp_path, kind="conditions")
+    assert used_conditions(seeds) == set(CONDITIONS)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mode", ["exactly_once", "once"])
+def test_btlog_of_trees_with_every_condition_attribute_sweep(mode: str, tmp_path: Path) -> None:
+    for seed in condition_seeds(60, mode, ticks=10, start=1000):
+        compare_btlog(seed, mode, tmp_path, kind="conditions")
 
 
 def replace_hook(uid: int, status: str, once: bool = False) -> bytes:

@@ -19,8 +19,9 @@ from py_trees.common import Status
 
 from bt_meta.bt.nodes.ticking import tick_exactly_once, tick_once
 from bt_meta.bt.registry import default_registry
-from bt_meta.bt.xml.document import MAX_NESTING, parse_text
-from bt_meta.bt.xml.reader import MAX_EXPANDED_NODES, load_tree_text, resolve_document
+from bt_meta.bt.xml.around_root import DOCTYPE_REFUSED
+from bt_meta.bt.xml.document import MAX_NESTING, parse_file, parse_text
+from bt_meta.bt.xml.reader import MAX_EXPANDED_NODES, load_tree_file, load_tree_text, resolve_document
 from bt_meta.errors import BtMetaError, TreeXMLError
 
 pytestmark = pytest.mark.usefixtures("clean_blackboard")
@@ -156,6 +157,88 @@ def test_xml_that_stays_malformed_keeps_the_strict_error() -> None:
 def test_xxe_and_entity_expansion_stay_refused() -> None:
     bomb = '<?xml version="1.0"?><!DOCTYPE r [<!ENTITY a "aaaa"><!ENTITY b "&a;&a;&a;">]>' + tree("<AlwaysSuccess/>")
     assert "DOCTYPE" in error_of(bomb).message
+
+
+# Text around the root element, as BehaviorTree.CPP 4.8's tinyxml2 reads it: (name, text, accepted, warning lines).
+R = tree("<AlwaysSuccess/>")
+AROUND_ROOT = [
+    ("a C++ comment line first", "// clang-format off\n" + R, True, [1]),
+    ("blank lines, then indented text", "\n\n  // note\n" + R, True, [3]),
+    ("text between the declaration and the root", '<?xml version="1.0"?>\n// c\n' + R, True, [2]),
+    ("text, a comment, text; after the root text, then a comment", "// a\n<!-- b -->\n// c\n" + R
+     + "\n// d\n<!-- e -->", True, [1, 3, 5]),
+    ("text with & and > and ]]>", "a && b &foo; > ]]>\n" + R, True, [1]),
+    ("a CDATA section before and after", "<![CDATA[ x ]]>\n" + R + "\n<![CDATA[ y ]]>", True, [1, 3]),
+    ("an element after the root", R + '\n<extra a="x && y"><b/></extra>', True, [2]),
+    ("a second root", R + "\n" + tree("<AlwaysFailure/>"), True, [2]),
+    ("an end tag after the root ends the reading", R + "\n</junk a='1'> anything <<< &&&", True, [2]),
+    ("whitespace before the XML declaration", '\n  <?xml version="1.0"?>\n' + R, True, [2]),
+    ("text that ends the file", R + "\n// end\n", False, []),
+    ("text before an XML declaration", '// c\n<?xml version="1.0"?>\n' + R, False, []),
+    ("a comment before an XML declaration", '<!-- c --><?xml version="1.0"?>' + R, False, []),
+    ("text before a processing instruction", "// c\n<?pi x?>\n" + R, False, []),
+    ("a processing instruction after the root", R + "<?pi x?>", False, []),
+    ("a processing instruction inside the root", R.replace("<AlwaysSuccess/>", "<?pi x?><AlwaysSuccess/>"), False,
+     []),
+    ("a '<' in the text before the root", "if (a < b)\n" + R, False, []),
+    ("a malformed element after the root", R + "\n<extra>\n", False, []),
+    ("text, then an end tag after the root", R + "\nfoo </x> bar", False, []),
+    ("an end tag without a name", R + "</>", False, []),
+    ("an unterminated comment after the root", R + "<!-- x", False, []),
+    ("an end tag before the root", "</x>" + R, False, []),
+    ("only text", "just text", False, []),
+]
+
+
+@pytest.mark.parametrize(("text", "accepted", "lines"), [case[1:] for case in AROUND_ROOT],
+                         ids=[case[0] for case in AROUND_ROOT])
+def test_text_around_the_root_is_read_as_behaviortree_cpp_reads_it(text: str, accepted: bool, lines: list[int],
+                                                                    tmp_path) -> None:
+    try:
+        btpy.BehaviorTreeFactory().register_behavior_tree_from_text(text)
+    except RuntimeError:
+        theirs = False
+    else:
+        theirs = True
+    assert theirs == accepted  # the table says what BehaviorTree.CPP does; bt-meta must do the same
+    path = tmp_path / "around.xml"
+    path.write_text(text)
+    if not accepted:
+        with pytest.raises(TreeXMLError) as info:
+            parse_file(path)
+        assert info.value.line is not None
+        return
+    document = parse_file(path)
+    assert list(document.trees) == ["M"]
+    assert [int(w.split(":")[1]) for w in document.warnings] == lines
+    assert all(w.startswith(f"{path}:") and ": warning: " in w for w in document.warnings)
+
+
+def test_a_file_starting_with_a_comment_line_ticks_like_behaviortree_cpp(tmp_path) -> None:
+    text = "// clang-format off\n" + tree(
+        '<Sequence><Script code="n := 1"/><Repeat num_cycles="3"><Script code="n += n"/></Repeat>'
+        '<ScriptCondition code="n == 8"/></Sequence>')
+    path = tmp_path / "commented.xml"
+    path.write_text(text)
+    theirs = btpy.BehaviorTreeFactory().create_tree_from_file(str(path))
+    ours = load_tree_file(path)
+    assert tick_once(ours).name == theirs.tick_once().name == "SUCCESS"
+    assert parse_file(path).warnings == [
+        f"{path}:1:1: warning: text before the root element (BehaviorTree.CPP ignores it)"]
+
+
+def test_the_misplaced_xml_declaration_and_the_error_inside_the_root_are_named() -> None:
+    error = error_of('// c\n<?xml version="1.0"?>\n' + R)
+    assert (error.line, error.column) == (2, 1)
+    assert error.message.startswith("the XML declaration must come first in the file")
+    # Once the text before the root is set aside, the error is the one inside the root, where it is.
+    error = error_of("// c\n" + tree("<Sequence><AlwaysSuccess/></Fallback>"))
+    assert (error.line, error.message) == (2, "malformed XML: mismatched tag")
+    error = error_of(R + "<?pi x?>")
+    assert error.message.startswith("processing instruction <?pi ...?> after a comment or an element")
+    # A DOCTYPE stays refused (BehaviorTree.CPP skips it; bt-meta reads no DTD), text before it or not.
+    error = error_of("// c\n<!DOCTYPE root>\n" + R)
+    assert (error.line, error.message) == (2, DOCTYPE_REFUSED)
 
 
 # --- fuzzing ----------------------------------------------------------------------------------------------------

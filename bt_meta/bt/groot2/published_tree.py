@@ -29,6 +29,7 @@ from typing import Any
 
 import py_trees
 
+from bt_meta.bt.nodes.conditions import POST_CONDITIONS, PRE_CONDITIONS
 from bt_meta.bt.nodes.subtree import SubTree
 from bt_meta.bt.registry import NodeInstance, NodeRegistry, NodeType, PortSpec, blackboard_key
 from bt_meta.bt.xml.writer import describe
@@ -36,9 +37,9 @@ from bt_meta.errors import BtMetaError
 
 Behaviour = py_trees.behaviour.Behaviour
 
-# BehaviorTree.CPP's pre- and post-condition attributes (written back with the node, like its ports).
-CONDITION_ATTRIBUTES = ("_failureIf", "_successIf", "_skipIf", "_while", "_onSuccess", "_onFailure", "_onHalted",
-                        "_post")
+# BehaviorTree.CPP's pre- and post-condition attributes, written after the ports in its enum order (PreCond, then
+# PostCond), as ``WriteTreeToXML`` does.
+CONDITION_ATTRIBUTES = (*PRE_CONDITIONS, *POST_CONDITIONS)
 _INTERNAL_PREFIX = "/bt_meta/"
 # Port types whose blackboard entries BehaviorTree.CPP stores converted: a string written there becomes a number.
 _TYPED = {"int", "unsigned int", "int32_t", "int64_t", "uint32_t", "uint64_t", "long", "unsigned", "size_t",
@@ -127,6 +128,10 @@ def _monitor_chain(behaviour: Behaviour) -> Behaviour:
     return behaviour
 
 
+def _conditions(instance: NodeInstance) -> dict[str, str]:
+    return {k: instance.attributes[k] for k in CONDITION_ATTRIBUTES if k in instance.attributes}
+
+
 def _allowed_port_name(name: str) -> bool:
     return bool(name) and name[0].isalpha() and name not in ("name", "ID")
 
@@ -155,16 +160,16 @@ class _Builder:
         return subtree, self.step(body, subtree, prefix)
 
     def attributes(self, instance: NodeInstance, node_type: NodeType | None) -> dict[str, str]:
-        """Ports as BehaviorTree.CPP keeps them: as written, plus declared defaults (inputs; outputs if ``{key}``)."""
-        written = {k: v for k, v in instance.ports.items() if _allowed_port_name(k) or k in CONDITION_ATTRIBUTES}
-        if node_type is None:
-            return written
-        for spec in node_type.ports:
-            if spec.name in written or spec.default in (None, ""):
-                continue
-            if spec.direction != "output" or blackboard_key(spec.default) is not None:
-                written[spec.name] = spec.default
-        return written
+        """Ports as BehaviorTree.CPP keeps them: as written, plus declared defaults (inputs; outputs if ``{key}``),
+        and the pre/post-condition scripts as written."""
+        written = {k: v for k, v in instance.ports.items() if _allowed_port_name(k)}
+        if node_type is not None:
+            for spec in node_type.ports:
+                if spec.name in written or spec.default in (None, ""):
+                    continue
+                if spec.direction != "output" or blackboard_key(spec.default) is not None:
+                    written[spec.name] = spec.default
+        return written | _conditions(instance)
 
     def note_model(self, instance: NodeInstance, node_type: NodeType | None) -> None:
         if node_type is not None:
@@ -208,7 +213,8 @@ class _Builder:
         named = node.name != tree_id
         path = prefix + node.name + ("" if named else f"::{uid}")
         ports = {k: v for k, v in instance.ports.items() if _allowed_port_name(k)}
-        published = PublishedNode(uid, behaviour, node, "SubTree", node.name, "SubTree", path, ports, tree_id)
+        published = PublishedNode(uid, behaviour, node, "SubTree", node.name, "SubTree", path,
+                                  ports | _conditions(instance), tree_id)
         self.nodes.append(published)
         subtree.nodes.append(published)
         self.used.setdefault("SubTree", _SUBTREE_MODEL)

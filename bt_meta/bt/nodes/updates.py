@@ -9,6 +9,8 @@ Offers:
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import py_trees
 from py_trees.common import Status
 
@@ -57,9 +59,15 @@ class EntryUpdatedDecorator(DecoratorNode):
         yield from self.decorated.tick()
         status = returned(self.decorated)
         self.still_executing_child = status == Status.RUNNING
-        if status in (Status.SUCCESS, Status.FAILURE):
-            self.reset_child()  # BT.CPP's DecoratorNode::executeTick resets a finished child
         return status
+
+    def tick(self) -> Iterator[py_trees.behaviour.Behaviour]:
+        for behaviour in super().tick():
+            if behaviour is self and self.decorated.status in (Status.SUCCESS, Status.FAILURE):
+                # BT.CPP's DecoratorNode::executeTick resets a finished child after this node's status is set
+                # (Groot2 and .btlog see the child go IDLE after its parent finished, not before).
+                self.reset_child()
+            yield behaviour
 
     def halt(self) -> None:
         # BT.CPP's halt() here does not halt the child (only the flag is cleared).

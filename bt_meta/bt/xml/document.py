@@ -2,8 +2,9 @@
 
 The parser is expat with every DTD feature refused: a DOCTYPE, an entity declaration or an external entity is an
 error, so entity-expansion bombs and external fetches cannot happen. What BehaviorTree.CPP's tinyxml2 accepts and a
-strict parser does not -- an unescaped ``&&`` or ``<`` inside an attribute value -- is accepted with a warning
-(``TreeDocument.warnings``, also logged on ``bt_meta.xml``). Elements nest at most :data:`MAX_NESTING` deep.
+strict parser does not -- an unescaped ``&&`` or ``<`` inside an attribute value, text such as ``// clang-format
+off`` before or after the root element (:mod:`~bt_meta.bt.xml.around_root`) -- is accepted with a warning naming
+its line (``TreeDocument.warnings``, also logged on ``bt_meta.xml``). Elements nest at most :data:`MAX_NESTING` deep.
 No structure beyond XML well-formedness is checked here except the shape of ``<root>`` (see
 :mod:`bt_meta.bt.xml.reader` for the tree semantics). Trees may span several files: ``<include path="x.xml"/>``
 (relative to the including file, then :class:`TreeSources` ``include_path``), and extra files whose trees are
@@ -28,6 +29,7 @@ from pathlib import Path
 from xml.parsers import expat
 
 from bt_meta.bt.registry import CATEGORIES, DIRECTIONS, PortSpec
+from bt_meta.bt.xml.around_root import DOCTYPE_REFUSED, blank_outside_root
 from bt_meta.errors import TreeXMLError
 
 # Deeper element nesting is refused while parsing: every later stage (resolving, building, ticking) recurses over
@@ -86,6 +88,8 @@ def _parse_elements(text: str | bytes, path: str) -> XMLElement:
     parser.SetParamEntityParsing(expat.XML_PARAM_ENTITY_PARSING_NEVER)
     stack: list[XMLElement] = []
     top: list[XMLElement] = []
+    # tinyxml2 reads processing instructions as declarations: only before any comment or element.
+    started = [False]
 
     def where() -> tuple[int, int]:
         return parser.CurrentLineNumber, parser.CurrentColumnNumber + 1
@@ -94,6 +98,7 @@ def _parse_elements(text: str | bytes, path: str) -> XMLElement:
         line, column = where()
         if len(stack) >= MAX_NESTING:
             raise _Refused(f"elements nested deeper than {MAX_NESTING} levels", line, column)
+        started[0] = True
         element = XMLElement(tag, dict(attrib), line, column)
         if stack:
             stack[-1].children.append(element)
@@ -104,8 +109,16 @@ def _parse_elements(text: str | bytes, path: str) -> XMLElement:
     def end(tag: str) -> None:
         stack.pop()
 
+    def comment(_data: str) -> None:
+        started[0] = True
+
+    def instruction(target: str, _data: str) -> None:
+        if started[0]:
+            raise _Refused(f"processing instruction <?{target} ...?> after a comment or an element (BehaviorTree.CPP "
+                           "accepts them only at the start of the file)", *where())
+
     def refuse_doctype(*_args: object) -> None:
-        raise _Refused("DOCTYPE declarations are not allowed in tree XML (no DTDs, no entities)", *where())
+        raise _Refused(DOCTYPE_REFUSED, *where())
 
     def refuse_entity(*_args: object) -> None:
         raise _Refused("entity declarations are not allowed in tree XML (entity expansion is disabled)", *where())
@@ -115,6 +128,8 @@ def _parse_elements(text: str | bytes, path: str) -> XMLElement:
 
     parser.StartElementHandler = start
     parser.EndElementHandler = end
+    parser.CommentHandler = comment
+    parser.ProcessingInstructionHandler = instruction
     parser.StartDoctypeDeclHandler = refuse_doctype
     parser.EntityDeclHandler = refuse_entity
     parser.UnparsedEntityDeclHandler = refuse_entity
@@ -190,9 +205,19 @@ def escape_attribute_values(text: str) -> tuple[str, list[tuple[int, int, str]]]
     return "".join(out), fixes
 
 
+def _well_formed(text: str, path: str) -> bool:
+    try:
+        _parse_elements(escape_attribute_values(text)[0], path)
+    except TreeXMLError:
+        return False
+    return True
+
+
 def _parse_lenient(text: str | bytes, path: str) -> tuple[XMLElement, list[str]]:
-    """Parse strictly; if that fails, accept what tinyxml2 accepts (unescaped ``&`` / ``<`` in attribute
-    values) and say so in warnings. Anything else keeps the strict parser's error."""
+    """Parse strictly; if that fails, accept what tinyxml2 accepts -- text and more around the root element
+    (:mod:`~bt_meta.bt.xml.around_root`), unescaped ``&`` / ``<`` in attribute values -- and say so in warnings.
+    Anything else keeps the strict parser's error (or, once the text around the root was blanked, the error
+    inside the root, at the same line and column)."""
     try:
         return _parse_elements(text, path), []
     except TreeXMLError as strict:
@@ -200,21 +225,36 @@ def _parse_lenient(text: str | bytes, path: str) -> tuple[XMLElement, list[str]]
             decoded = text.decode("utf-8") if isinstance(text, bytes) else text
         except UnicodeDecodeError:
             raise strict from None
+        error = strict
+        warnings: list[str] = []
+        outside = blank_outside_root(decoded, path, lambda fragment: _well_formed(fragment, path))
+        if outside is not None:
+            decoded, warnings = outside
+            try:
+                element = _parse_elements(decoded, path)
+            except TreeXMLError as inside:
+                error = inside
+            else:
+                return element, _logged(warnings)
         fixed, fixes = escape_attribute_values(decoded)
         if not fixes:
-            raise
+            raise error from None
         try:
             element = _parse_elements(fixed, path)
         except TreeXMLError:
-            raise strict from None
-        warnings = [
+            raise error from None
+        warnings += [
             f"{path}:{line}:{column}: warning: unescaped {char!r} in an attribute value (BehaviorTree.CPP accepts "
             f"it; write {'&amp;' if char == '&' else '&lt;'} to make the XML well formed)"
             for line, column, char in fixes
         ]
-        for warning in warnings:
-            _LOG.warning(warning)
-        return element, warnings
+        return element, _logged(warnings)
+
+
+def _logged(warnings: list[str]) -> list[str]:
+    for warning in warnings:
+        _LOG.warning(warning)
+    return warnings
 
 
 def _parse_model(element: XMLElement, doc_path: str) -> list[ModelEntry]:

@@ -21,11 +21,14 @@ def test_the_bench_reports_both_ways_of_running_an_episode(capsys):
     assert main(["bench", "episode", "--family", "housing", "--repeat", "1", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["real_time_factor"] > 0 and out["worker_real_time_factor"] > 0 and out["pybullet_real_time_factor"] > 0
-    assert out["ratio_to_pybullet"] == pytest.approx(out["real_time_factor"] / out["pybullet_real_time_factor"])
+    (fresh,) = out["runs"]
+    # each ratio is paired with the raw stepping its own process measured right after its episode
+    assert out["ratio_to_pybullet"] == pytest.approx(fresh["real_time_factor"] / fresh["raw"]["real_time_factor"])
+    assert out["worker_ratio_to_pybullet"] == pytest.approx(out["worker_runs"][0]["ratio_to_pybullet"])
+    assert out["cpu_ratio_to_pybullet"] > 0 and out["worker_cpu_ratio_to_pybullet"] > 0
     worker = out["worker"]
     assert worker["episodes"] == 1 and worker["same_outcomes_as_fresh"] is True
     assert worker["warm_up"]["phases"]["import"] > 0  # the warm-up carries the imports, the timed episodes do not
     assert "import" not in out["worker_runs"][0]["phases"]
-    (fresh,) = out["runs"]
     assert fresh["process_wall_seconds"] > fresh["phases"]["episode"] > fresh["phases"]["run"] > 0
     assert fresh["simulated_seconds"] == out["worker_runs"][0]["simulated_seconds"] > 0

@@ -197,8 +197,14 @@ class ObjectModel:
         return tuple(f.name for f in self.features)
 
     def points(self) -> np.ndarray:
-        """Sample points on the geometry's outline (object frame)."""
-        return np.concatenate([p.corners() for p in self.parts])
+        """Sample points on the geometry's outline (object frame). Computed once: the model is immutable and skills
+        ask for them hundreds of times a step; the array is read-only."""
+        cached = self.__dict__.get("_points")
+        if cached is None:
+            cached = np.concatenate([p.corners() for p in self.parts])
+            cached.setflags(write=False)
+            object.__setattr__(self, "_points", cached)
+        return cached
 
     def lowest_z(self, roll: float, pitch: float) -> float:
         """How far below the origin the geometry reaches when turned by (roll, pitch): resting height on a plane."""
@@ -212,9 +218,15 @@ class ObjectModel:
                 for name in names]  # type: ignore[misc]
 
     def extent(self) -> tuple[np.ndarray, np.ndarray]:
-        """Axis-aligned bounds (min, max) of the geometry in the object frame."""
-        pts = self.points()
-        return pts.min(axis=0), pts.max(axis=0)
+        """Axis-aligned bounds (min, max) of the geometry in the object frame (computed once, read-only)."""
+        cached = self.__dict__.get("_extent")
+        if cached is None:
+            pts = self.points()
+            cached = (pts.min(axis=0), pts.max(axis=0))
+            for bound in cached:
+                bound.setflags(write=False)
+            object.__setattr__(self, "_extent", cached)
+        return cached
 
 
 # -- the paper's objects ---------------------------------------------------------------------------------------

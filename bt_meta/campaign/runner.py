@@ -182,13 +182,16 @@ def _ray_results(tasks: Sequence[dict[str, Any]], address: str, workers: int | N
         options: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False,
                                    "configure_logging": False}
         try:
-            if address == "auto":
-                ray.init(num_cpus=workers or os.cpu_count() or 1, **options)
-            else:
+            if address != "auto":
                 ray.init(address=address, **options)
-        except (ConnectionError, RuntimeError, ValueError) as error:
-            raise RayAddressError(f"--ray {address!r}: cannot join the Ray cluster there ({error})",
-                                  "<command line>") from None
+            elif os.environ.get("RAY_ADDRESS"):  # a Ray job's driver, or a cluster the environment names: join it
+                ray.init(**options)
+            else:
+                ray.init(num_cpus=workers or os.cpu_count() or 1, **options)
+        except Exception as error:  # whatever ray.init raises, the cluster there cannot be used
+            first = (str(error).splitlines() or [""])[0]
+            raise RayAddressError(f"--ray {address!r}: cannot join the Ray cluster there ({type(error).__name__}: "
+                                  f"{first})", "<command line>") from None
     pending: dict[Any, tuple[dict[str, Any], int]] = {}
     try:
         remote = ray.remote(num_cpus=1, max_retries=0)(_ray_episode)

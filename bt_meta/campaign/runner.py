@@ -23,6 +23,7 @@ Offers:
 
 from __future__ import annotations
 
+import contextlib
 import os
 import socket
 import sys
@@ -227,7 +228,8 @@ def _ray_results(tasks: Sequence[dict[str, Any]], address: str, workers: int | N
                                      "again to run these")
     finally:
         for ref in pending:  # stopped early: nothing of this campaign keeps running on the cluster
-            ray.cancel(ref, force=True)
+            with contextlib.suppress(Exception):  # a task that ended meanwhile cannot be cancelled: fine
+                ray.cancel(ref, force=True)
         if started_here:
             ray.shutdown()
 

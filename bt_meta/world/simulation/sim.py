@@ -17,7 +17,7 @@ Offers:
 ``BT_META_MERGE_FIXED_LINKS=1`` (or ``merge_fixed_links=True``) loads the robot with its fixed links merged into
 the moving links they hang from (the Baxter: 19 links instead of 56), every link name still resolving to its
 frame (:mod:`bt_meta.world.simulation.robot_links`): faster physics, but not bitwise the same dynamics, so it is
-off by default (docs/benchmarks.md, "Episode throughput").
+off by default (docs/benchmarks.md, "Episode cost").
 
 Why the robot's visuals are its collision geometry by default (headless): the original DAE meshes take ~1.8 s
 (CPU) to load and ~90 ms per 320x240 TinyRenderer frame; the collision shapes load in ~0.14 s and the eye-in-hand

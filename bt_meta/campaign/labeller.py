@@ -72,7 +72,7 @@ PROBE_HEIGHT = 0.02
 """Height (m) of the footprint probe above a letter cell, from just above the table: anything resting there."""
 START_SEED = 0
 """The seed of the start noise the labels describe: a campaign episode moves every object by the demo's seeded
-noise before it starts (:func:`bt_meta.demo.runner.jitter`, up to 3 mm and 2 degrees), and the label is for the
+noise before it starts (:func:`bt_meta.judge.noise.jitter`, up to 3 mm and 2 degrees), and the label is for the
 scene the episode runs -- the first (by default the only) seed's. Labelled without it, a green 1x2 was 6.5 mm into a
 cell of H and 5.7 mm in the run, below what the place takes as room (generated letters_H s1 0058). ``None``: the
 scene exactly as written (hand-built cases)."""
@@ -87,12 +87,14 @@ class Label:
     evidence: dict[str, Any] = field(default_factory=dict)
 
 
-def letter_cells(plan: Iterable[Any], shapes: dict[str, str]) -> list[tuple[float, float]]:
-    """The unit cells (lb) a letter's plan fills: ``place(b, x, y)`` covers (x, y), or for a 1x2 the two cells
-    half a unit either side along the letter's x."""
+def letter_cells(plan: Iterable[Any], shapes: dict[str, str], actions: Iterable[str]
+                 ) -> list[tuple[float, float]]:
+    """The unit cells (lb) a plan fills through ``actions`` (primitives putting a block at a frame's cell):
+    ``place(b, x, y)`` covers (x, y), or for a 1x2 the two cells half a unit either side along the letter's x."""
     cells: list[tuple[float, float]] = []
+    actions = set(actions)
     for action in plan:
-        if action.name != "place":
+        if action.name not in actions:
             continue
         block, x, y = action.args[0], float(action.args[1]), float(action.args[2])
         cells += [(x + dx, y) for dx in _cell_offsets(shapes.get(block))]
@@ -129,10 +131,11 @@ def letters_feasible(units: int, pairs: int, n1: int, n2: int) -> bool:
 class Labeller:
     """Labels the variants of one family; owns one headless simulator reused for every variant."""
 
-    def __init__(self, family: Any, scene: Any, start_seed: int | None = START_SEED) -> None:
-        from bt_meta.campaign.families import needed_objects
+    def __init__(self, family: Any, scene: Any, start_seed: int | None = START_SEED, robot: Any = None) -> None:
+        from bt_meta.campaign.families import derived_fixtures, derived_grasped, needed_objects
         from bt_meta.htn import load_task_file
         from bt_meta.htn.planner import plan
+        from bt_meta.world.robot.description import RobotDescription, load_robot
         from bt_meta.world.simulation.sim import Simulation
         from bt_meta.world.simulation.sim_world import load_grounding, quiet_stdout
 
@@ -150,12 +153,23 @@ class Labeller:
         self.colour_symbols = {str(f[1]) for f in facts if len(f) == 3 and f[0] == "colour"}
         result = plan(self.task_file.domain, self.problem)
         self.plan = list(result.plan) if result.ok else []
+        # primitives that put a part at a cell of a frame (the grounding gives their skill a `frame`)
+        self.cell_actions = {name for name, spec in self.grounding.skills.items() if spec.get("frame")}
+        chosen = robot if robot is not None else self.grounding.robot or "baxter"
+        self.robot = chosen if isinstance(chosen, RobotDescription) else load_robot(chosen)
         with quiet_stdout():
             import pybullet  # noqa: F401  (prints its build time on import)
 
-            self.sim = Simulation(seed=0, visuals="light")
+            self.sim = Simulation(seed=0, visuals="light", robot=self.robot)
         world = self._world(scene.path, None)
         try:
+            present = list(world.sim.object_names())
+            self.grasped: tuple[str, ...] = (family.grasped if family.grasped is not None
+                                             else derived_grasped(self.plan, self.grounding, present))
+            positions = {name: world.sim.object_transform(name)[:2, 3] for name in present}
+            self.absolute_fixtures: tuple[str, ...] = (
+                family.absolute_fixtures if family.absolute_fixtures is not None
+                else derived_fixtures(self.plan, self.grounding, positions, world.sim.robot.scene_offset))
             self.targets = self._targets(world)
             self.nominal_up = {name: _up(world.sim.object_transform(name)) for name in world.sim.object_names()}
             self.nominal_xy = {name: world.sim.object_transform(name)[:2, 3].copy()
@@ -164,13 +178,15 @@ class Labeller:
             self.nominal_held = self._held_as_demonstrated(world)
         finally:
             world.close()
-        self.cells = letter_cells(self.plan, self.shapes) if family.truth == "letters" else []
+        self.cells = letter_cells(self.plan, self.shapes, self.cell_actions)
+        self.on_cells = bool(self.cells)
+        """The task puts blocks on a frame's cells: the inventory rule decides what can be drawn."""
         self.reorientable = any(str(task).startswith(REORIENT_PREFIX) for task in self.task_file.domain.tasks)
 
     def _held_as_demonstrated(self, world: Any) -> dict[str, np.ndarray]:
         """Object type -> the part in the gripper's frame as the nominal scene's top-down grasp holds it."""
         out: dict[str, np.ndarray] = {}
-        for name in self.family.grasped or ():
+        for name in self.grasped:
             if name in world.sim.object_names():
                 out.setdefault(world.sim.object_model(name).type,
                                np.linalg.inv(self._over(world, name, GRASP_HEIGHT)) @ world.sim.object_transform(name))
@@ -204,9 +220,10 @@ class Labeller:
         grounding = dataclasses.replace(self.grounding, problems={**self.grounding.problems,
                                                                   self.problem.name: setup})
         with quiet_stdout():
-            world = SimWorld(self.task_file.domain, self.problem, grounding, variant=variant, seed=0, sim=self.sim)
+            world = SimWorld(self.task_file.domain, self.problem, grounding, variant=variant, seed=0, sim=self.sim,
+                             robot=self.robot)
         if self.start_seed is not None:
-            from bt_meta.demo.runner import jitter
+            from bt_meta.judge.noise import jitter
 
             try:
                 jitter(world, self.start_seed)
@@ -220,7 +237,7 @@ class Labeller:
         out: list[tuple[float, float, float]] = []
         frame = next((spec.get("frame") for spec in self.grounding.skills.values() if spec.get("frame")), None)
         for action in self.plan:
-            if action.name == "place" and frame is not None:
+            if action.name in self.cell_actions and frame is not None:
                 shape = self.shapes.get(action.args[0])
                 x, y = float(action.args[1]), float(action.args[2])
                 for dx in _cell_offsets(shape):
@@ -228,7 +245,7 @@ class Labeller:
                     out.append((gx, gy, world.sim.table.top_z))
         if out:
             return out
-        grasped = set(self.family.grasped or ())
+        grasped = set(self.grasped)
         for name in self.needed:
             if name in grasped or name not in world.sim.object_names():
                 continue
@@ -253,7 +270,7 @@ class Labeller:
         sim = world.sim
         overlap = place_overlap()
         for step, action in enumerate(self.plan):
-            if action.name != "place":
+            if action.name not in self.cell_actions:
                 continue
             shape = self.shapes.get(action.args[0])
             x, y = float(action.args[1]), float(action.args[2])
@@ -279,12 +296,12 @@ class Labeller:
         frame = next((spec.get("frame") for spec in self.grounding.skills.values() if spec.get("frame")), None)
         out: list[tuple[str | None, tuple[float, float, float]]] = []
         for action in self.plan:
-            if action.name == "place" and frame is not None:
+            if action.name in self.cell_actions and frame is not None:
                 gx, gy, _ = world.ground_cell(str(frame), str(action.args[1]), str(action.args[2]))
                 out.append((str(action.args[0]), (gx, gy, world.sim.table.top_z)))
         if out:
             return out
-        return [(name, target) for name in (self.family.grasped or ()) for target in self.targets]
+        return [(name, target) for name in self.grasped for target in self.targets]
 
     # -- the label ------------------------------------------------------------------------------------------
 
@@ -313,7 +330,7 @@ class Labeller:
         limit = self._fill(roles, feasible, present)
         if limit is not None:
             limits.append(limit)
-        fixtures = {n for n in self.needed if self.family.grasped is not None and n not in self.family.grasped}
+        fixtures = {n for n in self.needed if not self.on_cells and n not in self.grasped}
         # only what the task does not name blocks a place: an object the plan uses is picked up by the plan, and
         # so is one it takes for a missing block
         named = set(self.needed) | self._stand_ins(world, present)
@@ -361,7 +378,7 @@ class Labeller:
                     return Label("repairable", f"{name} is turned {math.degrees(angle):.0f} deg off its nominal "
                                  "up axis (re-orientation or pose repair)", {"object": name,
                                                                              "degrees": math.degrees(angle)})
-            if name in self.family.absolute_fixtures and name in self.nominal_xy:
+            if name in self.absolute_fixtures and name in self.nominal_xy:
                 moved = float(np.linalg.norm(sim.object_transform(name)[:2, 3] - self.nominal_xy[name]))
                 if moved > FIXTURE_TOLERANCE:
                     return Label("repairable", f"{name} moved {moved * 100:.1f} cm; the nominal plan's poses "
@@ -371,8 +388,8 @@ class Labeller:
     def _roles(self, present: dict[str, Any]) -> dict[str, list[str]] | Label:
         """Role -> candidate objects (the needed object first, then stand-ins); ``unrepairable`` when the table
         cannot make the goal."""
-        grasped = self.family.grasped
-        if self.family.truth == "letters":
+        grasped = None if self.on_cells else self.grasped
+        if self.on_cells:
             blocks = {n: m for n, m in present.items() if m.shape in ("1x1", "1x2")}
             n1 = sum(m.shape == "1x1" for m in blocks.values())
             n2 = sum(m.shape == "1x2" for m in blocks.values())
@@ -401,7 +418,7 @@ class Labeller:
         the task's symbols name colours, then one lying on a letter cell, then by name. The plan picks them up, so
         a cell one lies on is not occupied -- when that cell is filled after the missing block's step, which is
         where the stand-in is taken (letters_A s0 0101: a green 1x1 on b3's cell stands in for the missing b0)."""
-        if self.family.truth != "letters":
+        if not self.on_cells:
             return set()
         named = [m.shape for n, m in present.items() if n in self.needed]
         if letters_feasible(len(self.cells), max_pairs(self.cells), named.count("1x1"), named.count("1x2")):
@@ -430,7 +447,7 @@ class Labeller:
         """Index in :attr:`targets` -> the plan step that puts something there (letters: a place per cell)."""
         out: dict[int, int] = {}
         for step, action in enumerate(self.plan):
-            if action.name == "place":
+            if action.name in self.cell_actions:
                 for _ in _cell_offsets(self.shapes.get(action.args[0])):
                     out[len(out)] = step
         return out if len(out) == len(self.targets) else {}
@@ -443,19 +460,19 @@ class Labeller:
         q = world.current_q()
         for height, allowed in ((APPROACH_HEIGHT, False), (GRASP_HEIGHT, True)):
             target = self._over(world, name, height)
-            world.allow_hand(name, "right", allowed)
+            world.allow_hand(name, world.default_arm, allowed)
             try:
-                result = world.ik.solve("right", pin.SE3(target[:3, :3], target[:3, 3]), q, seed=0)
+                result = world.ik.solve(world.default_arm, pin.SE3(target[:3, :3], target[:3, 3]), q, seed=0)
                 if result.success and allowed and world.sim.obstacles():  # the descent, against obstacles
                     hit = self._move_hit(world, q, result.q, target)
                     if hit is not None:
                         return False, "collision", f"{name}: the descent to the grasp runs into {hit}"
             finally:
-                world.allow_hand(name, "right", False)
+                world.allow_hand(name, world.default_arm, False)
             if not result.success:
                 return False, result.kind, f"{name}: {result.message}"
             q = result.q
-        if self.family.truth == "letters" and _angle(_up(transform), np.array([0.0, 0.0, 1.0])) > UP_TOLERANCE:
+        if self.on_cells and _angle(_up(transform), np.array([0.0, 0.0, 1.0])) > UP_TOLERANCE:
             # A block on another face is turned where it lies before it is placed (the place skill keeps the
             # tilt in the gripper): the turn the skill would make from that grasp, lifted, must be reachable.
             from bt_meta.world.skills.place import turned_pose
@@ -463,7 +480,7 @@ class Labeller:
             grasp = self._over(world, name, GRASP_HEIGHT)
             lifted = grasp.copy()
             lifted[2, 3] += APPROACH_HEIGHT
-            if not turned_pose(world, name, "right", lifted, np.linalg.inv(grasp) @ transform)[1]:
+            if not turned_pose(world, name, world.default_arm, lifted, np.linalg.inv(grasp) @ transform)[1]:
                 return False, "reachability", f"{name}: the turn that stands it on its base is out of reach"
         return True, None, ""
 
@@ -478,10 +495,10 @@ class Labeller:
             return Label("limit:collision", f"the robot's start configuration runs into {hit}",
                          {"contact": hit, "step": -1})
         stand_in = None
-        place_steps = [i for i, action in enumerate(self.plan) if action.name == "place"]
-        letters = self.family.truth == "letters" and len(place_steps) == len(self.jobs)
+        place_steps = [i for i, action in enumerate(self.plan) if action.name in self.cell_actions]
+        letters = self.on_cells and len(place_steps) == len(self.jobs)
         for index, (nominal, target) in enumerate(self.jobs):
-            if self.family.truth == "letters":
+            if self.on_cells:
                 shape = present[nominal].shape if nominal in present else self.shapes.get(str(nominal))
                 pool = [n for n in roles["blocks"] if present[n].shape == shape] or list(roles["blocks"])
             else:
@@ -532,7 +549,7 @@ class Labeller:
         for k in range(1, steps + 1):
             f = k / steps
             pose = pin.SE3(start[:3, :3] @ pin.exp3(rotation * f), start[:3, 3] + (goal[:3, 3] - start[:3, 3]) * f)
-            result = world.ik.solve("right", pose, q, seed=0, check_collisions=False)
+            result = world.ik.solve(world.default_arm, pose, q, seed=0, check_collisions=False)
             if not result.success:
                 return f"no solution on the straight line ({result.message})"
             q = result.q
@@ -566,12 +583,12 @@ class Labeller:
         hit = self._path_hit(world, q_from, q_to)
         if hit is None:
             return None
-        start = pose_matrix(world.kin.end_effector_pose(q_from, "right"))
+        start = pose_matrix(world.kin.end_effector_pose(q_from, world.default_arm))
         if self._line_hit(world, q_from, start, goal) is None:
             return None
         if self._lift_first_hit(world, q_from, start, goal, q_to) is None:
             return None
-        indices = world.kin.arm_indices("right")
+        indices = world.kin.arm_indices(world.default_arm)
 
         def free(arm_q: np.ndarray) -> bool:
             q = q_from.copy()
@@ -588,10 +605,10 @@ class Labeller:
         import pinocchio as pin
 
         target = pin.SE3(pose[:3, :3], pose[:3, 3])
-        result = world.ik.solve("right", target, q, seed=0)
+        result = world.ik.solve(world.default_arm, target, q, seed=0)
         if result.success:
             return result.q, None
-        free = world.ik.solve("right", target, q, seed=0, check_collisions=False)
+        free = world.ik.solve(world.default_arm, target, q, seed=0, check_collisions=False)
         if not free.success:
             return None, f"no IK solution ({free.message})"
         hit = self._hit(world, free.q)
@@ -603,7 +620,7 @@ class Labeller:
 
         transform = world.sim.object_transform(name)
         above, grasp = self._over(world, name, APPROACH_HEIGHT), self._over(world, name, GRASP_HEIGHT)
-        world.allow_hand(name, "right", True)
+        world.allow_hand(name, world.default_arm, True)
         try:
             q1, why = self._motion(world, q0, above, f"reaching above {name}", f"reaching for {name}")
             if q1 is None:
@@ -613,9 +630,9 @@ class Labeller:
                 return f"grasping {name}: {why}"
             parts = [p for p in world.collision.objects if world.contact_object(p) == name]
             saved = {p: world.collision.pose(p) for p in parts}
-            hand = world.hand_links("right")
+            hand = world.hand_links(world.default_arm)
             for part in parts:
-                world.collision.attach(part, world.end_effector("right"), q2, allow=hand)
+                world.collision.attach(part, world.end_effector(world.default_arm), q2, allow=hand)
             try:
                 lifted = grasp.copy()
                 lifted[2, 3] += APPROACH_HEIGHT
@@ -624,14 +641,14 @@ class Labeller:
                     return why
                 first = None
                 attached = np.linalg.inv(grasp) @ transform
-                gripper = pose_matrix(world.kin.end_effector_pose(q2, "right"))
+                gripper = pose_matrix(world.kin.end_effector_pose(q2, world.default_arm))
                 for held, block in self._arrivals(world, name, attached, target):
                     if held is not attached:  # carried as another grasp holds it: move the parts to match
                         moved = gripper @ held @ np.linalg.inv(attached) @ np.linalg.inv(gripper)
                         for part in parts:
                             now = world.collision.pose(part, q2).homogeneous
                             world.collision.detach(part, pose=moved @ now)
-                            world.collision.attach(part, world.end_effector("right"), q2, allow=hand)
+                            world.collision.attach(part, world.end_effector(world.default_arm), q2, allow=hand)
                         attached = held
                     why = self._put_down_hit(world, name, target, q3, block @ np.linalg.inv(held))
                     if why is None:
@@ -642,7 +659,7 @@ class Labeller:
                 for part in parts:
                     world.collision.detach(part, pose=saved[part])
         finally:
-            world.allow_hand(name, "right", False)
+            world.allow_hand(name, world.default_arm, False)
 
     def _arrivals(self, world: Any, name: str, as_grasped: np.ndarray, target: tuple[float, float, float]
                   ) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -663,7 +680,7 @@ class Labeller:
                                   0.0, 0.0, goal_yaw))
         out = [(as_grasped, upright)]
         nominal_up = self.nominal_up.get(name, np.array([0.0, 0.0, 1.0]))
-        if self.family.truth == "letters" or _angle(_up(transform), nominal_up) <= UP_TOLERANCE:
+        if self.on_cells or _angle(_up(transform), nominal_up) <= UP_TOLERANCE:
             return out
         demonstrated = self.nominal_held.get(model.type)
         if demonstrated is not None and self.reorientable:
@@ -708,7 +725,7 @@ class Labeller:
             return Label(f"limit:{kind}", f"no graspable object: {message}",
                          {"kind": kind, "step": min(first) if first else None})
 
-        if self.family.truth == "letters":
+        if self.on_cells:
             ok = [n for n in roles["blocks"] if feasible[n][0]]
             n1 = sum(present[n].shape == "1x1" for n in ok)
             n2 = sum(present[n].shape == "1x2" for n in ok)

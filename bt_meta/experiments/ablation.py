@@ -3,7 +3,7 @@
 The paper's claim, checked in the simulator: expectations that use both symbolic and low-level information repair
 more failures than either alone. The letters (A with substituted blocks), magnetic-attach (variant poses of the
 active part) and housing (upside down) variants are run under four plugin configurations
-(:mod:`bt_meta.demo.configurations`):
+(:mod:`bt_meta.configurations`):
 
 * ``dual`` -- symbolic + low-level expectations (grid-maps, keypoints), every repair plugin
 * ``symbolic`` -- symbolic expectations only; object substitution matches symbolically
@@ -113,7 +113,7 @@ def _choices(text: str, known: Sequence[str], option: str) -> tuple[str, ...]:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from bt_meta.demo.configurations import CONFIGURATIONS
+    from bt_meta.configurations import CONFIGURATIONS
     from bt_meta.demo.scenario import FAMILIES, variants
 
     if not 1 <= args.seeds <= 50:
@@ -176,8 +176,8 @@ def run(*, seeds: int = 3, seed: int = 0, families: Sequence[str] = ("letters", 
         only: Sequence[str] | None = None, echo: bool = False, robot: Any = None) -> dict[str, Any]:
     """Record the demonstrations, run every variant (or the ``only`` ones) under every configuration for ``seeds``
     seeds, on ``robot`` (a description; default each grounding's); the table."""
+    from bt_meta.configurations import CONFIGURATIONS, available_repairs
     from bt_meta.demo.capture import Progress
-    from bt_meta.demo.configurations import CONFIGURATIONS, available_repairs
     from bt_meta.demo.runner import memory_environment, record_demonstration, run_variant
     from bt_meta.demo.scenario import FAMILIES, VariantRun, demonstrations, variants
     from bt_meta.memory import EpisodicMemory

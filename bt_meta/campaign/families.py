@@ -14,6 +14,7 @@ Offers:
 * :func:`load_family` -- a family file (every mistake a :class:`FamilyError` at ``path:line:column``)
 * :func:`task_family` -- the family of a task file and problem as it stands (an optional family file adds to it)
 * :func:`family_of_manifest` -- the family a campaign directory was generated from
+* :func:`family_spec` -- a family's perturbation spec read against a scene
 * :func:`needed_objects` / :func:`derived_grasped` / :func:`derived_fixtures` -- what the plan uses
 """
 
@@ -31,7 +32,7 @@ import yaml
 from bt_meta.errors import ConfigError, UserInputError
 
 __all__ = ["CampaignFamily", "FamilyError", "derived_fixtures", "derived_grasped", "family", "family_of_manifest",
-           "load_family", "needed_objects", "shipped_families", "task_family"]
+           "family_spec", "load_family", "needed_objects", "shipped_families", "task_family"]
 
 _KEYS = {"family", "description", "task", "problem", "scene", "demonstrations", "grasped", "absolute_fixtures",
          "success", "perturbations", "spec"}
@@ -284,6 +285,17 @@ def task_family(task: str | Path, problem: str, *, scene: str | None = None,
     grounding = load_grounding(task_file.domain.name, task_path)
     chosen.success_check(task_file, task_file.problem(problem), grounding, _scene_object_names(chosen, grounding))
     return chosen
+
+
+def family_spec(chosen: CampaignFamily, scene: Any = None, roles: Mapping[str, Sequence[str]] | None = None) -> Any:
+    """A family's perturbation spec read against ``scene`` (default its own): objects by name, type or role."""
+    from bt_meta.world.simulation.objects import make_model
+    from bt_meta.world.simulation.scenes import load_scene
+
+    if scene is None:
+        scene = load_scene(chosen.scene) if chosen.scene is not None else None
+    objects = {o.name: (o.type, make_model(o.type).role) for o in scene.objects}
+    return chosen.spec(objects, roles or {})
 
 
 def family_of_manifest(manifest: Mapping[str, Any]) -> CampaignFamily:

@@ -20,7 +20,8 @@ Offers:
 
 * :func:`register` -- ``bt-meta experiment ablation [--seeds N] [--seed S] [--families F,...]
   [--configurations C,...] [--variants V,...] [--json]``; with ``--generated N [--out DIR] [--workers W]
-  [--ray ADDRESS] [--perfect-sensing]`` the experiment runs as campaigns of generated variants instead
+  [--ray ADDRESS] [--perfect-sensing] [--robot R]`` the experiment runs as campaigns of generated variants instead,
+  labelled for and run on the robot
   (:mod:`bt_meta.campaign.ablation`)
 * :func:`run` -- the experiment; returns ``{"configurations", "families", "rows", "runs", ...}``
 * :func:`wilson` -- Wilson score interval of a proportion
@@ -124,10 +125,6 @@ def _main(args: argparse.Namespace) -> int:
                                  "magnetic attach, housing); run a scene of one's own with "
                                  "`bt-meta run TASK --scene FILE`", path="<command line>")
     if args.generated is not None:
-        if options["robot"] is not None:
-            raise AblationInputError("--robot with --generated: the campaign's generated episodes build their "
-                                     "worlds from its spec (on the Baxter); run the ablation without "
-                                     "--generated on another robot", path="<command line>")
         return _generated(args)
     families = _choices(args.families, list(FAMILIES), "--families")
     configurations = _choices(args.configurations, list(CONFIGURATIONS), "--configurations")
@@ -155,7 +152,8 @@ def _generated(args: argparse.Namespace) -> int:
                               "--configurations")
     result = run_ablation(args.out or "ablation-campaigns", n=args.generated, seeds=args.seeds, seed=args.seed,
                           families=families, configurations=configurations, workers=args.workers,
-                          ray_address=args.ray, perfect_sensing=args.perfect_sensing, progress=not args.json)
+                          ray_address=args.ray, perfect_sensing=args.perfect_sensing, progress=not args.json,
+                          robot=args.robot)
     if args.json:
         print_json(result)
         return 0

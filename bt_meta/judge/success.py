@@ -213,10 +213,12 @@ class _Builder:
         if names != ("...",) and len(args) != len(names):
             raise self.error(f"check {kind!r} takes {len(names)} argument(s) ({', '.join(names)}), got "
                              f"{len(args)}", node)
-        for name, value in zip(names * (len(args) if names == ("...",) else 1), args, strict=True):
+        for index, (name, value) in enumerate(zip(names * (len(args) if names == ("...",) else 1), args,
+                                                  strict=True)):
             if kind != "ignore" and name in _SYMBOLS and value not in self.symbols:
+                item = node.value[index] if isinstance(node, yaml.SequenceNode) and index < len(node.value) else node
                 raise self.error(f"check {kind!r}: unknown object {value!r} (not a symbol of the problem, the "
-                                 "grounding or the scene)", node)
+                                 "grounding or the scene)", item)
 
     def plan_adds(self, predicate: str) -> list[tuple[str, ...]]:
         """The atoms of ``predicate`` the nominal plan adds (in its final state, not in the initial one)."""

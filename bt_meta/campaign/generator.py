@@ -556,7 +556,9 @@ def generate(chosen: Any, n: int, seed: int, out: str | Path, *, spec_path: str 
             roles = {"grasped": list(labeller.grasped), "needed": list(labeller.needed)}
             spec = (load_spec(spec_path, objects, family=chosen.name, roles=roles) if spec_path is not None
                     else chosen.spec(objects, roles))
-            targets = [(x, y) for x, y, _ in labeller.targets]
+            # the labeller's targets are in the robot's base frame; the scene file's poses in the scene frame
+            dx, dy, _ = labeller.sim.robot.scene_offset
+            targets = [(x - dx, y - dy) for x, y, _ in labeller.targets]
             for k in range(n):
                 objects_k, changes = draw_variant(nominal, spec, seed, k, targets=targets, table=Table().bounds)
                 name = f"{chosen.name}_{seed}_{k:04d}"

@@ -76,6 +76,8 @@ noise before it starts (:func:`bt_meta.judge.noise.jitter`, up to 3 mm and 2 deg
 scene the episode runs -- the first (by default the only) seed's. Labelled without it, a green 1x2 was 6.5 mm into a
 cell of H and 5.7 mm in the run, below what the place takes as room (generated letters_H s1 0058). ``None``: the
 scene exactly as written (hand-built cases)."""
+GRASP_TURNS = (0.0, 90.0, -90.0, 45.0, -45.0, 135.0, -135.0, 180.0)
+"""Grasp yaws (degrees about the vertical, from the skills' own) tried before a part counts as out of reach."""
 REORIENT_PREFIX = "Reorient"
 """Tasks so named re-orient a part by a regrasp (the ``reorientation`` repair plugin's convention)."""
 
@@ -142,6 +144,8 @@ class Labeller:
         self.family = family
         self.scene = scene
         self.start_seed = start_seed
+        self._grasp_turn: dict[str, float] = {}
+        """Object -> the grasp yaw (radians, from the skills' own) found reachable in the variant labelled now."""
         task_path = family.task_path()
         self.task_file = load_task_file(task_path)
         self.problem = self.task_file.problem(family.problem)
@@ -192,13 +196,14 @@ class Labeller:
                                np.linalg.inv(self._over(world, name, GRASP_HEIGHT)) @ world.sim.object_transform(name))
         return out
 
-    @staticmethod
-    def _over(world: Any, name: str, height: float) -> np.ndarray:
-        """The top-down gripper pose ``height`` over ``name``'s top, at the yaw the skills pick it at."""
+    def _over(self, world: Any, name: str, height: float) -> np.ndarray:
+        """The top-down gripper pose ``height`` over ``name``'s top, at the yaw the skills pick it at turned by the
+        grasp yaw :meth:`_graspable` found reachable (none found yet: the skills' own)."""
         from bt_meta.world.skills.place import GRIPPER_YAW, nearest_yaw, object_yaw, symmetry, top_down
 
         transform = world.sim.object_transform(name)
         yaw = nearest_yaw(object_yaw(transform), symmetry(world.sim.object_model(name)), GRIPPER_YAW)
+        yaw += self._grasp_turn.get(name, 0.0)
         return top_down(transform[0, 3], transform[1, 3], world.stack_top(name) + height, yaw)
 
     def __enter__(self) -> Labeller:
@@ -307,6 +312,7 @@ class Labeller:
 
     def label(self, scene_path: str | Path, variant: str | None, changes: Sequence[dict[str, Any]] = ()) -> Label:
         world = self._world(scene_path, variant)
+        self._grasp_turn = {}
         try:
             return self._label(world)
         finally:
@@ -452,11 +458,10 @@ class Labeller:
                     out[len(out)] = step
         return out if len(out) == len(self.targets) else {}
 
-    def _graspable(self, world: Any, name: str) -> tuple[bool, str | None, str]:
-        """(ok, failure kind, message) of the top-down grasp and its approach above ``name``."""
+    def _grasp_at(self, world: Any, name: str) -> tuple[bool, str | None, str]:
+        """(ok, failure kind, message) of the approach and the top-down grasp of ``name`` at its current grasp yaw."""
         import pinocchio as pin
 
-        transform = world.sim.object_transform(name)
         q = world.current_q()
         for height, allowed in ((APPROACH_HEIGHT, False), (GRASP_HEIGHT, True)):
             target = self._over(world, name, height)
@@ -472,6 +477,24 @@ class Labeller:
             if not result.success:
                 return False, result.kind, f"{name}: {result.message}"
             q = result.q
+        return True, None, ""
+
+    def _graspable(self, world: Any, name: str) -> tuple[bool, str | None, str]:
+        """(ok, failure kind, message) of a top-down grasp and its approach above ``name``: the robot reaches the
+        part when some grasp yaw about the vertical (the skills' own first, then :data:`GRASP_TURNS` from it) has an
+        IK solution clear of the scene -- a pose the domain's move primitive can be given, whichever yaw today's
+        skills would pick. The failure reported is the skills' own yaw's."""
+        transform = world.sim.object_transform(name)
+        first: tuple[bool, str | None, str] | None = None
+        for turn in GRASP_TURNS:
+            self._grasp_turn[name] = math.radians(turn)
+            outcome = self._grasp_at(world, name)
+            if outcome[0]:
+                break
+            first = first or outcome
+        else:
+            self._grasp_turn.pop(name, None)
+            return first  # type: ignore[return-value]
         if self.on_cells and _angle(_up(transform), np.array([0.0, 0.0, 1.0])) > UP_TOLERANCE:
             # A block on another face is turned where it lies before it is placed (the place skill keeps the
             # tilt in the gripper): the turn the skill would make from that grasp, lifted, must be reachable.

@@ -78,6 +78,8 @@ cell of H and 5.7 mm in the run, below what the place takes as room (generated l
 scene exactly as written (hand-built cases)."""
 GRASP_TURNS = (0.0, 90.0, -90.0, 45.0, -45.0, 135.0, -135.0, 180.0)
 """Grasp yaws (degrees about the vertical, from the skills' own) tried before a part counts as out of reach."""
+ARRIVAL_YAWS = tuple(range(0, 360, 30))
+"""Yaws (degrees) about a target feature's normal tried for a part brought onto it as it is held."""
 REORIENT_PREFIX = "Reorient"
 """Tasks so named re-orient a part by a regrasp (the ``reorientation`` repair plugin's convention)."""
 
@@ -168,6 +170,8 @@ class Labeller:
         world = self._world(scene.path, None)
         try:
             present = list(world.sim.object_names())
+            self.target_features: list[tuple[str, str | None]] = []
+            """(object, feature) of each of :attr:`targets` a part is put onto (none for a frame's cells)."""
             self.grasped: tuple[str, ...] = (family.grasped if family.grasped is not None
                                              else derived_grasped(self.plan, self.grounding, present))
             positions = {name: world.sim.object_transform(name)[:2, 3] for name in present}
@@ -252,13 +256,15 @@ class Labeller:
             return out
         grasped = set(self.grasped)
         for name in self.needed:
-            if name in grasped or name not in world.sim.object_names():
+            # a part the robot only carries is no target; one the plan's absolute poses were taught over is, even
+            # when the plan picks it up afterwards (the tutorial's base, lifted to show the joint)
+            if (name in grasped and name not in self.absolute_fixtures) or name not in world.sim.object_names():
                 continue
-            point, _ = world.sim.feature(name, None)
             feature_names = [s.get("feature") for s in self.grounding.features.values() if s.get("object") == name]
-            if feature_names and feature_names[0]:
-                point, _ = world.sim.feature(name, feature_names[0])
+            feature = feature_names[0] if feature_names and feature_names[0] else None
+            point, _ = world.sim.feature(name, feature)
             out.append((float(point[0]), float(point[1]), float(point[2])))
+            self.target_features.append((name, feature))
         return out
 
     def _occupied_cell(self, world: Any, names: Sequence[str]) -> Label | None:
@@ -306,7 +312,8 @@ class Labeller:
                 out.append((str(action.args[0]), (gx, gy, world.sim.table.top_z)))
         if out:
             return out
-        return [(name, target) for name in self.grasped for target in self.targets]
+        return [(name, target) for name in self.grasped
+                for target, (owner, _) in zip(self.targets, self.target_features, strict=True) if owner != name]
 
     # -- the label ------------------------------------------------------------------------------------------
 
@@ -381,9 +388,14 @@ class Labeller:
             if name in self.nominal_up:
                 angle = _angle(_up(sim.object_transform(name)), self.nominal_up[name])
                 if angle > UP_TOLERANCE:
-                    return Label("repairable", f"{name} is turned {math.degrees(angle):.0f} deg off its nominal "
-                                 "up axis (re-orientation or pose repair)", {"object": name,
-                                                                             "degrees": math.degrees(angle)})
+                    turned = f"{name} is turned {math.degrees(angle):.0f} deg off its nominal up axis"
+                    way = self._turned_way(world, name, feasible)
+                    if way is None:
+                        return Label("limit:reachability", f"{turned}; the domain offers no re-orientation and no "
+                                     "grasp of it as it lies brings it onto its target within reach",
+                                     {"object": name, "degrees": math.degrees(angle), "step": self._step_of(name)})
+                    return Label("repairable", f"{turned} ({way})", {"object": name,
+                                                                      "degrees": math.degrees(angle)})
             if name in self.absolute_fixtures and name in self.nominal_xy:
                 moved = float(np.linalg.norm(sim.object_transform(name)[:2, 3] - self.nominal_xy[name]))
                 if moved > FIXTURE_TOLERANCE:
@@ -416,6 +428,58 @@ class Labeller:
             if grasped is not None and name in grasped:
                 roles[name] = candidates
         return roles
+
+    def _turned_way(self, world: Any, name: str, feasible: dict[str, tuple[bool, str | None, str]]) -> str | None:
+        """How a correct system gets ``name``, turned off its nominal up axis, to its goal -- the domain's own
+        means, on the true scene -- or None when nothing does: a block on a frame's cell is turned where it lies
+        (checked with its grasp); a part the robot only carries to a fixture is re-oriented by a ``Reorient...``
+        task the domain offers, or held as it lies (a top-down grasp) and turned in the hand so its primary
+        feature meets the target feature, normals opposed, at some yaw about them with an IK solution clear of the
+        scene. A part no plan step carries (a fixture) is followed by poses relative to it."""
+        if self.on_cells or name not in self.grasped or not self.target_features:
+            return "re-orientation or pose repair"
+        if self.reorientable and feasible.get(name, (True, None, ""))[0]:
+            return "the domain's re-orientation"
+        for owner, feature in self.target_features:
+            if owner != name and self._feature_arrival(world, name, owner, feature):
+                return f"held as it lies, its feature brought onto {owner}'s"
+        return None
+
+    def _feature_arrival(self, world: Any, name: str, owner: str, feature: str | None) -> bool:
+        """Whether ``name``, grasped top-down as it lies (at one of :data:`GRASP_TURNS`), can be held with its
+        primary feature on ``owner``'s ``feature`` (normals opposed, 2 mm apart) at one of :data:`ARRIVAL_YAWS`
+        about the feature's normal: an IK solution clear of the scene for the gripper there (the part itself not
+        carried in the check)."""
+        import pinocchio as pin
+
+        sim = world.sim
+        part = sim.object_transform(name)
+        primary = sim.object_model(name).feature(None)
+        point_f, normal_f = np.asarray(primary.point, dtype=float), np.asarray(primary.normal, dtype=float)
+        target, target_normal = (np.asarray(v, dtype=float) for v in sim.feature(owner, feature))
+        align = _rotation_onto(normal_f, -target_normal)
+        q0 = world.current_q()
+        kept = self._grasp_turn.get(name)
+        world.allow_hand(name, world.default_arm, True)
+        try:
+            for turn in GRASP_TURNS:
+                self._grasp_turn[name] = math.radians(turn)
+                in_gripper = np.linalg.inv(self._over(world, name, GRASP_HEIGHT)) @ part  # the part in the hand
+                for yaw in ARRIVAL_YAWS:
+                    goal = np.eye(4)
+                    goal[:3, :3] = _axis_rotation(target_normal, math.radians(yaw)) @ align
+                    goal[:3, 3] = target + 0.002 * target_normal - goal[:3, :3] @ point_f
+                    gripper = goal @ np.linalg.inv(in_gripper)
+                    target_se3 = pin.SE3(gripper[:3, :3], gripper[:3, 3])
+                    if world.ik.solve(world.default_arm, target_se3, q0, seed=0).success:
+                        return True
+        finally:
+            world.allow_hand(name, world.default_arm, False)
+            if kept is None:
+                self._grasp_turn.pop(name, None)
+            else:
+                self._grasp_turn[name] = kept
+        return False
 
     def _stand_ins(self, world: Any, present: dict[str, Any]) -> set[str]:
         """Letters: the blocks the task does not name that the run takes for its missing ones, as the substitution
@@ -765,6 +829,25 @@ class Labeller:
             if not any(feasible[n][0] for n in candidates):
                 return limit(candidates)
         return None
+
+
+def _rotation_onto(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotation taking unit vector ``a`` onto ``b``."""
+    a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
+    axis, cos = np.cross(a, b), float(np.dot(a, b))
+    if np.linalg.norm(axis) < 1e-9:
+        if cos > 0:
+            return np.eye(3)
+        other = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        return _axis_rotation(np.cross(a, other), math.pi)
+    return _axis_rotation(axis, math.atan2(float(np.linalg.norm(axis)), cos))
+
+
+def _axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rodrigues: the rotation by ``angle`` about ``axis``."""
+    k = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    cross = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * cross + (1.0 - math.cos(angle)) * cross @ cross
 
 
 def _up(transform: np.ndarray) -> np.ndarray:

@@ -85,3 +85,25 @@ def test_a_task_whose_demonstration_fails_stops_before_any_episode(tmp_path, mon
     assert "Traceback" not in err
     assert not (out / "memory.sqlite").exists() and not list(out.glob(".memory.sqlite.partial*"))
     assert not (out / "episodes").exists()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("robot", ["baxter", "panda"])
+def test_a_part_on_its_side_is_labelled_by_what_the_domain_can_do(tmp_path, robot):
+    """The tutorial's domain offers no re-orientation: its peg on its side is repairable because a grasp of it as it
+    lies can bring its magnet onto the base's within the robot's reach; the magnetic domain's Reorient does it."""
+    from bt_meta.campaign.families import family, task_family
+    from bt_meta.campaign.labeller import Labeller
+    from bt_meta.world.simulation.scenes import load_scene
+
+    task = _tutorial_files(tmp_path)
+    with Labeller(task_family(task, "nominal"), load_scene(tmp_path / "scene.yaml"), robot=robot) as labeller:
+        assert not labeller.reorientable and labeller.target_features == [("base", None)]
+        assert labeller.grasped == ("peg", "base") and labeller.absolute_fixtures == ("base",)
+        label = labeller.label(tmp_path / "scene.yaml", "peg_on_side")
+        assert label.expected == "repairable" and "held as it lies" in label.reason, label
+        assert labeller.label(tmp_path / "scene.yaml", None).expected == "nominal_equivalent"
+    scene = load_scene("magnetic_attach")
+    with Labeller(family("magnetic"), scene, robot=robot) as labeller:
+        label = labeller.label(scene.path, "active_on_side")
+        assert label.expected == "repairable" and "re-orientation" in label.reason, label

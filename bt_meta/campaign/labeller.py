@@ -392,7 +392,7 @@ class Labeller:
                     way = self._turned_way(world, name, feasible)
                     if way is None:
                         return Label("limit:reachability", f"{turned}; the domain offers no re-orientation and no "
-                                     "grasp of it as it lies brings it onto its target within reach",
+                                     "grasp as the parts lie brings one onto the other within reach",
                                      {"object": name, "degrees": math.degrees(angle), "step": self._step_of(name)})
                     return Label("repairable", f"{turned} ({way})", {"object": name,
                                                                       "degrees": math.degrees(angle)})
@@ -430,16 +430,24 @@ class Labeller:
         return roles
 
     def _turned_way(self, world: Any, name: str, feasible: dict[str, tuple[bool, str | None, str]]) -> str | None:
-        """How a correct system gets ``name``, turned off its nominal up axis, to its goal -- the domain's own
-        means, on the true scene -- or None when nothing does: a block on a frame's cell is turned where it lies
-        (checked with its grasp); a part the robot only carries to a fixture is re-oriented by a ``Reorient...``
-        task the domain offers, or held as it lies (a top-down grasp) and turned in the hand so its primary
-        feature meets the target feature, normals opposed, at some yaw about them with an IK solution clear of the
-        scene. A part no plan step carries (a fixture) is followed by poses relative to it."""
-        if self.on_cells or name not in self.grasped or not self.target_features:
+        """How a correct system gets the goal with ``name`` turned off its nominal up axis -- by the domain's own
+        means, on the true scene -- or None when nothing does. A block on a frame's cell is turned where it lies
+        (checked with its grasp). A part the robot carries is re-oriented by a ``Reorient...`` task the domain
+        offers, or held as it lies (a top-down grasp) and turned in the hand so its primary feature meets its
+        target's (:meth:`_feature_arrival`). A target turned (a fixture) keeps its feature where it now faces: every
+        part carried onto it must meet it so. An object that is neither is followed by poses relative to it."""
+        if self.on_cells:
             return "re-orientation or pose repair"
-        if self.reorientable and feasible.get(name, (True, None, ""))[0]:
+        if self.reorientable and name in self.grasped and feasible.get(name, (True, None, ""))[0]:
             return "the domain's re-orientation"
+        owned = [feature for owner, feature in self.target_features if owner == name]
+        if owned:
+            carried = [p for p in self.grasped if p != name and p in world.sim.object_names()]
+            if all(any(self._feature_arrival(world, p, name, f) for f in owned) for p in carried):
+                return "what goes onto it is brought onto its feature as it lies"
+            return None
+        if name not in self.grasped:
+            return "followed by poses relative to it"
         for owner, feature in self.target_features:
             if owner != name and self._feature_arrival(world, name, owner, feature):
                 return f"held as it lies, its feature brought onto {owner}'s"

@@ -25,7 +25,7 @@ setup(
     package_data={
         "bt_meta.data.robots": ["*.yaml"],
         "bt_meta.data.trees": ["*.yaml", "*.xml", "*.md", "scenes/*.yaml", "poses/*.yaml", "poses/*.md",
-                             "objects/*.yaml", "objects/meshes/*.obj"],
+                             "families/*.yaml", "objects/*.yaml", "objects/meshes/*.obj"],
         "bt_meta_plugins": ["*.yaml"],
         "bt_meta.bench": ["problems/*.yaml"],
         "bt_meta.campaign": ["specs/*.yaml"],

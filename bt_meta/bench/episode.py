@@ -58,7 +58,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _main(args: argparse.Namespace) -> int:
     from bt_meta.campaign.families import family
-    from bt_meta.demo.configurations import CONFIGURATIONS
+    from bt_meta.configurations import CONFIGURATIONS
 
     family(args.family)
     if args.configuration not in CONFIGURATIONS:
@@ -186,8 +186,8 @@ def child(task_path: str) -> list[dict[str, Any]]:
     with quiet_stdout():
         import pybullet  # noqa: F401
 
+        from bt_meta import configurations  # noqa: F401
         from bt_meta.campaign import episode  # noqa: F401
-        from bt_meta.demo import configurations  # noqa: F401
         from bt_meta.meta import MetaExecutor  # noqa: F401
     imported = time.perf_counter() - started
     tasks = json.loads(Path(task_path).read_text(encoding="utf-8"))

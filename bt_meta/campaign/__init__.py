@@ -6,7 +6,7 @@ the campaign database (``campaign.sqlite``: one row per finished episode, writte
 
 Modules (one concept each):
 
-* :mod:`bt_meta.campaign.families` -- the variant families (task file, problem, scene, what the goal needs)
+* :mod:`bt_meta.campaign.families` -- family files: task file, problem, scene, demonstrations, perturbations, checks
 * :mod:`bt_meta.campaign.spec` -- the declarative perturbation spec and its loader (located errors)
 * :mod:`bt_meta.campaign.generator` -- draws variants from a spec with a seed, writes scene files + manifest
 * :mod:`bt_meta.campaign.labeller` -- the expected outcome of a variant, decided from ground truth
@@ -19,7 +19,7 @@ Modules (one concept each):
 * :mod:`bt_meta.campaign.ablation` -- the paper's ablation as campaigns (``experiment ablation --generated``)
 """
 
-CAMPAIGN_VERSION = 1
+CAMPAIGN_VERSION = 2
 """Bumped whenever the layout of a campaign directory or the meaning of its rows changes: a directory of another
 version is refused, never mixed."""
 

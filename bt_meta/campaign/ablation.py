@@ -42,19 +42,23 @@ def run_ablation(out: str | Path, *, n: int, seeds: int = 3, seed: int = 0,
                  families: Sequence[str] = ABLATION_FAMILIES,
                  configurations: Sequence[str] = ("dual", "symbolic", "low_level", "retry"),
                  workers: int | None = None, ray_address: str | None = None, perfect_sensing: bool = False,
-                 progress: bool = True, echo: Callable[[str], None] | None = None) -> dict[str, Any]:
+                 progress: bool = True, echo: Callable[[str], None] | None = None,
+                 robot: str | None = None) -> dict[str, Any]:
+    """Generate (once) and run a campaign per family under ``out``, labelled for and run on ``robot`` (default the
+    grounding's); a folder generated for another robot is refused."""
     from bt_meta.campaign.generator import generate
     from bt_meta.campaign.runner import run_campaign
 
     out = Path(out)
-    result: dict[str, Any] = {"out": str(out), "n": n, "seeds": seeds, "seed": seed,
+    result: dict[str, Any] = {"out": str(out), "n": n, "seeds": seeds, "seed": seed, "robot": robot,
                               "sensing": "perfect" if perfect_sensing else "perceived",
                               "configurations": list(configurations), "families": {}}
     for name in families:
         folder = out / name
         if not (folder / "campaign.json").is_file():
-            generate(name, n, seed, folder)
+            generate(name, n, seed, folder, robot=robot)
         run = run_campaign(folder, configurations=configurations, seeds=seeds, workers=workers,
-                           ray_address=ray_address, perfect_sensing=perfect_sensing, progress=progress, echo=echo)
+                           ray_address=ray_address, perfect_sensing=perfect_sensing, progress=progress, echo=echo,
+                           robot=robot)
         result["families"][name] = {"summary": run["summary"], "verdicts": verdicts(run["summary"])}
     return result

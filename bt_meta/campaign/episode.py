@@ -5,10 +5,10 @@ driver, in a pool worker and as a Ray task; it writes nothing into the campaign 
 writer). The campaign's demonstration memory is copied into a private temporary file first: a repair's learned
 refinement goes into that copy, and a repaired variant is run a second time on it (the **second exposure**: a
 correct system needs zero attempts then). The world is the variant's scene file with the demo's seeded start-pose
-noise (:func:`bt_meta.demo.runner.jitter`); the task is done or not by the simulator's ground truth
-(:mod:`bt_meta.demo.truth`). The manifest's expected outcomes are for the start noise of
-:data:`~bt_meta.campaign.labeller.START_SEED`; an episode of another seed labels its variant again for its own
-(:func:`seed_label`), keeping the manifest's as ``expected_as_generated``.
+noise (:func:`bt_meta.judge.noise.jitter`) on the campaign's robot; the task is done or not by the family's
+success check on the simulator's true state (:mod:`bt_meta.judge.success`). The manifest's expected outcomes are
+for the start noise of :data:`~bt_meta.campaign.labeller.START_SEED`; an episode of another seed labels its
+variant again for its own (:func:`seed_label`), keeping the manifest's as ``expected_as_generated``.
 
 Offers:
 
@@ -38,8 +38,12 @@ MAX_SECONDS = 90.0
 
 def episode_task(folder: str | Path, manifest: dict[str, Any], variant: dict[str, Any], configuration: str,
                  seed: int, *, perfect_sensing: bool = False) -> dict[str, Any]:
+    from bt_meta.campaign.manifest import manifest_robot
+
     folder = Path(folder).resolve()
     return {"folder": str(folder), "family": manifest["family"], "task_file": manifest["task_file"],
+            "shipped": manifest.get("shipped"), "family_file": manifest.get("family_file"),
+            "family_scene": manifest.get("family_scene"), "robot": manifest_robot(manifest),
             "problem": manifest["problem"], "variant": variant["name"], "scene": str(folder / variant["file"]),
             "expected": variant["expected"], "configuration": configuration, "seed": int(seed),
             "memory": str(folder / "memory.sqlite"), "perfect_sensing": perfect_sensing,
@@ -52,7 +56,7 @@ def seed_label(task: dict[str, Any]) -> Any:
     elsewhere, which can carry one across a threshold of the labeller's (a distractor's reach into a letter cell).
     The family's scene stands in for a base scene path that another install of bt-meta wrote (the same file name);
     another missing one is an error naming it."""
-    from bt_meta.campaign.families import family
+    from bt_meta.campaign.families import family_of_manifest
     from bt_meta.campaign.generator import VARIANT_NAME
     from bt_meta.campaign.labeller import START_SEED, Labeller
     from bt_meta.errors import ConfigError
@@ -60,20 +64,22 @@ def seed_label(task: dict[str, Any]) -> Any:
 
     if int(task["seed"]) == START_SEED:
         return None
-    chosen = family(task["family"])
+    chosen = family_of_manifest(task)
     base = task.get("base_scene") or chosen.scene
     if not Path(base).exists() and Path(base).suffix:
         if Path(base).stem != Path(str(chosen.scene)).stem:
             raise ConfigError(f"campaign.json: the base scene {base} is not there (labelling seed {task['seed']})")
         base = chosen.scene
-    with Labeller(chosen, load_scene(base), start_seed=int(task["seed"])) as labeller:
+    with Labeller(chosen, load_scene(base), start_seed=int(task["seed"]), robot=task.get("robot")) as labeller:
         return labeller.label(task["scene"], task.get("scene_variant", VARIANT_NAME))
 
 
-def variant_world(task_path: Path, problem_name: str, scene: str | Path, variant: str | None, seed: int) -> Any:
-    """(task file, problem, world): the problem's grounding with its scene replaced by ``scene``."""
-    from bt_meta.demo.runner import jitter
+def variant_world(task_path: Path, problem_name: str, scene: str | Path, variant: str | None, seed: int,
+                  robot: Any = None) -> Any:
+    """(task file, problem, world): the problem's grounding with its scene replaced by ``scene``, on ``robot``
+    (default the grounding's)."""
     from bt_meta.htn import load_task_file
+    from bt_meta.judge.noise import jitter
     from bt_meta.world.simulation.sim_world import SimWorld, load_grounding, quiet_stdout
 
     task_file = load_task_file(task_path)
@@ -82,7 +88,7 @@ def variant_world(task_path: Path, problem_name: str, scene: str | Path, variant
     grounding = dataclasses.replace(grounding, problems={**grounding.problems,
                                                       problem.name: {"scene": str(Path(scene).resolve())}})
     with quiet_stdout():
-        world = SimWorld(task_file.domain, problem, grounding, variant=variant, seed=seed)
+        world = SimWorld(task_file.domain, problem, grounding, variant=variant, seed=seed, robot=robot)
     try:
         jitter(world, seed)
     except BaseException:
@@ -92,14 +98,13 @@ def variant_world(task_path: Path, problem_name: str, scene: str | Path, variant
 
 
 def _one_run(task: dict[str, Any], memory_path: Path, *, save: bool) -> dict[str, Any]:
-    from bt_meta.campaign.families import family
+    from bt_meta.campaign.families import family_of_manifest
     from bt_meta.campaign.generator import VARIANT_NAME
-    from bt_meta.demo.configurations import plugin_host
-    from bt_meta.demo.truth import achieved
+    from bt_meta.configurations import plugin_host
     from bt_meta.memory import EpisodicMemory
     from bt_meta.meta import Limits, MetaExecutor, RefinementStore
 
-    chosen = family(task["family"])
+    chosen = family_of_manifest(task)
     task_path = chosen.task_path()
     extra = []
     if not task.get("perfect_sensing", True):
@@ -108,7 +113,8 @@ def _one_run(task: dict[str, Any], memory_path: Path, *, save: bool) -> dict[str
         extra = perceived_plugins(int(task["seed"]))
     with EpisodicMemory.open(memory_path) as memory, RefinementStore.open(memory_path) as refinements:
         task_file, problem, world = variant_world(task_path, task["problem"], task["scene"],
-                                                  task.get("scene_variant", VARIANT_NAME), int(task["seed"]))
+                                                  task.get("scene_variant", VARIANT_NAME), int(task["seed"]),
+                                                  robot=task.get("robot"))
         try:
             host = plugin_host(task_path, memory, configuration=task["configuration"], seed=int(task["seed"]),
                                extra=extra)
@@ -117,7 +123,8 @@ def _one_run(task: dict[str, Any], memory_path: Path, *, save: bool) -> dict[str
                                     refinements=refinements, save_refinements=save, task_file=task_file,
                                     variant=task.get("scene_variant", VARIANT_NAME), memory=memory)
             report = executor.run().to_dict()
-            done, truth = achieved(chosen.truth, world, memory, problem)
+            judge = chosen.success_check(task_file, problem, world.grounding, [o.name for o in world.scene.objects])
+            done, truth = judge.evaluate(world)
             report["simulated_seconds"] = world.total_ticks * world.tick_seconds
         finally:
             world.close()

@@ -10,7 +10,8 @@ is not decided here but by the labeller, on the true scene.
 
 Each variant is written as an ordinary scene file (``variants/<name>.yaml``): the nominal objects plus one variant
 ``perturbed`` made of ``override`` / ``remove`` / ``add`` / ``obstacles``, so ``bt-meta run`` and the scene loader
-read it as any shipped scene. Its expected outcome comes from :mod:`bt_meta.campaign.labeller`.
+read it as any shipped scene. Its expected outcome comes from :mod:`bt_meta.campaign.labeller`, for the campaign's
+robot. Generation writes into a temporary folder renamed when complete: a failure leaves no half-written one.
 
 Offers:
 
@@ -510,40 +511,77 @@ def _change_text(change: dict[str, Any]) -> str:
     return f"{change['kind']} ({rest})"
 
 
-def generate(family_name: str, n: int, seed: int, out: str | Path, *, spec_path: str | Path | None = None,
-             scene_path: str | Path | None = None, progress: Callable[[int, int], None] | None = None
-             ) -> dict[str, Any]:
-    """Write ``n`` variants of a family into ``out`` with their expected outcomes; returns the manifest."""
-    from bt_meta.campaign.families import default_spec_path, family
+def generate(chosen: Any, n: int, seed: int, out: str | Path, *, spec_path: str | Path | None = None,
+             scene_path: str | Path | None = None, progress: Callable[[int, int], None] | None = None,
+             robot: str | None = None) -> dict[str, Any]:
+    """Write ``n`` variants of a family (a :class:`~bt_meta.campaign.families.CampaignFamily` or a shipped
+    family's name) into ``out`` with their expected outcomes for ``robot`` (default the grounding's); returns the
+    manifest. Everything is written into a temporary folder beside ``out`` and renamed when complete: a failure
+    leaves nothing behind."""
+    import shutil
+    import tempfile
+
+    from bt_meta.campaign.families import family, scene_of
     from bt_meta.campaign.labeller import Labeller
     from bt_meta.campaign.manifest import new_manifest, write_manifest
     from bt_meta.campaign.spec import load_spec
+    from bt_meta.world.simulation.objects import make_model
     from bt_meta.world.simulation.scenes import load_scene
     from bt_meta.world.simulation.sim import Table
+    from bt_meta.world.simulation.sim_world import load_grounding
 
-    chosen = family(family_name)
-    scene = load_scene(scene_path if scene_path is not None else chosen.scene)
-    spec = load_spec(spec_path if spec_path is not None else default_spec_path(family_name),
-                     [o.name for o in scene.objects], family=family_name)
+    if isinstance(chosen, str):
+        chosen = family(chosen)
     out = Path(out)
-    folder = out / "variants"
-    folder.mkdir(parents=True, exist_ok=True)
-    nominal = placed_objects(scene)
-    entries = []
-    with Labeller(chosen, scene) as labeller:
-        targets = [(x, y) for x, y, _ in labeller.targets]
-        for k in range(n):
-            objects, changes = draw_variant(nominal, spec, seed, k, targets=targets, table=Table().bounds)
-            name = f"{family_name}_{seed}_{k:04d}"
-            path = folder / f"{name}.yaml"
-            path.write_text(scene_text(scene, name, objects, changes), encoding="utf-8")
-            label = labeller.label(path, VARIANT_NAME, changes)
-            path.write_text(scene_text(scene, name, objects, changes, label.expected, label.reason),
-                            encoding="utf-8")
-            entries.append({"name": name, "file": f"variants/{name}.yaml", "expected": label.expected,
-                            "reason": label.reason, "changes": changes})
-            if progress is not None:
-                progress(k + 1, n)
-    manifest = new_manifest(chosen, seed, spec, scene, entries)
-    write_manifest(out, manifest)
+    if scene_path is not None:
+        scene = load_scene(scene_path)
+    else:
+        from bt_meta.htn import load_task_file
+
+        scene = scene_of(chosen, load_grounding(load_task_file(chosen.task_path()).domain.name, chosen.task_path()))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
+    try:
+        folder = staging / "variants"
+        folder.mkdir()
+        nominal = placed_objects(scene)
+        entries = []
+        with Labeller(chosen, scene, robot=robot) as labeller:
+            if not labeller.plan:
+                from bt_meta.errors import UserInputError
+
+                raise UserInputError(f"problem {chosen.problem!r} has no plan: nothing to perturb",
+                                     chosen.task_path())
+            objects = {o.name: (o.type, make_model(o.type).role) for o in scene.objects}
+            roles = {"grasped": list(labeller.grasped), "needed": list(labeller.needed)}
+            spec = (load_spec(spec_path, objects, family=chosen.name, roles=roles) if spec_path is not None
+                    else chosen.spec(objects, roles))
+            # the labeller's targets are in the robot's base frame; the scene file's poses in the scene frame
+            dx, dy, _ = labeller.sim.robot.scene_offset
+            targets = [(x - dx, y - dy) for x, y, _ in labeller.targets]
+            for k in range(n):
+                objects_k, changes = draw_variant(nominal, spec, seed, k, targets=targets, table=Table().bounds)
+                name = f"{chosen.name}_{seed}_{k:04d}"
+                path = folder / f"{name}.yaml"
+                path.write_text(scene_text(scene, name, objects_k, changes), encoding="utf-8")
+                label = labeller.label(path, VARIANT_NAME, changes)
+                path.write_text(scene_text(scene, name, objects_k, changes, label.expected, label.reason),
+                                encoding="utf-8")
+                entries.append({"name": name, "file": f"variants/{name}.yaml", "expected": label.expected,
+                                "reason": label.reason, "changes": changes})
+                if progress is not None:
+                    progress(k + 1, n)
+            robot_name = labeller.robot.name
+        manifest = new_manifest(chosen, seed, spec, scene, entries, robot=robot_name, robot_file=robot)
+        write_manifest(staging, manifest)
+        if out.exists():
+            if any(out.iterdir()):
+                from bt_meta.campaign.manifest import CampaignDirError
+
+                raise CampaignDirError("is not empty; choose another -o", out)
+            out.rmdir()
+        staging.rename(out)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
     return manifest

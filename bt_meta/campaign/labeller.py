@@ -72,10 +72,14 @@ PROBE_HEIGHT = 0.02
 """Height (m) of the footprint probe above a letter cell, from just above the table: anything resting there."""
 START_SEED = 0
 """The seed of the start noise the labels describe: a campaign episode moves every object by the demo's seeded
-noise before it starts (:func:`bt_meta.demo.runner.jitter`, up to 3 mm and 2 degrees), and the label is for the
+noise before it starts (:func:`bt_meta.judge.noise.jitter`, up to 3 mm and 2 degrees), and the label is for the
 scene the episode runs -- the first (by default the only) seed's. Labelled without it, a green 1x2 was 6.5 mm into a
 cell of H and 5.7 mm in the run, below what the place takes as room (generated letters_H s1 0058). ``None``: the
 scene exactly as written (hand-built cases)."""
+GRASP_TURNS = (0.0, 90.0, -90.0, 45.0, -45.0, 135.0, -135.0, 180.0)
+"""Grasp yaws (degrees about the vertical, from the skills' own) tried before a part counts as out of reach."""
+ARRIVAL_YAWS = tuple(range(0, 360, 30))
+"""Yaws (degrees) about a target feature's normal tried for a part brought onto it as it is held."""
 REORIENT_PREFIX = "Reorient"
 """Tasks so named re-orient a part by a regrasp (the ``reorientation`` repair plugin's convention)."""
 
@@ -87,12 +91,14 @@ class Label:
     evidence: dict[str, Any] = field(default_factory=dict)
 
 
-def letter_cells(plan: Iterable[Any], shapes: dict[str, str]) -> list[tuple[float, float]]:
-    """The unit cells (lb) a letter's plan fills: ``place(b, x, y)`` covers (x, y), or for a 1x2 the two cells
-    half a unit either side along the letter's x."""
+def letter_cells(plan: Iterable[Any], shapes: dict[str, str], actions: Iterable[str]
+                 ) -> list[tuple[float, float]]:
+    """The unit cells (lb) a plan fills through ``actions`` (primitives putting a block at a frame's cell):
+    ``place(b, x, y)`` covers (x, y), or for a 1x2 the two cells half a unit either side along the letter's x."""
     cells: list[tuple[float, float]] = []
+    actions = set(actions)
     for action in plan:
-        if action.name != "place":
+        if action.name not in actions:
             continue
         block, x, y = action.args[0], float(action.args[1]), float(action.args[2])
         cells += [(x + dx, y) for dx in _cell_offsets(shapes.get(block))]
@@ -129,16 +135,19 @@ def letters_feasible(units: int, pairs: int, n1: int, n2: int) -> bool:
 class Labeller:
     """Labels the variants of one family; owns one headless simulator reused for every variant."""
 
-    def __init__(self, family: Any, scene: Any, start_seed: int | None = START_SEED) -> None:
-        from bt_meta.campaign.families import needed_objects
+    def __init__(self, family: Any, scene: Any, start_seed: int | None = START_SEED, robot: Any = None) -> None:
+        from bt_meta.campaign.families import derived_fixtures, derived_grasped, needed_objects
         from bt_meta.htn import load_task_file
         from bt_meta.htn.planner import plan
+        from bt_meta.world.robot.description import RobotDescription, load_robot
         from bt_meta.world.simulation.sim import Simulation
         from bt_meta.world.simulation.sim_world import load_grounding, quiet_stdout
 
         self.family = family
         self.scene = scene
         self.start_seed = start_seed
+        self._grasp_turn: dict[str, float] = {}
+        """Object -> the grasp yaw (radians, from the skills' own) found reachable in the variant labelled now."""
         task_path = family.task_path()
         self.task_file = load_task_file(task_path)
         self.problem = self.task_file.problem(family.problem)
@@ -150,12 +159,25 @@ class Labeller:
         self.colour_symbols = {str(f[1]) for f in facts if len(f) == 3 and f[0] == "colour"}
         result = plan(self.task_file.domain, self.problem)
         self.plan = list(result.plan) if result.ok else []
+        # primitives that put a part at a cell of a frame (the grounding gives their skill a `frame`)
+        self.cell_actions = {name for name, spec in self.grounding.skills.items() if spec.get("frame")}
+        chosen = robot if robot is not None else self.grounding.robot or "baxter"
+        self.robot = chosen if isinstance(chosen, RobotDescription) else load_robot(chosen)
         with quiet_stdout():
             import pybullet  # noqa: F401  (prints its build time on import)
 
-            self.sim = Simulation(seed=0, visuals="light")
+            self.sim = Simulation(seed=0, visuals="light", robot=self.robot)
         world = self._world(scene.path, None)
         try:
+            present = list(world.sim.object_names())
+            self.target_features: list[tuple[str, str | None]] = []
+            """(object, feature) of each of :attr:`targets` a part is put onto (none for a frame's cells)."""
+            self.grasped: tuple[str, ...] = (family.grasped if family.grasped is not None
+                                             else derived_grasped(self.plan, self.grounding, present))
+            positions = {name: world.sim.object_transform(name)[:2, 3] for name in present}
+            self.absolute_fixtures: tuple[str, ...] = (
+                family.absolute_fixtures if family.absolute_fixtures is not None
+                else derived_fixtures(self.plan, self.grounding, positions, world.sim.robot.scene_offset))
             self.targets = self._targets(world)
             self.nominal_up = {name: _up(world.sim.object_transform(name)) for name in world.sim.object_names()}
             self.nominal_xy = {name: world.sim.object_transform(name)[:2, 3].copy()
@@ -164,25 +186,28 @@ class Labeller:
             self.nominal_held = self._held_as_demonstrated(world)
         finally:
             world.close()
-        self.cells = letter_cells(self.plan, self.shapes) if family.truth == "letters" else []
+        self.cells = letter_cells(self.plan, self.shapes, self.cell_actions)
+        self.on_cells = bool(self.cells)
+        """The task puts blocks on a frame's cells: the inventory rule decides what can be drawn."""
         self.reorientable = any(str(task).startswith(REORIENT_PREFIX) for task in self.task_file.domain.tasks)
 
     def _held_as_demonstrated(self, world: Any) -> dict[str, np.ndarray]:
         """Object type -> the part in the gripper's frame as the nominal scene's top-down grasp holds it."""
         out: dict[str, np.ndarray] = {}
-        for name in self.family.grasped or ():
+        for name in self.grasped:
             if name in world.sim.object_names():
                 out.setdefault(world.sim.object_model(name).type,
                                np.linalg.inv(self._over(world, name, GRASP_HEIGHT)) @ world.sim.object_transform(name))
         return out
 
-    @staticmethod
-    def _over(world: Any, name: str, height: float) -> np.ndarray:
-        """The top-down gripper pose ``height`` over ``name``'s top, at the yaw the skills pick it at."""
+    def _over(self, world: Any, name: str, height: float) -> np.ndarray:
+        """The top-down gripper pose ``height`` over ``name``'s top, at the yaw the skills pick it at turned by the
+        grasp yaw :meth:`_graspable` found reachable (none found yet: the skills' own)."""
         from bt_meta.world.skills.place import GRIPPER_YAW, nearest_yaw, object_yaw, symmetry, top_down
 
         transform = world.sim.object_transform(name)
         yaw = nearest_yaw(object_yaw(transform), symmetry(world.sim.object_model(name)), GRIPPER_YAW)
+        yaw += self._grasp_turn.get(name, 0.0)
         return top_down(transform[0, 3], transform[1, 3], world.stack_top(name) + height, yaw)
 
     def __enter__(self) -> Labeller:
@@ -204,9 +229,10 @@ class Labeller:
         grounding = dataclasses.replace(self.grounding, problems={**self.grounding.problems,
                                                                   self.problem.name: setup})
         with quiet_stdout():
-            world = SimWorld(self.task_file.domain, self.problem, grounding, variant=variant, seed=0, sim=self.sim)
+            world = SimWorld(self.task_file.domain, self.problem, grounding, variant=variant, seed=0, sim=self.sim,
+                             robot=self.robot)
         if self.start_seed is not None:
-            from bt_meta.demo.runner import jitter
+            from bt_meta.judge.noise import jitter
 
             try:
                 jitter(world, self.start_seed)
@@ -220,7 +246,7 @@ class Labeller:
         out: list[tuple[float, float, float]] = []
         frame = next((spec.get("frame") for spec in self.grounding.skills.values() if spec.get("frame")), None)
         for action in self.plan:
-            if action.name == "place" and frame is not None:
+            if action.name in self.cell_actions and frame is not None:
                 shape = self.shapes.get(action.args[0])
                 x, y = float(action.args[1]), float(action.args[2])
                 for dx in _cell_offsets(shape):
@@ -228,15 +254,17 @@ class Labeller:
                     out.append((gx, gy, world.sim.table.top_z))
         if out:
             return out
-        grasped = set(self.family.grasped or ())
+        grasped = set(self.grasped)
         for name in self.needed:
-            if name in grasped or name not in world.sim.object_names():
+            # a part the robot only carries is no target; one the plan's absolute poses were taught over is, even
+            # when the plan picks it up afterwards (the tutorial's base, lifted to show the joint)
+            if (name in grasped and name not in self.absolute_fixtures) or name not in world.sim.object_names():
                 continue
-            point, _ = world.sim.feature(name, None)
             feature_names = [s.get("feature") for s in self.grounding.features.values() if s.get("object") == name]
-            if feature_names and feature_names[0]:
-                point, _ = world.sim.feature(name, feature_names[0])
+            feature = feature_names[0] if feature_names and feature_names[0] else None
+            point, _ = world.sim.feature(name, feature)
             out.append((float(point[0]), float(point[1]), float(point[2])))
+            self.target_features.append((name, feature))
         return out
 
     def _occupied_cell(self, world: Any, names: Sequence[str]) -> Label | None:
@@ -253,7 +281,7 @@ class Labeller:
         sim = world.sim
         overlap = place_overlap()
         for step, action in enumerate(self.plan):
-            if action.name != "place":
+            if action.name not in self.cell_actions:
                 continue
             shape = self.shapes.get(action.args[0])
             x, y = float(action.args[1]), float(action.args[2])
@@ -279,17 +307,19 @@ class Labeller:
         frame = next((spec.get("frame") for spec in self.grounding.skills.values() if spec.get("frame")), None)
         out: list[tuple[str | None, tuple[float, float, float]]] = []
         for action in self.plan:
-            if action.name == "place" and frame is not None:
+            if action.name in self.cell_actions and frame is not None:
                 gx, gy, _ = world.ground_cell(str(frame), str(action.args[1]), str(action.args[2]))
                 out.append((str(action.args[0]), (gx, gy, world.sim.table.top_z)))
         if out:
             return out
-        return [(name, target) for name in (self.family.grasped or ()) for target in self.targets]
+        return [(name, target) for name in self.grasped
+                for target, (owner, _) in zip(self.targets, self.target_features, strict=True) if owner != name]
 
     # -- the label ------------------------------------------------------------------------------------------
 
     def label(self, scene_path: str | Path, variant: str | None, changes: Sequence[dict[str, Any]] = ()) -> Label:
         world = self._world(scene_path, variant)
+        self._grasp_turn = {}
         try:
             return self._label(world)
         finally:
@@ -313,7 +343,7 @@ class Labeller:
         limit = self._fill(roles, feasible, present)
         if limit is not None:
             limits.append(limit)
-        fixtures = {n for n in self.needed if self.family.grasped is not None and n not in self.family.grasped}
+        fixtures = {n for n in self.needed if not self.on_cells and n not in self.grasped}
         # only what the task does not name blocks a place: an object the plan uses is picked up by the plan, and
         # so is one it takes for a missing block
         named = set(self.needed) | self._stand_ins(world, present)
@@ -358,10 +388,15 @@ class Labeller:
             if name in self.nominal_up:
                 angle = _angle(_up(sim.object_transform(name)), self.nominal_up[name])
                 if angle > UP_TOLERANCE:
-                    return Label("repairable", f"{name} is turned {math.degrees(angle):.0f} deg off its nominal "
-                                 "up axis (re-orientation or pose repair)", {"object": name,
-                                                                             "degrees": math.degrees(angle)})
-            if name in self.family.absolute_fixtures and name in self.nominal_xy:
+                    turned = f"{name} is turned {math.degrees(angle):.0f} deg off its nominal up axis"
+                    way = self._turned_way(world, name, feasible)
+                    if way is None:
+                        return Label("limit:reachability", f"{turned}; the domain offers no re-orientation and no "
+                                     "grasp as the parts lie brings one onto the other within reach",
+                                     {"object": name, "degrees": math.degrees(angle), "step": self._step_of(name)})
+                    return Label("repairable", f"{turned} ({way})", {"object": name,
+                                                                      "degrees": math.degrees(angle)})
+            if name in self.absolute_fixtures and name in self.nominal_xy:
                 moved = float(np.linalg.norm(sim.object_transform(name)[:2, 3] - self.nominal_xy[name]))
                 if moved > FIXTURE_TOLERANCE:
                     return Label("repairable", f"{name} moved {moved * 100:.1f} cm; the nominal plan's poses "
@@ -371,8 +406,8 @@ class Labeller:
     def _roles(self, present: dict[str, Any]) -> dict[str, list[str]] | Label:
         """Role -> candidate objects (the needed object first, then stand-ins); ``unrepairable`` when the table
         cannot make the goal."""
-        grasped = self.family.grasped
-        if self.family.truth == "letters":
+        grasped = None if self.on_cells else self.grasped
+        if self.on_cells:
             blocks = {n: m for n, m in present.items() if m.shape in ("1x1", "1x2")}
             n1 = sum(m.shape == "1x1" for m in blocks.values())
             n2 = sum(m.shape == "1x2" for m in blocks.values())
@@ -394,6 +429,66 @@ class Labeller:
                 roles[name] = candidates
         return roles
 
+    def _turned_way(self, world: Any, name: str, feasible: dict[str, tuple[bool, str | None, str]]) -> str | None:
+        """How a correct system gets the goal with ``name`` turned off its nominal up axis -- by the domain's own
+        means, on the true scene -- or None when nothing does. A block on a frame's cell is turned where it lies
+        (checked with its grasp). A part the robot carries is re-oriented by a ``Reorient...`` task the domain
+        offers, or held as it lies (a top-down grasp) and turned in the hand so its primary feature meets its
+        target's (:meth:`_feature_arrival`). A target turned (a fixture) keeps its feature where it now faces: every
+        part carried onto it must meet it so. An object that is neither is followed by poses relative to it."""
+        if self.on_cells:
+            return "re-orientation or pose repair"
+        if self.reorientable and name in self.grasped and feasible.get(name, (True, None, ""))[0]:
+            return "the domain's re-orientation"
+        owned = [feature for owner, feature in self.target_features if owner == name]
+        if owned:
+            carried = [p for p in self.grasped if p != name and p in world.sim.object_names()]
+            if all(any(self._feature_arrival(world, p, name, f) for f in owned) for p in carried):
+                return "what goes onto it is brought onto its feature as it lies"
+            return None
+        if name not in self.grasped:
+            return "followed by poses relative to it"
+        for owner, feature in self.target_features:
+            if owner != name and self._feature_arrival(world, name, owner, feature):
+                return f"held as it lies, its feature brought onto {owner}'s"
+        return None
+
+    def _feature_arrival(self, world: Any, name: str, owner: str, feature: str | None) -> bool:
+        """Whether ``name``, grasped top-down as it lies (at one of :data:`GRASP_TURNS`), can be held with its
+        primary feature on ``owner``'s ``feature`` (normals opposed, 2 mm apart) at one of :data:`ARRIVAL_YAWS`
+        about the feature's normal: an IK solution clear of the scene for the gripper there (the part itself not
+        carried in the check)."""
+        import pinocchio as pin
+
+        sim = world.sim
+        part = sim.object_transform(name)
+        primary = sim.object_model(name).feature(None)
+        point_f, normal_f = np.asarray(primary.point, dtype=float), np.asarray(primary.normal, dtype=float)
+        target, target_normal = (np.asarray(v, dtype=float) for v in sim.feature(owner, feature))
+        align = _rotation_onto(normal_f, -target_normal)
+        q0 = world.current_q()
+        kept = self._grasp_turn.get(name)
+        world.allow_hand(name, world.default_arm, True)
+        try:
+            for turn in GRASP_TURNS:
+                self._grasp_turn[name] = math.radians(turn)
+                in_gripper = np.linalg.inv(self._over(world, name, GRASP_HEIGHT)) @ part  # the part in the hand
+                for yaw in ARRIVAL_YAWS:
+                    goal = np.eye(4)
+                    goal[:3, :3] = _axis_rotation(target_normal, math.radians(yaw)) @ align
+                    goal[:3, 3] = target + 0.002 * target_normal - goal[:3, :3] @ point_f
+                    gripper = goal @ np.linalg.inv(in_gripper)
+                    target_se3 = pin.SE3(gripper[:3, :3], gripper[:3, 3])
+                    if world.ik.solve(world.default_arm, target_se3, q0, seed=0).success:
+                        return True
+        finally:
+            world.allow_hand(name, world.default_arm, False)
+            if kept is None:
+                self._grasp_turn.pop(name, None)
+            else:
+                self._grasp_turn[name] = kept
+        return False
+
     def _stand_ins(self, world: Any, present: dict[str, Any]) -> set[str]:
         """Letters: the blocks the task does not name that the run takes for its missing ones, as the substitution
         chooses. Only when the blocks the task names cannot draw the letter (a 1x2 standing in for two 1x1 needs no
@@ -401,7 +496,7 @@ class Labeller:
         the task's symbols name colours, then one lying on a letter cell, then by name. The plan picks them up, so
         a cell one lies on is not occupied -- when that cell is filled after the missing block's step, which is
         where the stand-in is taken (letters_A s0 0101: a green 1x1 on b3's cell stands in for the missing b0)."""
-        if self.family.truth != "letters":
+        if not self.on_cells:
             return set()
         named = [m.shape for n, m in present.items() if n in self.needed]
         if letters_feasible(len(self.cells), max_pairs(self.cells), named.count("1x1"), named.count("1x2")):
@@ -430,32 +525,49 @@ class Labeller:
         """Index in :attr:`targets` -> the plan step that puts something there (letters: a place per cell)."""
         out: dict[int, int] = {}
         for step, action in enumerate(self.plan):
-            if action.name == "place":
+            if action.name in self.cell_actions:
                 for _ in _cell_offsets(self.shapes.get(action.args[0])):
                     out[len(out)] = step
         return out if len(out) == len(self.targets) else {}
 
-    def _graspable(self, world: Any, name: str) -> tuple[bool, str | None, str]:
-        """(ok, failure kind, message) of the top-down grasp and its approach above ``name``."""
+    def _grasp_at(self, world: Any, name: str) -> tuple[bool, str | None, str]:
+        """(ok, failure kind, message) of the approach and the top-down grasp of ``name`` at its current grasp yaw."""
         import pinocchio as pin
 
-        transform = world.sim.object_transform(name)
         q = world.current_q()
         for height, allowed in ((APPROACH_HEIGHT, False), (GRASP_HEIGHT, True)):
             target = self._over(world, name, height)
-            world.allow_hand(name, "right", allowed)
+            world.allow_hand(name, world.default_arm, allowed)
             try:
-                result = world.ik.solve("right", pin.SE3(target[:3, :3], target[:3, 3]), q, seed=0)
+                result = world.ik.solve(world.default_arm, pin.SE3(target[:3, :3], target[:3, 3]), q, seed=0)
                 if result.success and allowed and world.sim.obstacles():  # the descent, against obstacles
                     hit = self._move_hit(world, q, result.q, target)
                     if hit is not None:
                         return False, "collision", f"{name}: the descent to the grasp runs into {hit}"
             finally:
-                world.allow_hand(name, "right", False)
+                world.allow_hand(name, world.default_arm, False)
             if not result.success:
                 return False, result.kind, f"{name}: {result.message}"
             q = result.q
-        if self.family.truth == "letters" and _angle(_up(transform), np.array([0.0, 0.0, 1.0])) > UP_TOLERANCE:
+        return True, None, ""
+
+    def _graspable(self, world: Any, name: str) -> tuple[bool, str | None, str]:
+        """(ok, failure kind, message) of a top-down grasp and its approach above ``name``: the robot reaches the
+        part when some grasp yaw about the vertical (the skills' own first, then :data:`GRASP_TURNS` from it) has an
+        IK solution clear of the scene -- a pose the domain's move primitive can be given, whichever yaw today's
+        skills would pick. The failure reported is the skills' own yaw's."""
+        transform = world.sim.object_transform(name)
+        first: tuple[bool, str | None, str] | None = None
+        for turn in GRASP_TURNS:
+            self._grasp_turn[name] = math.radians(turn)
+            outcome = self._grasp_at(world, name)
+            if outcome[0]:
+                break
+            first = first or outcome
+        else:
+            self._grasp_turn.pop(name, None)
+            return first  # type: ignore[return-value]
+        if self.on_cells and _angle(_up(transform), np.array([0.0, 0.0, 1.0])) > UP_TOLERANCE:
             # A block on another face is turned where it lies before it is placed (the place skill keeps the
             # tilt in the gripper): the turn the skill would make from that grasp, lifted, must be reachable.
             from bt_meta.world.skills.place import turned_pose
@@ -463,7 +575,7 @@ class Labeller:
             grasp = self._over(world, name, GRASP_HEIGHT)
             lifted = grasp.copy()
             lifted[2, 3] += APPROACH_HEIGHT
-            if not turned_pose(world, name, "right", lifted, np.linalg.inv(grasp) @ transform)[1]:
+            if not turned_pose(world, name, world.default_arm, lifted, np.linalg.inv(grasp) @ transform)[1]:
                 return False, "reachability", f"{name}: the turn that stands it on its base is out of reach"
         return True, None, ""
 
@@ -478,10 +590,10 @@ class Labeller:
             return Label("limit:collision", f"the robot's start configuration runs into {hit}",
                          {"contact": hit, "step": -1})
         stand_in = None
-        place_steps = [i for i, action in enumerate(self.plan) if action.name == "place"]
-        letters = self.family.truth == "letters" and len(place_steps) == len(self.jobs)
+        place_steps = [i for i, action in enumerate(self.plan) if action.name in self.cell_actions]
+        letters = self.on_cells and len(place_steps) == len(self.jobs)
         for index, (nominal, target) in enumerate(self.jobs):
-            if self.family.truth == "letters":
+            if self.on_cells:
                 shape = present[nominal].shape if nominal in present else self.shapes.get(str(nominal))
                 pool = [n for n in roles["blocks"] if present[n].shape == shape] or list(roles["blocks"])
             else:
@@ -532,7 +644,7 @@ class Labeller:
         for k in range(1, steps + 1):
             f = k / steps
             pose = pin.SE3(start[:3, :3] @ pin.exp3(rotation * f), start[:3, 3] + (goal[:3, 3] - start[:3, 3]) * f)
-            result = world.ik.solve("right", pose, q, seed=0, check_collisions=False)
+            result = world.ik.solve(world.default_arm, pose, q, seed=0, check_collisions=False)
             if not result.success:
                 return f"no solution on the straight line ({result.message})"
             q = result.q
@@ -566,12 +678,12 @@ class Labeller:
         hit = self._path_hit(world, q_from, q_to)
         if hit is None:
             return None
-        start = pose_matrix(world.kin.end_effector_pose(q_from, "right"))
+        start = pose_matrix(world.kin.end_effector_pose(q_from, world.default_arm))
         if self._line_hit(world, q_from, start, goal) is None:
             return None
         if self._lift_first_hit(world, q_from, start, goal, q_to) is None:
             return None
-        indices = world.kin.arm_indices("right")
+        indices = world.kin.arm_indices(world.default_arm)
 
         def free(arm_q: np.ndarray) -> bool:
             q = q_from.copy()
@@ -588,10 +700,10 @@ class Labeller:
         import pinocchio as pin
 
         target = pin.SE3(pose[:3, :3], pose[:3, 3])
-        result = world.ik.solve("right", target, q, seed=0)
+        result = world.ik.solve(world.default_arm, target, q, seed=0)
         if result.success:
             return result.q, None
-        free = world.ik.solve("right", target, q, seed=0, check_collisions=False)
+        free = world.ik.solve(world.default_arm, target, q, seed=0, check_collisions=False)
         if not free.success:
             return None, f"no IK solution ({free.message})"
         hit = self._hit(world, free.q)
@@ -603,7 +715,7 @@ class Labeller:
 
         transform = world.sim.object_transform(name)
         above, grasp = self._over(world, name, APPROACH_HEIGHT), self._over(world, name, GRASP_HEIGHT)
-        world.allow_hand(name, "right", True)
+        world.allow_hand(name, world.default_arm, True)
         try:
             q1, why = self._motion(world, q0, above, f"reaching above {name}", f"reaching for {name}")
             if q1 is None:
@@ -613,9 +725,9 @@ class Labeller:
                 return f"grasping {name}: {why}"
             parts = [p for p in world.collision.objects if world.contact_object(p) == name]
             saved = {p: world.collision.pose(p) for p in parts}
-            hand = world.hand_links("right")
+            hand = world.hand_links(world.default_arm)
             for part in parts:
-                world.collision.attach(part, world.end_effector("right"), q2, allow=hand)
+                world.collision.attach(part, world.end_effector(world.default_arm), q2, allow=hand)
             try:
                 lifted = grasp.copy()
                 lifted[2, 3] += APPROACH_HEIGHT
@@ -624,14 +736,14 @@ class Labeller:
                     return why
                 first = None
                 attached = np.linalg.inv(grasp) @ transform
-                gripper = pose_matrix(world.kin.end_effector_pose(q2, "right"))
+                gripper = pose_matrix(world.kin.end_effector_pose(q2, world.default_arm))
                 for held, block in self._arrivals(world, name, attached, target):
                     if held is not attached:  # carried as another grasp holds it: move the parts to match
                         moved = gripper @ held @ np.linalg.inv(attached) @ np.linalg.inv(gripper)
                         for part in parts:
                             now = world.collision.pose(part, q2).homogeneous
                             world.collision.detach(part, pose=moved @ now)
-                            world.collision.attach(part, world.end_effector("right"), q2, allow=hand)
+                            world.collision.attach(part, world.end_effector(world.default_arm), q2, allow=hand)
                         attached = held
                     why = self._put_down_hit(world, name, target, q3, block @ np.linalg.inv(held))
                     if why is None:
@@ -642,7 +754,7 @@ class Labeller:
                 for part in parts:
                     world.collision.detach(part, pose=saved[part])
         finally:
-            world.allow_hand(name, "right", False)
+            world.allow_hand(name, world.default_arm, False)
 
     def _arrivals(self, world: Any, name: str, as_grasped: np.ndarray, target: tuple[float, float, float]
                   ) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -663,7 +775,7 @@ class Labeller:
                                   0.0, 0.0, goal_yaw))
         out = [(as_grasped, upright)]
         nominal_up = self.nominal_up.get(name, np.array([0.0, 0.0, 1.0]))
-        if self.family.truth == "letters" or _angle(_up(transform), nominal_up) <= UP_TOLERANCE:
+        if self.on_cells or _angle(_up(transform), nominal_up) <= UP_TOLERANCE:
             return out
         demonstrated = self.nominal_held.get(model.type)
         if demonstrated is not None and self.reorientable:
@@ -708,7 +820,7 @@ class Labeller:
             return Label(f"limit:{kind}", f"no graspable object: {message}",
                          {"kind": kind, "step": min(first) if first else None})
 
-        if self.family.truth == "letters":
+        if self.on_cells:
             ok = [n for n in roles["blocks"] if feasible[n][0]]
             n1 = sum(present[n].shape == "1x1" for n in ok)
             n2 = sum(present[n].shape == "1x2" for n in ok)
@@ -725,6 +837,25 @@ class Labeller:
             if not any(feasible[n][0] for n in candidates):
                 return limit(candidates)
         return None
+
+
+def _rotation_onto(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotation taking unit vector ``a`` onto ``b``."""
+    a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
+    axis, cos = np.cross(a, b), float(np.dot(a, b))
+    if np.linalg.norm(axis) < 1e-9:
+        if cos > 0:
+            return np.eye(3)
+        other = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        return _axis_rotation(np.cross(a, other), math.pi)
+    return _axis_rotation(axis, math.atan2(float(np.linalg.norm(axis)), cos))
+
+
+def _axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rodrigues: the rotation by ``angle`` about ``axis``."""
+    k = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    cross = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * cross + (1.0 - math.cos(angle)) * cross @ cross
 
 
 def _up(transform: np.ndarray) -> np.ndarray:

@@ -7,6 +7,7 @@ so a directory with a manifest is complete; one without it is half-written and r
 Offers:
 
 * :func:`new_manifest` / :func:`write_manifest` / :func:`read_manifest`
+* :func:`manifest_robot` / :func:`check_robot` -- the robot a campaign is for; another one is refused
 * :func:`manifest_digest` -- the SHA-256 of the manifest file (the database remembers which manifest it ran)
 * :class:`CampaignDirError` -- a campaign directory that cannot be used, and why
 """
@@ -22,7 +23,8 @@ from typing import Any
 from bt_meta.campaign import CAMPAIGN_VERSION
 from bt_meta.errors import UserInputError
 
-__all__ = ["MANIFEST", "CampaignDirError", "manifest_digest", "new_manifest", "read_manifest", "write_manifest"]
+__all__ = ["MANIFEST", "CampaignDirError", "check_robot", "manifest_digest", "manifest_robot", "new_manifest",
+           "read_manifest", "write_manifest"]
 
 MANIFEST = "campaign.json"
 
@@ -31,12 +33,39 @@ class CampaignDirError(UserInputError):
     """A campaign directory that is missing, half-written or of another version."""
 
 
-def new_manifest(family: Any, seed: int, spec: Any, scene: Any, variants: list[dict[str, Any]]) -> dict[str, Any]:
+def new_manifest(family: Any, seed: int, spec: Any, scene: Any, variants: list[dict[str, Any]], *,
+                 robot: str = "baxter", robot_file: str | None = None) -> dict[str, Any]:
+    """The manifest of a generated campaign. ``robot``: the robot's name its labels are for (``robot_file``: the
+    robot YAML as given, when not a shipped name); ``shipped``: a shipped family, found by name again."""
     from bt_meta import __version__
 
+    given = robot_file if robot_file is not None and Path(robot_file).suffix else None
     return {"campaign_version": CAMPAIGN_VERSION, "bt_meta_version": __version__, "family": family.name,
+            "shipped": bool(getattr(family, "shipped", False)),
+            "family_file": None if family.file is None else str(family.file), "family_scene": family.scene,
             "task_file": family.task_file, "problem": family.problem, "scene": str(scene.path), "seed": seed,
+            "robot": robot, "robot_file": None if given is None else str(Path(given).resolve()),
             "spec_file": spec.path, "spec": spec.to_dict(), "variants": variants}
+
+
+def manifest_robot(manifest: dict[str, Any]) -> str:
+    """The robot a campaign's labels are for: its YAML file when one was given, else its shipped name."""
+    return str(manifest.get("robot_file") or manifest.get("robot") or "baxter")
+
+
+def check_robot(manifest: dict[str, Any], robot: str | None, folder: str | Path) -> str:
+    """The campaign's robot; ``robot`` (a name or YAML path asked for on the command line) must be it: a campaign
+    is labelled for one robot, and its episodes on another would be judged against the wrong labels."""
+    recorded = manifest_robot(manifest)
+    if robot is None:
+        return recorded
+    from bt_meta.world.robot.description import load_robot
+
+    if load_robot(robot).name != str(manifest.get("robot") or "baxter"):
+        raise CampaignDirError(f"was generated for the robot {manifest.get('robot')!r}, not {robot!r}: its labels "
+                               "are for that robot; generate a campaign for this one with `campaign generate ... "
+                               f"--robot {robot}`", Path(folder) / MANIFEST)
+    return recorded
 
 
 def write_manifest(folder: Path, manifest: dict[str, Any]) -> None:

@@ -34,8 +34,8 @@ from typing import Any
 
 from bt_meta.errors import BtMetaError, UserInputError
 
-__all__ = ["CampaignIncomplete", "RayAddressError", "check_ray_address", "ensure_memory", "episode_key", "report_path",
-           "run_campaign"]
+__all__ = ["CampaignIncomplete", "DemonstrationError", "RayAddressError", "check_ray_address", "ensure_memory",
+           "episode_key", "report_path", "run_campaign"]
 
 MEMORY = "memory.sqlite"
 EPISODES = "episodes"
@@ -53,9 +53,15 @@ def report_path(folder: str | Path, row: dict[str, Any]) -> Path:
     return Path(folder) / EPISODES / f"{episode_key(row)}.json"
 
 
+class DemonstrationError(UserInputError):
+    """A demonstration of the campaign's task that does not succeed: the task as written fails, no episode runs."""
+
+
 def ensure_memory(folder: Path, manifest: dict[str, Any], *, echo: Callable[[str], None] = print) -> Path:
-    """``DIR/memory.sqlite``, recording the family's demonstrations first when it is not there."""
-    from bt_meta.campaign.families import family
+    """``DIR/memory.sqlite``, recording the family's demonstrations first (on the campaign's robot) when it is not
+    there; a demonstration that fails stops everything, naming it (:class:`DemonstrationError`)."""
+    from bt_meta.campaign.families import family_of_manifest
+    from bt_meta.campaign.manifest import manifest_robot
     from bt_meta.demo.capture import Progress
     from bt_meta.demo.runner import memory_environment, record_demonstration
     from bt_meta.demo.scenario import Demonstration
@@ -67,17 +73,22 @@ def ensure_memory(folder: Path, manifest: dict[str, Any], *, echo: Callable[[str
     partial = folder / f".{MEMORY}.partial"
     for leftover in folder.glob(f".{MEMORY}.partial*"):
         leftover.unlink()
-    chosen = family(manifest["family"])
+    chosen = family_of_manifest(manifest)
+    robot = manifest_robot(manifest) if manifest.get("robot") else None
     started = time.perf_counter()
-    demos = [Demonstration(chosen.truth, chosen.task_file, problem, int(manifest["seed"]) + k)
-             for problem, repeats in chosen.demonstrations for k in range(repeats)]
-    with memory_environment(partial), EpisodicMemory.open(partial) as memory:
-        for demo in demos:
-            outcome = record_demonstration(demo, memory, Progress(quiet=True))
-            if outcome.status == "failed":
-                from bt_meta.errors import BtMetaError
-
-                raise BtMetaError(f"recording the demonstration {demo.label} failed: {outcome.message}")
+    demos = [Demonstration(chosen.name, chosen.task_file, problem, int(manifest["seed"]) + k)
+             for problem, repeats in chosen.demonstration_list() for k in range(repeats)]
+    try:
+        with memory_environment(partial), EpisodicMemory.open(partial) as memory:
+            for demo in demos:
+                outcome = record_demonstration(demo, memory, Progress(quiet=True), robot=robot)
+                if outcome.status == "failed":
+                    raise DemonstrationError(f"the demonstration {demo.label} failed, so no episode runs: "
+                                             f"{outcome.message}", chosen.task_file)
+    except BaseException:
+        for leftover in folder.glob(f".{MEMORY}.partial*"):
+            leftover.unlink()
+        raise
     os.replace(partial, path)
     for leftover in folder.glob(f".{MEMORY}.partial*"):  # SQLite's -wal / -shm companions
         leftover.unlink()
@@ -249,13 +260,14 @@ def _terminate_as_interrupt() -> None:
 def run_campaign(folder: str | Path, *, configurations: Sequence[str] = ("dual", "symbolic", "low_level", "retry"),
                  seeds: int = 1, workers: int | None = None, ray_address: str | None = None,
                  perfect_sensing: bool = False, progress: bool = True, echo: Callable[[str], None] | None = None,
-                 limit: int | None = None) -> dict[str, Any]:
-    """Run (or resume) the campaign in ``folder``; ``limit`` stops after that many new episodes (tests)."""
+                 limit: int | None = None, robot: str | None = None) -> dict[str, Any]:
+    """Run (or resume) the campaign in ``folder`` on its robot (``robot``, if given, must be it: another is refused
+    before anything runs); ``limit`` stops after that many new episodes (tests)."""
     import json
 
     from bt_meta.campaign.database import CampaignDatabase
     from bt_meta.campaign.episode import episode_task
-    from bt_meta.campaign.manifest import manifest_digest, read_manifest
+    from bt_meta.campaign.manifest import check_robot, manifest_digest, read_manifest
     from bt_meta.campaign.stats import summarise
     from bt_meta.world.simulation.sim_world import quiet_stdout
 
@@ -264,6 +276,7 @@ def run_campaign(folder: str | Path, *, configurations: Sequence[str] = ("dual",
     say = echo or (lambda text: print(text, file=sys.stderr, flush=True))
     folder = Path(folder)
     manifest = read_manifest(folder)
+    check_robot(manifest, robot, folder)
     if ray_address is not None:
         check_ray_address(ray_address)
     workers = workers or os.cpu_count() or 1

@@ -2,7 +2,9 @@
 
 A spec is a mapping with an optional ``family`` (checked against the family generated) and a list
 ``perturbations``; each item is a one-key mapping ``KIND: {parameters}``. Every perturbation applies to a variant
-with its ``probability``, to one object drawn from ``objects`` (``all``, or a list of the scene's object names).
+with its ``probability``, to one object drawn from ``objects``: ``all``, or a list whose items select by name
+(``b0``), by type (``{type: megablok_1x1}``) or by role (``{role: grasped}``: the objects the task picks up;
+``needed``: every object the problem names; ``active`` / ``reference``: the catalogue's magnet roles).
 Kinds and their parameters (lengths in metres, angles in degrees; see docs/campaigns.md):
 
 * ``shift`` -- ``distance: [lo, hi]``: move the object that far in a random direction on the table
@@ -25,14 +27,15 @@ Every mistake -- an unknown kind, parameter, object, colour or type -- is a :cla
 
 Offers:
 
-* :func:`load_spec` -- a :class:`Spec` from a file, checked against a scene's object names
+* :func:`load_spec` -- a :class:`Spec` from a file, checked against a scene's objects
+* :func:`read_perturbations` -- the ``perturbations:`` list of another file (a campaign family file)
 * :class:`Spec`, :class:`Perturbation`, :class:`SpecError`, :data:`KINDS`
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -41,7 +44,7 @@ import yaml
 
 from bt_meta.errors import ConfigError
 
-__all__ = ["KINDS", "Perturbation", "Spec", "SpecError", "load_spec"]
+__all__ = ["KINDS", "Perturbation", "Spec", "SpecError", "load_spec", "read_perturbations"]
 
 
 class SpecError(ConfigError):
@@ -96,19 +99,35 @@ class Spec:
         return {"family": self.family, "perturbations": [p.to_dict() for p in self.perturbations]}
 
 
-def load_spec(path: str | Path, object_names: Sequence[str], *, family: str | None = None) -> Spec:
-    """Read a spec; its objects must be among ``object_names`` and its ``family`` (if given) be ``family``."""
+def load_spec(path: str | Path, objects: Sequence[str] | Mapping[str, tuple[str, str | None]], *,
+              family: str | None = None, roles: Mapping[str, Sequence[str]] | None = None) -> Spec:
+    """Read a spec; its objects must be among ``objects`` (names, or name -> (type, catalogue role)), its roles
+    among ``roles`` (role -> object names) and its ``family`` (if given) be ``family``."""
     path = Path(path)
     if not path.is_file():
         raise SpecError("spec file not found", path)
-    return _SpecReader(path, tuple(object_names), family).read()
+    return _SpecReader(path, objects, family, roles).read()
+
+
+def read_perturbations(path: str | Path, node: yaml.Node, objects: Sequence[str] | Mapping[str, tuple[str, str | None]],
+                       *, family: str | None = None, roles: Mapping[str, Sequence[str]] | None = None) -> Spec:
+    """The ``perturbations:`` list ``node`` of the file ``path`` (a campaign family file) as a :class:`Spec`."""
+    reader = _SpecReader(Path(path), objects, family, roles)
+    return Spec(str(path), family, reader.perturbations(node))
 
 
 class _SpecReader:
-    def __init__(self, path: Path, object_names: tuple[str, ...], family: str | None) -> None:
+    def __init__(self, path: Path, objects: Sequence[str] | Mapping[str, tuple[str, str | None]],
+                 family: str | None, roles: Mapping[str, Sequence[str]] | None = None) -> None:
         self.path = path
-        self.object_names = object_names
+        self.objects_info = dict(objects) if isinstance(objects, Mapping) else {n: ("", None) for n in objects}
+        self.object_names = tuple(self.objects_info)
         self.family = family
+        self.roles = {role: tuple(names) for role, names in (roles or {}).items()}
+        for name, (_, role) in self.objects_info.items():
+            if role:
+                self.roles.setdefault(role, ())
+                self.roles[role] = (*self.roles[role], name)
 
     def error(self, message: str, node: yaml.Node | None) -> SpecError:
         if node is None:
@@ -133,10 +152,12 @@ class _SpecReader:
                 raise self.error(f"this spec is for family {family!r}, not {self.family!r}", node)
         if "perturbations" not in top:
             raise self.error("a spec needs `perturbations:` (a list)", root)
-        items = top["perturbations"][1]
+        return Spec(str(self.path), family, self.perturbations(top["perturbations"][1]))
+
+    def perturbations(self, items: yaml.Node) -> tuple[Perturbation, ...]:
         if not isinstance(items, yaml.SequenceNode) or not items.value:
             raise self.error("perturbations must be a non-empty list of `KIND: {parameters}`", items)
-        return Spec(str(self.path), family, tuple(self.perturbation(item) for item in items.value))
+        return tuple(self.perturbation(item) for item in items.value)
 
     def perturbation(self, node: yaml.Node) -> Perturbation:
         if not isinstance(node, yaml.MappingNode) or len(node.value) != 1:
@@ -209,15 +230,38 @@ class _SpecReader:
         if isinstance(node, yaml.ScalarNode) and node.value == "all":
             return None
         if not isinstance(node, yaml.SequenceNode) or not node.value:
-            raise self.error("objects: `all` or a non-empty list of the scene's object names", node)
-        out = []
+            raise self.error("objects: `all` or a non-empty list of object names, {type: T} or {role: R}", node)
+        out: list[str] = []
         for item in node.value:
-            name = self.string(item, "an object name")
-            if name not in self.object_names:
-                raise self.error(f"unknown object {name!r}; the scene's objects: {', '.join(self.object_names)}",
-                                 item)
-            out.append(name)
+            for name in self.selected(item):
+                if name not in out:
+                    out.append(name)
         return tuple(out)
+
+    def selected(self, item: yaml.Node) -> list[str]:
+        """The scene objects one ``objects:`` item selects: a name, ``{type: T}`` or ``{role: R}``."""
+        if isinstance(item, yaml.MappingNode):
+            entries = self.mapping(item, "an object selector", {"type", "role"})
+            if len(entries) != 1:
+                raise self.error("an object selector is {type: T} or {role: R}", item)
+            (key, (_, value)), = entries.items()
+            wanted = self.string(value, key)
+            if key == "type":
+                names = [n for n, (t, _) in self.objects_info.items() if t == wanted]
+                known = sorted({t for t, _ in self.objects_info.values() if t})
+            else:
+                names = [n for n in self.roles.get(wanted, ()) if n in self.objects_info]
+                known = sorted(self.roles)
+            if wanted not in known:
+                raise self.error(f"no object of {key} {wanted!r} in the scene; {key}s: {', '.join(known) or 'none'}",
+                                 value)
+            if not names:
+                raise self.error(f"no object of {key} {wanted!r} in the scene", value)
+            return names
+        name = self.string(item, "an object name")
+        if name not in self.object_names:
+            raise self.error(f"unknown object {name!r}; the scene's objects: {', '.join(self.object_names)}", item)
+        return [name]
 
     def names(self, node: yaml.Node, what: str, known: Any, noun: str) -> tuple[str, ...]:
         if not isinstance(node, yaml.SequenceNode) or not node.value:

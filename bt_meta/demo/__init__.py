@@ -10,15 +10,15 @@ Offers (each in its own module):
 * :class:`Demonstration`, :class:`VariantRun`, :func:`demonstrations`, :func:`variants` -- the scenario as data
   (``scenario``)
 * :data:`CONFIGURATIONS`, :func:`plugin_host` -- which plugins a run has: dual, symbolic, low-level, retry
-  (``configurations``)
+  (:mod:`bt_meta.configurations`)
 * :class:`Progress`, :class:`RunCapture`, :class:`CapturingExecutor` -- what the demo watches (``capture``)
 * :func:`tree_svg` -- the behaviour tree as an inline SVG picture (``svg``; plots: :mod:`bt_meta.plotting`)
 """
 
 from __future__ import annotations
 
+from bt_meta.configurations import CONFIGURATIONS, plugin_host
 from bt_meta.demo.capture import CapturingExecutor, Progress, RunCapture
-from bt_meta.demo.configurations import CONFIGURATIONS, plugin_host
 from bt_meta.demo.report import write_report
 from bt_meta.demo.runner import DemoResult, record_demonstration, run_demo, run_variant
 from bt_meta.demo.scenario import Demonstration, VariantRun, demonstrations, variants

@@ -35,10 +35,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from bt_meta.configurations import CONFIGURATIONS, available_repairs, plugin_host
 from bt_meta.demo.capture import CapturingExecutor, Progress, RunCapture, top_view_png
-from bt_meta.demo.configurations import CONFIGURATIONS, available_repairs, plugin_host
 from bt_meta.demo.scenario import FAMILIES, Demonstration, VariantRun, demonstrations, variants
 from bt_meta.errors import BtMetaError
+from bt_meta.judge.noise import jitter
 
 __all__ = ["DemoResult", "RecordOutcome", "VariantOutcome", "memory_environment", "record_demonstration",
            "run_demo", "run_variant"]
@@ -97,7 +98,7 @@ class VariantOutcome:
     error: str | None = None
     seconds: float = 0.0
     achieved: bool | None = None
-    """Ground truth from the simulator (:mod:`bt_meta.demo.truth`): is the task really done?"""
+    """Ground truth from the simulator (:mod:`bt_meta.judge.success`): is the task really done?"""
     truth: str = ""
 
     @property
@@ -204,12 +205,6 @@ class DemoResult:
 # -- recording ------------------------------------------------------------------------------------------------------
 
 
-#: Seeded start-pose noise of every object (m, rad): demonstrations and runs vary as an instructor's would (the
-#: shipped scenes have no jitter of their own).
-JITTER_POSITION = 0.003
-JITTER_YAW = math.radians(2.0)
-
-
 def _world(task_path: Path, problem: str, variant: str | None, seed: int, robot: Any = None
            ) -> tuple[Any, Any, Any]:
     from bt_meta.htn import load_task_file
@@ -226,22 +221,6 @@ def _world(task_path: Path, problem: str, variant: str | None, seed: int, robot:
         world.close()
         raise
     return task_file, chosen, world
-
-
-def jitter(world: Any, seed: int, position: float = JITTER_POSITION, yaw: float = JITTER_YAW) -> None:
-    """Move every object by seeded noise (x, y within ``position``, yaw within ``yaw``; about the base z axis)."""
-    import numpy as np
-
-    rng = np.random.default_rng(seed)
-    sim = world.sim
-    for name in sorted(sim.object_names()):
-        pose = list(sim.object_pose(name))
-        dx, dy = rng.uniform(-position, position, 2)
-        pose[0], pose[1] = pose[0] + float(dx), pose[1] + float(dy)
-        pose[5] += float(rng.uniform(-yaw, yaw))
-        sim.move_object(name, pose)
-    sim.settle(60)
-    world.sync_collision()
 
 
 def _already_recorded(memory: Any, demo: Demonstration, task: str) -> int | None:
@@ -343,9 +322,11 @@ def run_variant(
         report = executor.run()
         progress.done()
         outcome.report = report.to_dict()
-        from bt_meta.demo.truth import achieved
+        from bt_meta.judge.success import success_check_file
 
-        outcome.achieved, outcome.truth = achieved(run.family, world, memory, problem)
+        judge = success_check_file(FAMILIES[run.family].success_file(), task_file, problem, world.grounding,
+                                   scene_objects=[o.name for o in world.scene.objects])
+        outcome.achieved, outcome.truth = judge.evaluate(world)
         if pictures:
             outcome.after_png, after_view = top_view_png(world)
             outcome.gridmaps = _gridmap_pictures(capture, after_view)
@@ -411,7 +392,6 @@ def _keypoint_series(capture: RunCapture, memory: Any, problem: Any, pair: tuple
                      report: dict[str, Any]) -> dict[str, Any] | None:
     """R_p (mm) and R_n (deg) of ``pair`` after each executed step of this run, and their means (with min/max) over
     the remembered nominal traces at the same plan step."""
-    import math
 
     from bt_meta.memory.recorder import root_task_name
     from bt_meta.perception.keypoints import KeypointError, relation

@@ -11,6 +11,7 @@ Offers:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 __all__ = ["FAMILIES", "Demonstration", "VariantRun", "demonstrations", "variants"]
 
@@ -23,14 +24,22 @@ class Family:
     problem: str
     keypoint_pair: tuple[str, str] | None
     """(active, reference) simulator objects whose R_p / R_n the report plots; ``None``: grid-maps instead."""
+    success: str
+    """The shipped campaign family file (``trees/families/<success>.yaml``) whose ``success:`` the judge uses."""
+
+    def success_file(self) -> Any:
+        from bt_meta.resources import trees_dir
+
+        return trees_dir() / "families" / f"{self.success}.yaml"
 
 
 FAMILIES = {
-    "letters": Family("letters", "Letters (section 6): A with substituted blocks", "letters.yaml", "A", None),
+    "letters": Family("letters", "Letters (section 6): A with substituted blocks", "letters.yaml", "A", None,
+                      "letters_A"),
     "magnetic": Family("magnetic", "MagneticAttach (section 7): variant poses of the active part",
-                       "magnetic_attach.yaml", "nominal", ("active", "reference")),
+                       "magnetic_attach.yaml", "nominal", ("active", "reference"), "magnetic"),
     "housing": Family("housing", "Housing insertion (section 2): upside-down housing", "housing_insertion.yaml",
-                      "nominal", ("housing", "board")),
+                      "nominal", ("housing", "board"), "housing"),
 }
 
 

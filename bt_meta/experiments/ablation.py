@@ -3,7 +3,7 @@
 The paper's claim, checked in the simulator: expectations that use both symbolic and low-level information repair
 more failures than either alone. The letters (A with substituted blocks), magnetic-attach (variant poses of the
 active part) and housing (upside down) variants are run under four plugin configurations
-(:mod:`bt_meta.demo.configurations`):
+(:mod:`bt_meta.configurations`):
 
 * ``dual`` -- symbolic + low-level expectations (grid-maps, keypoints), every repair plugin
 * ``symbolic`` -- symbolic expectations only; object substitution matches symbolically
@@ -20,7 +20,8 @@ Offers:
 
 * :func:`register` -- ``bt-meta experiment ablation [--seeds N] [--seed S] [--families F,...]
   [--configurations C,...] [--variants V,...] [--json]``; with ``--generated N [--out DIR] [--workers W]
-  [--ray ADDRESS] [--perfect-sensing]`` the experiment runs as campaigns of generated variants instead
+  [--ray ADDRESS] [--perfect-sensing] [--robot R]`` the experiment runs as campaigns of generated variants instead,
+  labelled for and run on the robot
   (:mod:`bt_meta.campaign.ablation`)
 * :func:`run` -- the experiment; returns ``{"configurations", "families", "rows", "runs", ...}``
 * :func:`wilson` -- Wilson score interval of a proportion
@@ -113,7 +114,7 @@ def _choices(text: str, known: Sequence[str], option: str) -> tuple[str, ...]:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from bt_meta.demo.configurations import CONFIGURATIONS
+    from bt_meta.configurations import CONFIGURATIONS
     from bt_meta.demo.scenario import FAMILIES, variants
 
     if not 1 <= args.seeds <= 50:
@@ -124,10 +125,6 @@ def _main(args: argparse.Namespace) -> int:
                                  "magnetic attach, housing); run a scene of one's own with "
                                  "`bt-meta run TASK --scene FILE`", path="<command line>")
     if args.generated is not None:
-        if options["robot"] is not None:
-            raise AblationInputError("--robot with --generated: the campaign's generated episodes build their "
-                                     "worlds from its spec (on the Baxter); run the ablation without "
-                                     "--generated on another robot", path="<command line>")
         return _generated(args)
     families = _choices(args.families, list(FAMILIES), "--families")
     configurations = _choices(args.configurations, list(CONFIGURATIONS), "--configurations")
@@ -155,7 +152,8 @@ def _generated(args: argparse.Namespace) -> int:
                               "--configurations")
     result = run_ablation(args.out or "ablation-campaigns", n=args.generated, seeds=args.seeds, seed=args.seed,
                           families=families, configurations=configurations, workers=args.workers,
-                          ray_address=args.ray, perfect_sensing=args.perfect_sensing, progress=not args.json)
+                          ray_address=args.ray, perfect_sensing=args.perfect_sensing, progress=not args.json,
+                          robot=args.robot)
     if args.json:
         print_json(result)
         return 0
@@ -176,8 +174,8 @@ def run(*, seeds: int = 3, seed: int = 0, families: Sequence[str] = ("letters", 
         only: Sequence[str] | None = None, echo: bool = False, robot: Any = None) -> dict[str, Any]:
     """Record the demonstrations, run every variant (or the ``only`` ones) under every configuration for ``seeds``
     seeds, on ``robot`` (a description; default each grounding's); the table."""
+    from bt_meta.configurations import CONFIGURATIONS, available_repairs
     from bt_meta.demo.capture import Progress
-    from bt_meta.demo.configurations import CONFIGURATIONS, available_repairs
     from bt_meta.demo.runner import memory_environment, record_demonstration, run_variant
     from bt_meta.demo.scenario import FAMILIES, VariantRun, demonstrations, variants
     from bt_meta.memory import EpisodicMemory

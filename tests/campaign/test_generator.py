@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
-from bt_meta.campaign.families import default_spec_path
+from bt_meta.campaign.families import family, family_spec
 from bt_meta.campaign.generator import VARIANT_NAME, draw_variant, placed_objects, scene_text
 from bt_meta.campaign.spec import load_spec
 from bt_meta.world.simulation.scenes import load_scene
 
 
-def _setup(name="letters_A", family="letters_A"):
+def _setup(name="letters_A", family_name="letters_A"):
     scene = load_scene(name)
-    spec = load_spec(default_spec_path(family), [o.name for o in scene.objects])
+    spec = family_spec(family(family_name), scene)
     return scene, spec, placed_objects(scene)
 
 
@@ -41,7 +41,7 @@ def test_variant_scene_file_loads_and_gives_the_drawn_objects(tmp_path):
 def test_perturbations_do_what_they_say():
     scene, _, nominal = _setup()
     kinds = set()
-    spec = load_spec(default_spec_path("letters_A"), [o.name for o in scene.objects])
+    spec = family_spec(family("letters_A"), scene)
     for k in range(60):
         objects, changes = draw_variant(nominal, spec, 0, k)
         names = {o.name for o in objects}
@@ -116,7 +116,6 @@ def test_a_distractor_blocking_a_target_on_a_part_rests_on_the_part(tmp_path):
     and the settled scene keeps the part upright (inside it, the simulator threw the reference over)."""
     import math
 
-    from bt_meta.campaign.families import family
     from bt_meta.campaign.labeller import Labeller
 
     scene = load_scene("magnetic_attach")

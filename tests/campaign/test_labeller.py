@@ -14,7 +14,7 @@ def test_letter_cells_and_pairs_of_A():
     plan = [SimpleNamespace(name="place", args=(b, x, y)) for b, x, y in
             [("b0", "0", "0"), ("b1", "0", "1"), ("b2", "3", "0"), ("b3", "3", "1"), ("b5", "1.5", "1"),
              ("b4", "1.5", "2")]]
-    cells = letter_cells(plan, {"b5": "1x2"})
+    cells = letter_cells(plan, {"b5": "1x2"}, {"place"})
     assert sorted(cells) == sorted([(0, 0), (0, 1), (3, 0), (3, 1), (1, 1), (2, 1), (1.5, 2)])
     assert max_pairs(cells) == 2  # along x only (a 1x2 lies along the letter's x): l1+bar-left, bar-right+r1
     h_cells = [(0, 0), (0, 1), (0, 2), (3, 0), (3, 1), (3, 2), (1, 1), (2, 1)]

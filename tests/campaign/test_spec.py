@@ -4,16 +4,14 @@ from __future__ import annotations
 
 import pytest
 
-from bt_meta.campaign.families import FAMILIES, default_spec_path
+from bt_meta.campaign.families import family, family_spec, shipped_families
 from bt_meta.campaign.spec import KINDS, SpecError, load_spec
 from bt_meta.cli import main
-from bt_meta.world.simulation.scenes import load_scene
 
 
-@pytest.mark.parametrize("name", sorted(FAMILIES))
+@pytest.mark.parametrize("name", shipped_families())
 def test_every_family_ships_a_default_spec_that_loads(name):
-    scene = load_scene(FAMILIES[name].scene)
-    spec = load_spec(default_spec_path(name), [o.name for o in scene.objects], family=name)
+    spec = family_spec(family(name))
     assert spec.family == name
     assert {p.kind for p in spec.perturbations} <= set(KINDS)
     assert spec.perturbations

@@ -63,10 +63,7 @@ def test_a_scene_whose_catalogue_mesh_is_missing_is_exit_2(tmp_path: Path, capsy
     assert f"{tmp_path / 'mine.yaml'}:4:11: type 'knob': mesh file {tmp_path / 'knob.stl'} does not exist" in err
 
 
-def test_ablation_refuses_a_scene_and_a_robot_for_generated_campaigns(capsys):
+def test_ablation_refuses_a_scene(capsys):
     code = main(["experiment", "ablation", "--scene", str(trees_dir() / "scenes" / "letters_A.yaml")])
     err = capsys.readouterr().err
     assert code == 2 and "--scene: the ablation runs its families' own scenes" in err and "Traceback" not in err
-    code = main(["experiment", "ablation", "--generated", "2", "--robot", "panda"])
-    err = capsys.readouterr().err
-    assert code == 2 and "--robot with --generated" in err and "Traceback" not in err

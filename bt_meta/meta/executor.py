@@ -109,6 +109,8 @@ class RunReport:
     refinements_skipped: list[dict[str, str]] = field(default_factory=list)
     """Stored refinements not planned with, with why (demoted, another robot's, weaker than the problem)."""
     refinements_demoted: list[str] = field(default_factory=list)
+    expected: list[dict[str, Any]] = field(default_factory=list)
+    """Monitor objections a used refinement's learning run met at the same steps, which its plan goes on through."""
     fallback: dict[str, Any] | None = None
     """When a learned plan failed on replay: the refinements demoted, the step, and what the run went on with."""
     robot: str | None = None
@@ -131,7 +133,7 @@ class RunReport:
             "plan": self.plan, "executed": self.executed, "refinements_used": self.refinements_used,
             "refinement_saved": self.refinement_saved, "rebound": self.rebound, "refused": self.refused,
             "refinements_skipped": self.refinements_skipped, "refinements_demoted": self.refinements_demoted,
-            "fallback": self.fallback, "robot": self.robot,
+            "fallback": self.fallback, "robot": self.robot, "expected": self.expected,
         }
 
 
@@ -229,6 +231,9 @@ class MetaExecutor:
         effects: dict[str, int] = {}  # an applied attempt's effect (plan_effect) -> its number
         undone: list[tuple[str, ...]] = []  # facts applied proposals made false on purpose (changes["facts"])
         touched: list[dict[str, Any]] = [dict(report.rebound)]  # substitutions and rebindings applied
+        # monitor objections the used refinements' learning runs met on the steps they replay through
+        expected = [dict(e) for m in report.refinements_used if m in stored
+                    for e in (stored[m].repair or {}).get("expected") or []]
         # perceived objects (world names and the task-file symbols for them): a repair that re-arranges them may
         # restate a goal fact about them (a re-tiling: the bar's cells covered by other blocks)
         names = _world_names(self.world, self.problem)
@@ -259,6 +264,14 @@ class MetaExecutor:
                 failures = [Failure(kind=FailureKind.INTERNAL, message="the tree failed without a failure record",
                                     step=plan_state.cursor)]
                 run.record_failure(failures[0])
+            if report.refinements_used and not report.attempts and report.fallback is None \
+                    and (passed := _expected_by(failures, plan_state, expected)) is not None:
+                # an objection the refinement's own learning run met at this step and its plan goes on through
+                # (it replays the moves that run made before the repair): expected, the plan goes on
+                report.expected.append(passed)
+                run.emit("repair", outcome="expected", expected=passed)
+                plan_state = dataclasses.replace(plan_state, cursor=int(passed["step"]) + 1)
+                continue
             if report.refinements_used and not report.attempts and report.fallback is None:
                 # the learned plan failed on replay: demote it, go back to the plan it refined (the hand-written
                 # methods' plan) and repair that, so a learned repair never turns a success into a failure
@@ -341,7 +354,9 @@ class MetaExecutor:
                         refines = next((stored[m].refines for m in report.refinements_used
                                         if m in stored and stored[m].refines), origin_plan)
                     report.refinement_saved = self._save_refinement(domain, replayed_report, start_objects, facts,
-                                                                    goal, report.rebound, robot, refines)
+                                                                    goal, report.rebound, robot, refines,
+                                                                    _passed_through(report.attempts,
+                                                                                    replayed_report.plan))
         return self._finish(report, run, wall_started)
 
     def _perceive(self, domain: Any, refinements: list[Any], problem: Any, run: RunContext,
@@ -494,6 +509,8 @@ class MetaExecutor:
                               replaced=replaced_steps(proposal, plan_state, diagnosis.step))
             attempt.failure.pop("evidence", None)
             attempt.failure["evidence_keys"] = sorted(diagnosis.failure.evidence)
+            if (signature := _monitor_signature(diagnosis.failure)) is not None:
+                attempt.failure["monitor"] = signature
             report.attempts.append(attempt)
             effects[effect] = attempt.number
             log.info("meta: attempt %d: %s (%s, score %.2f, %s) -> %s", attempt.number, proposal.action,
@@ -518,7 +535,8 @@ class MetaExecutor:
     def _save_refinement(self, domain: Any, report: RunReport, start_objects: dict[str, Any],
                          anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]],
                          goal: list[Any], rebound: dict[str, str] | None = None, robot: str | None = None,
-                         refines: list[list[str]] | None = None) -> dict[str, Any] | None:
+                         refines: list[list[str]] | None = None,
+                         expected: list[dict[str, Any]] | None = None) -> dict[str, Any] | None:
         from bt_meta.meta.refinements import RefinementError
 
         listing = getattr(self.refinements, "list", None)
@@ -527,7 +545,8 @@ class MetaExecutor:
             saved = self.refinements.save_repair(self.base_domain, self.problem, report, start_objects,
                                                  variant=self.variant, names=_world_names(self.world, self.problem),
                                                  facts=(sorted(anchored[0]), sorted(anchored[1])), goal=goal,
-                                                 rebind=rebound or None, robot=robot, refines=refines)
+                                                 rebind=rebound or None, robot=robot, refines=refines,
+                                                 expected=expected or None)
         except RefinementError as error:
             log.info("meta: repaired plan not saved as a refinement: %s", error)
             return {"saved": False, "reason": str(error)}
@@ -724,6 +743,54 @@ def _robot_name(world: Any) -> str | None:
     if name is None:
         name = getattr(getattr(getattr(world, "sim", None), "robot", None), "name", None)
     return None if name is None else str(name)
+
+
+def _monitor_signature(failure: Failure) -> list[list[Any]] | None:
+    """What a monitor objected to (each mismatch's kind, plugin and failed relations), ``None`` for a failure no
+    monitor raised (a skill's, a verification)."""
+    mismatches = (failure.evidence or {}).get("mismatches")
+    if not mismatches:
+        return None
+    return sorted([str(m.get("kind")), str(m.get("plugin")), sorted(str(x) for x in (m.get("evidence") or {})
+                                                                   .get("failed") or [])] for m in mismatches)
+
+
+def _passed_through(attempts: list[Attempt], plan: list[list[str]]) -> list[dict[str, Any]]:
+    """The monitor objections of ``attempts`` that a refinement replaying ``plan`` will meet again: the failed step
+    is in ``plan`` at the same place, kept as it ran, because its attempt's plugin keeps a plan that replays the
+    moves this run made before the repair (``evidence["replay_plan"]``)."""
+    out = []
+    for attempt in attempts:
+        failure = attempt.failure
+        monitor = failure.get("monitor")
+        step = failure.get("step")
+        if not monitor or step is None or not (attempt.proposal.get("evidence") or {}).get("replay_plan"):
+            continue
+        call = [str(failure.get("action")), *(str(a) for a in failure.get("args") or [])]
+        if 0 <= int(step) < len(plan) and [str(a) for a in plan[int(step)]] == call:
+            out.append({"step": int(step), "kind": failure.get("kind"), "call": call, "monitor": monitor})
+    return out
+
+
+def _expected_by(failures: list[Failure], plan_state: PlanState, expected: list[dict[str, Any]]
+                 ) -> dict[str, Any] | None:
+    """The entry of ``expected`` (taken out of it) that the segment's failure is: the same monitor objection at the
+    same step of the same plan, with the step's call as it was; ``None`` when it is anything else."""
+    located = [f for f in failures if f.step is not None]
+    if not located or not expected:
+        return None
+    failure = located[-1]
+    signature = _monitor_signature(failure)
+    steps = plan_state.steps()
+    if signature is None or not 0 <= failure.step < len(steps) or len(plan_state.committed):
+        return None
+    call = [str(a) for a in steps[failure.step].task]
+    for index, entry in enumerate(expected):
+        if (int(entry.get("step", -1)) == failure.step and entry.get("kind") == failure.kind.value
+                and [str(a) for a in entry.get("call") or []] == call and entry.get("monitor") == signature):
+            del expected[index]
+            return {**entry, "message": failure.message}
+    return None
 
 
 def _rearranged(before: PlanState, after: PlanState, perceived: set[str]) -> set[str]:

@@ -346,7 +346,8 @@ class RefinementStore:
                     facts: tuple[Iterable[Sequence[str]], Iterable[Sequence[str]]] | None = None,
                     goal: Sequence[Sequence[str]] | None = None,
                     rebind: dict[str, str] | None = None, robot: str | None = None,
-                    refines: Sequence[Sequence[str]] | None = None) -> Refinement:
+                    refines: Sequence[Sequence[str]] | None = None,
+                    expected: Sequence[dict[str, Any]] | None = None) -> Refinement:
         """Turn a successful repaired run (``report``, a :class:`~bt_meta.meta.executor.RunReport`) into a
         refinement of the problem's task and store it; the objects' starting poses become its precondition.
 
@@ -357,7 +358,8 @@ class RefinementStore:
         reported at the start (``start_objects[obj][attribute] == value``) becomes a ``seen`` condition. ``goal``
         is the goal as the repair rewrote it (kept when it differs from the problem's). ``rebind`` are the grounding
         symbols the repair grounded as other objects (``names`` then already maps them so). ``robot`` is the robot
-        that learned it, ``refines`` the plan it refined (default: the report's initial plan).
+        that learned it, ``refines`` the plan it refined (default: the report's initial plan), ``expected`` the
+        monitor objections its plan replays through (kept in :attr:`Refinement.repair`, ``"expected"``).
 
         A stored refinement equivalent to the new one (:meth:`equivalent`: the same plan, facts, goal, rebinding
         and robot, its objects' starting poses within the tolerance of the new ones) is kept once: it is returned
@@ -402,7 +404,8 @@ class RefinementStore:
             tolerance=dict(self.tolerance), problem=getattr(problem, "name", None), variant=variant,
             repair={"attempts": len(report.attempts), "kinds": [a.kind for a in report.attempts],
                     "proposals": [{"action": a.proposal.get("action"), "plugin": a.proposal.get("plugin"),
-                                   "change": a.change} for a in report.attempts]})
+                                   "change": a.change} for a in report.attempts],
+                    **({"expected": [dict(e) for e in expected]} if expected else {})})
         refinement.to_method(domain_with_pose_predicate(domain))  # it must load before it is stored
         return self.add(refinement)
 

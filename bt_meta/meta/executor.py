@@ -269,7 +269,9 @@ class MetaExecutor:
                 # an objection the refinement's own learning run met at this step and its plan goes on through
                 # (it replays the moves that run made before the repair): expected, the plan goes on
                 report.expected.append(passed)
-                run.emit("repair", outcome="expected", expected=passed)
+                run.emit("repair", outcome="expected", expected=passed,
+                         reason=f"step {passed['step']}: the learned plan's own run met this objection here and went "
+                                "on through it")
                 plan_state = dataclasses.replace(plan_state, cursor=int(passed["step"]) + 1)
                 continue
             if report.refinements_used and not report.attempts and report.fallback is None:
@@ -658,7 +660,9 @@ class MetaExecutor:
                                           "learned plan is repaired as it stands")
         log.info("meta: learned refinement(s) %s demoted (%s); fallback: %s", report.refinements_used, reason,
                  report.fallback.get("to") or report.fallback.get("why_not"))
-        run.emit("repair", outcome="fallback", fallback=dict(report.fallback))
+        run.emit("repair", outcome="fallback", fallback=dict(report.fallback),
+                 reason=f"learned plan demoted ({reason}); going on with "
+                        f"{report.fallback.get('to') or 'it as it stands'}")
         return fallback
 
     def _note_replay(self, method: str, *, succeeded: bool, reason: str | None = None) -> None:

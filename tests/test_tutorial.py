@@ -3,6 +3,7 @@ ending with the exit status the tutorial states (0 unless a line says ``# exit N
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shlex
@@ -70,6 +71,9 @@ def test_the_tutorial_runs_as_written(tmp_path, monkeypatch, capsys):
     listing = outputs["bt-meta memory ls --memory memory.sqlite"]
     assert "peg_on_side  success" in listing and "nominal      success" in listing
     assert "repair attempt(s)" in outputs['bt-meta tick peg.yaml --repair --fault "Grasp#1=fail:physical"']
+    second = json.loads(outputs["bt-meta run peg.yaml --variant peg_on_side --repair --memory memory.sqlite --json"])
+    assert second["status"] == "SUCCESS" and second["attempts"] == [] and second["refinements_used"]
+    assert [e["step"] for e in second["expected"]] == [3]
 
 
 # -- the repaired run, judged from the simulator's true state ----------------------------------------------------

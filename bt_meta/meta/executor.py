@@ -16,7 +16,13 @@ The loop (``docs/meta-reasoning.md``):
 6. a learned refinement whose precondition holds at the start (its objects where they were, its entities seen as
    they were) has its perceived facts added to the world's and the problem's state before planning, and a run
    that uses it is verified against its rewritten goal;
-7. a ``rebind`` repair (a grounding symbol grounded as a spare, :data:`~bt_meta.meta.proposals.REBIND`) is passed
+7. every proposal is checked before it applies (:mod:`bt_meta.meta.invariants`): one that would rewrite, skip or
+   drop a verification step, or weaken the goal, is refused (``RunReport.refused``); a stored refinement that would
+   is not planned with (``RunReport.refinements_skipped``), nor one of another robot or demoted;
+8. a plan from learned refinements that fails on replay -- unless it is an objection the refinement's own run met
+   at that step (``RunReport.expected``) -- demotes them and falls back to the hand-written methods
+   (``RunReport.fallback``); a replay with zero attempts is counted;
+9. a ``rebind`` repair (a grounding symbol grounded as a spare, :data:`~bt_meta.meta.proposals.REBIND`) is passed
    to the world (``world.rebind_object``) before the plan runs again, and kept with the refinement: a refinement
    whose precondition holds rebinds the same symbols before planning.
 

@@ -12,7 +12,9 @@ repair's rewrite of the goal (:func:`rewrite_goal`) is kept as :attr:`Refinement
 the refinement is verified against. A repair that grounded a task-file symbol as another object (a spare for a
 missing part, ``rebind``) is kept as :attr:`Refinement.rebind`: the executor rebinds the same symbols when the
 precondition (which then names the spare's starting pose) holds. Refinements live in the episodic memory file
-(table ``refinements``, schema v3; ``facts``, ``goal`` and ``rebind`` ride in its ``repair`` column); the next
+(table ``refinements``, schema v3; ``facts``, ``goal`` and ``rebind`` ride in its ``repair`` column; v4 adds the
+robot that learned it, the plan it refined, its status -- a refinement whose replay failed is demoted -- and its
+replay counts; an equivalent refinement is stored once, :meth:`RefinementStore.equivalent`); the next
 run of the same variant plans with them first, so it succeeds with zero repair attempts; a run whose objects are
 elsewhere (or other) fails the precondition and plans as before.
 

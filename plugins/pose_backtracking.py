@@ -9,10 +9,11 @@ On a ``verification`` (or keypoint ``unexpected_configuration``) failure the plu
    spliced steps in (a re-orientation, then the task again) the task's latest run is compared, not the first
    (:func:`~bt_meta_plugins._trace_relations.align_steps`);
 2. collects the *pose-setting* primitives from there on: ``MoveTo`` steps during which the active object moved
-   (it was in hand), outside the verification task (a step under a task named ``verify...``);
+   (it was in hand), never a verification step (under a task named ``verify...``, or with a pose that declares a
+   check such as ``verify_lifted``: :func:`bt_meta.meta.invariants.is_verification`);
 3. backtracks to the last of them; on a later failure (``evidence["repair_history"]`` shows where it went) one
-   further back, until the first pose that differs from the traces -- every pose-setting step from ``to_step`` on
-   gets a new pose;
+   further back, until the first pose that differs from the traces -- every pose-setting step from ``to_step`` on,
+   up to the next grasp or release (the part held with one grasp), gets a new pose;
 4. samples (seeded) a known-good pose of the active object for each such step from the traces, relative to the
    reference object (its attachment point and normal where they were in a success, the rotation about the normal
    the trace's first, then others), turns it into a gripper pose through the current object-gripper relation
@@ -63,6 +64,7 @@ from bt_meta_plugins._trace_relations import moved as _moved
 from bt_meta_plugins._trace_relations import moved_in_trace as _moved_in_trace
 
 from bt_meta.bt.failures import Failure, FailureKind, RepairProposal
+from bt_meta.meta.invariants import is_verification
 from bt_meta.perception.recall import memory_for, root_task
 from bt_meta.plugins import ConfiguredPlugin, hookimpl
 from bt_meta.world.simulation.objects import matrix_to_pose, pose_to_matrix
@@ -118,6 +120,7 @@ class PoseBacktracking:
         self.max_candidates = max_candidates
         self.max_check_seconds = max_check_seconds
         self._run: Any = None
+        self._world: Any = None
         self._current: dict[int, dict[str, Any]] = {}
         self._q: dict[int, np.ndarray] = {}
         """The robot's configuration after each step of the run (where a replay of a repaired plan passes)."""
@@ -185,6 +188,7 @@ class PoseBacktracking:
             return None
         first = deviating[0]
         evidence["first_deviating_step"] = first
+        self._world = world
         window = self._window(plan, current, traces, active, first, aligned)
         evidence["pose_steps"] = window
         done = [int(a["proposal"]["changes"]["to_step"]) for a in failure.evidence.get("repair_history") or []
@@ -205,7 +209,7 @@ class PoseBacktracking:
         deadline = time.perf_counter() + self.max_check_seconds
         fallback = None
         for to_step in reversed(targets):  # the last pose-setting step first, then one further back
-            steps = [s for s in window if s >= to_step]
+            steps = self._held_moves(plan, window, to_step)
             after = self._next_move(world, held_by, plan, steps[-1])
             replay = self._q.get(to_step - 1) if self._run is context.run else None
             # a replay holds the part as this run held it before the first rewritten move, not as it holds it now
@@ -285,6 +289,14 @@ class PoseBacktracking:
                 if int(r["step"]) >= to_step]
         return [*prefix, *ran, *rest]
 
+    def _held_moves(self, plan: list[dict[str, Any]], window: list[int], to_step: int) -> list[int]:
+        """The steps of ``window`` from ``to_step`` on up to the plan's next step that is not a pose-setting move (a
+        grasp or a release): the part is held with one grasp along them, which the sampled poses assume (a move
+        after the release -- lifting the reference with the part joined to it -- is no pose of the held part)."""
+        stop = min((int(r["step"]) for r in plan if int(r["step"]) > to_step
+                    and str(r["action"]) not in self.pose_actions), default=None)
+        return [s for s in window if s >= to_step and (stop is None or s < stop)]
+
     def _pair(self, context: Any, world: Any) -> tuple[str | None, str | None]:
         tasks = getattr(getattr(context.run, "problem", None), "tasks", None) or []
         if not tasks or len(tasks[0]) < 3:
@@ -321,8 +333,8 @@ class PoseBacktracking:
                 index = alignment[step]
                 node = traces[0].steps[index].node_id if index < len(traces[0].steps) else None
                 tasks = tasks_of_node.get(str(node), tasks) if node is not None else tasks
-            if any(str(t).lower().startswith("verify") for t in tasks):
-                continue
+            if is_verification(self._world, [record["action"], *record.get("args", [])], tasks):
+                continue  # a verification step is never rewritten (bt_meta.meta.invariants)
             before, after = current.get(step - 1), current.get(step)
             if before is not None and after is not None and active in before and active in after:
                 moved = _moved(before[active], after[active])

@@ -76,6 +76,9 @@ def _print(refinement: Refinement) -> None:
     repair = refinement.repair or {}
     print(f"{refinement.id}  {refinement.domain}  {refinement.task}  ->  {refinement.method}  "
           f"({refinement.created}; problem {refinement.problem or '-'}; variant {refinement.variant or '-'})")
+    status = refinement.status + (f" ({refinement.status_reason})" if refinement.status_reason else "")
+    print(f"    robot {refinement.robot or 'unknown'}; {status}; replayed {refinement.replays} time(s), "
+          f"failed {refinement.failures}")
     print(f"    precondition: {refinement.precondition}")
     print(f"    plan: {', '.join(refinement.subtasks)}")
     add, delete = refinement.fact_atoms()

@@ -261,10 +261,22 @@ def _run_repaired(args: argparse.Namespace, task_file: Any, problem: Any, world:
         "reported": report.reported,
         "initial_plan": [" ".join(step) for step in report.initial_plan],
         "repair_status": report.status,
+        "refused": report.refused,
+        "refinements_skipped": report.refinements_skipped,
+        "refinements_demoted": report.refinements_demoted,
+        "fallback": report.fallback,
+        "expected": report.expected,
     })
     if not args.json:
         if report.refinements_used:
             print(f"learned refinements used: {', '.join(report.refinements_used)}")
+        for skipped in report.refinements_skipped:
+            print(f"learned refinement not used: {skipped['method']}: {skipped['reason']}")
+        for passed in report.expected:
+            print(f"  step {passed['step']}: the refinement's learning run met the same objection here; it goes on")
+        if report.fallback:
+            print(f"  learned plan failed on replay, demoted: {', '.join(report.fallback['refinements'])}; "
+                  f"went on with {report.fallback.get('to') or 'it as it stands (' + report.fallback['why_not'] + ')'}")
         print(f"initial plan: {len(report.initial_plan)} primitives; {len(report.attempts)} repair attempt(s)")
         for attempt in report.attempts:
             proposal = attempt.proposal
@@ -273,6 +285,10 @@ def _run_repaired(args: argparse.Namespace, task_file: Any, problem: Any, world:
             print(f"  attempt {attempt.number}: {attempt.kind} at step {attempt.step} {call} -> "
                   f"{proposal.get('action')} by {proposal.get('plugin')} (score {proposal.get('score', 0):.2f}): "
                   f"{attempt.change} [{attempt.outcome}]")
+        for refused in report.refused:
+            proposal = refused["proposal"]
+            print(f"  refused: {proposal.get('action')} by {proposal.get('plugin')} at step {refused['step']}: "
+                  f"{refused['reason']}")
         if report.stop_reason:
             print(f"  stopped: {report.stop_reason}")
         if report.refinement_saved:

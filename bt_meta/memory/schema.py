@@ -12,7 +12,7 @@ The version lives in ``PRAGMA user_version``. A file written by a newer bt-meta 
 file that is a SQLite database but not a bt-meta memory (foreign application id, or tables and no id) is refused,
 never written to. Migrations only ever add: user data is never dropped or rewritten in place.
 
-Tables (v2):
+Tables (v4; ``refinements`` since v3, its robot, refined plan, status and replay counts since v4):
 
 * ``episodes`` -- one row per trace, with the declared ``step_count``, ``object_count``, ``grid_map_count`` and
   ``expectation_count`` so a reader can prove the trace is complete
@@ -235,10 +235,27 @@ def _v3(connection: sqlite3.Connection) -> None:
     )
 
 
+def _v4(connection: sqlite3.Connection) -> None:
+    """Refinements record the robot that learned them, the plan they refined, and how their replays went (a
+    refinement that fails on replay is demoted); rows of v3 keep everything, with no robot and status active."""
+    _run(
+        connection,
+        (
+            "ALTER TABLE refinements ADD COLUMN robot TEXT",
+            "ALTER TABLE refinements ADD COLUMN refines TEXT",
+            "ALTER TABLE refinements ADD COLUMN status TEXT NOT NULL DEFAULT 'active'",
+            "ALTER TABLE refinements ADD COLUMN status_reason TEXT",
+            "ALTER TABLE refinements ADD COLUMN replays INTEGER NOT NULL DEFAULT 0",
+            "ALTER TABLE refinements ADD COLUMN failures INTEGER NOT NULL DEFAULT 0",
+        ),
+    )
+
+
 MIGRATIONS: tuple[Migration, ...] = (
     Migration(1, "episodes, steps, object states, grid-maps, expectations", _v1),
     Migration(2, "steps.task_index (backfilled), views p_a and e_db", _v2),
     Migration(3, "refinements: learned method refinements", _v3),
+    Migration(4, "refinements: robot, the plan refined, status and replay counts", _v4),
 )
 
 SCHEMA_VERSION = MIGRATIONS[-1].version

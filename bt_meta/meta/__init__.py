@@ -11,6 +11,7 @@ Offers (each in its own module):
 * :class:`Refinement`, :class:`RefinementStore`, :func:`with_refinements`, :func:`task_file_yaml` -- learned
   method refinements in the memory file, exportable as task-file YAML (``refinements``); which plan a repaired run
   keeps, with later repairs carried into a plugin's replay plan (``kept_plan``)
+* what no repair may change -- verification steps, the goal (``invariants``)
 * :data:`MOTION_LIMITS`, :func:`is_motion_limit` -- how the reasoner treats taxonomy kinds (``taxonomy``)
 
 The taxonomy rules, the retry baseline and the pose-tolerance predicate are plugins: ``bt_meta_plugins.

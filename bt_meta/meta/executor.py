@@ -16,7 +16,13 @@ The loop (``docs/meta-reasoning.md``):
 6. a learned refinement whose precondition holds at the start (its objects where they were, its entities seen as
    they were) has its perceived facts added to the world's and the problem's state before planning, and a run
    that uses it is verified against its rewritten goal;
-7. a ``rebind`` repair (a grounding symbol grounded as a spare, :data:`~bt_meta.meta.proposals.REBIND`) is passed
+7. every proposal is checked before it applies (:mod:`bt_meta.meta.invariants`): one that would rewrite, skip or
+   drop a verification step, or weaken the goal, is refused (``RunReport.refused``); a stored refinement that would
+   is not planned with (``RunReport.refinements_skipped``), nor one of another robot or demoted;
+8. a plan from learned refinements that fails on replay -- unless it is an objection the refinement's own run met
+   at that step (``RunReport.expected``) -- demotes them and falls back to the hand-written methods
+   (``RunReport.fallback``); a replay with zero attempts is counted;
+9. a ``rebind`` repair (a grounding symbol grounded as a spare, :data:`~bt_meta.meta.proposals.REBIND`) is passed
    to the world (``world.rebind_object``) before the plan runs again, and kept with the refinement: a refinement
    whose precondition holds rebinds the same symbols before planning.
 
@@ -33,6 +39,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
+from collections import Counter
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -47,6 +54,7 @@ from bt_meta.bt.domain_nodes import domain_registry
 from bt_meta.bt.failures import Failure, FailureKind
 from bt_meta.errors import BtMetaError, PluginError, UnknownWorldError
 from bt_meta.htn.state import atom_text
+from bt_meta.meta.invariants import missing_verifications, touched_entities, verification_calls, weakened_goal
 from bt_meta.meta.kept_plan import replaced_steps, replayed, unkept_attempts
 from bt_meta.meta.proposals import PlanState, ProposalError, apply_proposal, plan_effect, proposal_facts
 from bt_meta.meta.reasoner import Attempt, Decision, Diagnosis, Limits, MetaReasoner
@@ -102,6 +110,16 @@ class RunReport:
     message: str = ""
     rebound: dict[str, str] = field(default_factory=dict)
     """Grounding symbols the run grounded as other world objects (repairs, or a refinement that kept them)."""
+    refused: list[dict[str, Any]] = field(default_factory=list)
+    """Proposals refused because they would change what counts as done (a verification step, the goal), with why."""
+    refinements_skipped: list[dict[str, str]] = field(default_factory=list)
+    """Stored refinements not planned with, with why (demoted, another robot's, weaker than the problem)."""
+    refinements_demoted: list[str] = field(default_factory=list)
+    expected: list[dict[str, Any]] = field(default_factory=list)
+    """Monitor objections a used refinement's learning run met at the same steps, which its plan goes on through."""
+    fallback: dict[str, Any] | None = None
+    """When a learned plan failed on replay: the refinements demoted, the step, and what the run went on with."""
+    robot: str | None = None
 
     @property
     def repairs(self) -> list[dict[str, Any]]:
@@ -119,7 +137,9 @@ class RunReport:
             "segments": self.segments, "attempts": [a.to_dict() for a in self.attempts], "repairs": self.repairs,
             "failures": self.failures, "reported": self.reported, "initial_plan": self.initial_plan,
             "plan": self.plan, "executed": self.executed, "refinements_used": self.refinements_used,
-            "refinement_saved": self.refinement_saved, "rebound": self.rebound,
+            "refinement_saved": self.refinement_saved, "rebound": self.rebound, "refused": self.refused,
+            "refinements_skipped": self.refinements_skipped, "refinements_demoted": self.refinements_demoted,
+            "fallback": self.fallback, "robot": self.robot, "expected": self.expected,
         }
 
 
@@ -175,11 +195,10 @@ class MetaExecutor:
         domain = self.base_domain
         added: list[str] = []
         stored: dict[str, Any] = {}
+        robot = _robot_name(self.world)
+        report.robot = robot
         if self.refinements is not None:
-            domain, added = self.refinements.apply(domain, self.problem)
-            listing = getattr(self.refinements, "list", None)
-            if added and listing is not None:
-                stored = {r.method: r for r in listing(domain=domain.name) if r.method in added}
+            domain, added, stored = self._learned(report, robot)
         planned = _declare_symbols(self.world, domain, added, self.problem)
         run = RunContext(self.world, self.plugins, domain=domain, problem=self.problem, task_file=self.task_file)
         if self.memory is not None:
@@ -211,10 +230,28 @@ class MetaExecutor:
         run.problem = dataclasses.replace(run.problem, goal=refined_goal if refined_goal is not None
                                           else list(getattr(self.problem, "goal", None) or []))
         base_goal = list(getattr(run.problem, "goal", None) or [])
+        origin_plan = list(report.initial_plan)  # the plan repairs are measured against (the hand-written one after a
+        # fallback from a refinement whose replay failed)
         registry = domain_registry(domain, self.plugins)
         tried: set[str] = set()
         effects: dict[str, int] = {}  # an applied attempt's effect (plan_effect) -> its number
         undone: list[tuple[str, ...]] = []  # facts applied proposals made false on purpose (changes["facts"])
+        touched: list[dict[str, Any]] = [dict(report.rebound)]  # substitutions and rebindings applied
+        # monitor objections the used refinements' learning runs met on the steps they replay through
+        expected = [dict(e) for m in report.refinements_used if m in stored
+                    for e in (stored[m].repair or {}).get("expected") or []]
+        # perceived objects (world names and the task-file symbols for them): a repair that re-arranges them may
+        # restate a goal fact about them (a re-tiling: the bar's cells covered by other blocks)
+        names = _world_names(self.world, self.problem)
+        perceived = set(start_objects) | {symbol for symbol, world_name in names.items() if world_name in start_objects}
+        moved: set[str] = set()  # perceived objects whose steps applied repairs changed
+
+        def guard(proposal: Any, before: PlanState, after: PlanState, failed_step: int) -> str | None:
+            """Why ``proposal`` (``before`` -> ``after``) would change what counts as done, or ``None``."""
+            return self._weakens(proposal, before, after, failed_step, domain, base_goal, origin_plan, start_state,
+                                 anchored, undone, [*touched, {e: e for e in moved | _rearranged(before, after,
+                                                                                                  perceived)}])
+
         while True:
             failures, status = self._segment(run, plan_state, registry, domain, report, started)
             if status is Status.SUCCESS:
@@ -233,6 +270,28 @@ class MetaExecutor:
                 failures = [Failure(kind=FailureKind.INTERNAL, message="the tree failed without a failure record",
                                     step=plan_state.cursor)]
                 run.record_failure(failures[0])
+            if report.refinements_used and not report.attempts and report.fallback is None \
+                    and (passed := _expected_by(failures, plan_state, expected)) is not None:
+                # an objection the refinement's own learning run met at this step and its plan goes on through
+                # (it replays the moves that run made before the repair): expected, the plan goes on
+                report.expected.append(passed)
+                run.emit("repair", outcome="expected", expected=passed,
+                         reason=f"step {passed['step']}: the learned plan's own run met this objection here and went "
+                                "on through it")
+                plan_state = dataclasses.replace(plan_state, cursor=int(passed["step"]) + 1)
+                continue
+            if report.refinements_used and not report.attempts and report.fallback is None:
+                # the learned plan failed on replay: demote it, go back to the plan it refined (the hand-written
+                # methods' plan) and repair that, so a learned repair never turns a success into a failure
+                fallback = self._fall_back(report, plan_state, failures, planned, run, external, plan_budget)
+                if fallback is not None:
+                    plan_state, origin_plan = fallback, [[a, *args] for a, args in fallback.full_plan()]
+                    domain = self.base_domain
+                    run.domain = domain
+                    registry = domain_registry(domain, self.plugins)
+                    base_goal = list(getattr(self.problem, "goal", None) or [])
+                    run.problem = dataclasses.replace(run.problem, goal=list(base_goal))
+                    continue
             diagnosis = self.reasoner.diagnose(failures, plan_state, run, report.attempts)
             if report.ticks >= self.limits.max_ticks:
                 decision = Decision([], stop=True, reason=f"tick budget spent ({self.limits.max_ticks} ticks)")
@@ -252,7 +311,7 @@ class MetaExecutor:
                 break
             skipped: list[dict[str, Any]] = []
             applied = self._apply(decision.proposals, diagnosis, plan_state, run, domain, report, tried, started,
-                                  effects, skipped, anchored, undone)
+                                  effects, skipped, anchored, undone, guard)
             if applied is None:
                 report.stop_reason = _unapplied_reason(diagnosis, skipped)
                 report.reported.append(_with_tried(self.reasoner.report_entry(diagnosis), report.attempts,
@@ -261,16 +320,22 @@ class MetaExecutor:
                          skipped=skipped)
                 break
             _rebind(self.world, plan_state.rebound, applied.rebound)
+            moved |= _rearranged(plan_state, applied, perceived)
             plan_state = applied
+            touched.append(_mapping_of(report.attempts[-1].proposal))
             keep_goal = bool((report.attempts[-1].proposal.get("evidence") or {}).get("keep_goal"))
             if base_goal and not keep_goal:  # the goal as the repair rewrote it (spliced placements stand for the
                 # replaced ones); a proposal that only prepares a later repair (keep_goal) leaves the goal alone
-                goal = self._rewritten_goal(domain, base_goal, report.initial_plan,
+                goal = self._rewritten_goal(domain, base_goal, origin_plan,
                                             [[a, *args] for a, args in plan_state.full_plan()], start_state, anchored,
                                             _still_undone(domain, undone, plan_state))
                 run.problem = dataclasses.replace(run.problem, goal=goal)
         report.plan = [[a, *args] for a, args in plan_state.full_plan()]
         report.rebound = dict(plan_state.rebound)
+        if report.status == "success" and report.refinements_used and not report.attempts \
+                and report.fallback is None and self.refinements is not None:
+            for method in report.refinements_used:  # replayed with zero attempts
+                self._note_replay(method, succeeded=True)
         if report.status == "success" and report.attempts and self.refinements is not None and self.save_refinements:
             # kept unless a repair says its plan does not replay from the start (bt_meta.meta.kept_plan)
             unkept = unkept_attempts(report.attempts, report.plan)
@@ -284,10 +349,22 @@ class MetaExecutor:
                 goal = list(getattr(run.problem, "goal", None) or [])
                 if replayed_report.plan != report.plan and base_goal:
                     # the goal the replayed plan reaches: a block a repair set aside is not moved in a replay
-                    goal = self._rewritten_goal(domain, base_goal, report.initial_plan, replayed_report.plan,
+                    goal = self._rewritten_goal(domain, base_goal, origin_plan, replayed_report.plan,
                                                 start_state, anchored)
-                report.refinement_saved = self._save_refinement(domain, replayed_report, start_objects, facts, goal,
-                                                                report.rebound)
+                weak = weakened_goal(base_goal, goal, touched_entities([*anchored[0], *anchored[1]],
+                                                                       [*touched, {e: e for e in moved}]))
+                if weak:
+                    report.refinement_saved = {"saved": False, "reason": "the replayed plan would weaken the goal: "
+                                               + ", ".join(atom_text(g) for g in weak) + " no longer reached"}
+                else:
+                    refines = origin_plan
+                    if report.fallback is None and report.refinements_used:  # repaired on top of a refinement
+                        refines = next((stored[m].refines for m in report.refinements_used
+                                        if m in stored and stored[m].refines), origin_plan)
+                    report.refinement_saved = self._save_refinement(domain, replayed_report, start_objects, facts,
+                                                                    goal, report.rebound, robot, refines,
+                                                                    _passed_through(report.attempts,
+                                                                                    replayed_report.plan))
         return self._finish(report, run, wall_started)
 
     def _perceive(self, domain: Any, refinements: list[Any], problem: Any, run: RunContext,
@@ -391,10 +468,12 @@ class MetaExecutor:
                domain: Any, report: RunReport, tried: set[str], started: float, effects: dict[str, int],
                skipped: list[dict[str, Any]],
                anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]],
-               undone: list[tuple[str, ...]]) -> PlanState | None:
+               undone: list[tuple[str, ...]],
+               guard: Callable[[Any, PlanState, PlanState, int], str | None] | None = None) -> PlanState | None:
         """The plan state of the first proposal that applies and does something no earlier attempt did;
-        ``skipped`` receives the others with why (not applicable, or equivalent to attempt N). The applied
-        proposal's ``facts`` (:func:`_apply_facts`) join the world's symbolic state and ``anchored``."""
+        ``skipped`` receives the others with why (not applicable, refused by ``guard`` -- it would change what
+        counts as done, also listed in ``report.refused`` -- or equivalent to attempt N). The applied proposal's
+        ``facts`` (:func:`_apply_facts`) join the world's symbolic state and ``anchored``."""
         # Repairs start from what the world is, not from what the failed run believed.
         symbolic = getattr(self.world, "symbolic_state", None)
         if symbolic is not None:
@@ -414,6 +493,15 @@ class MetaExecutor:
                 run.emit("repair", outcome="not_applicable", proposal=proposal.to_dict(), reason=str(error))
                 skipped.append({"proposal": proposal.to_dict(), "reason": f"not applicable: {error}"})
                 continue
+            refusal = None if guard is None else guard(proposal, plan_state, new_state, diagnosis.step)
+            if refusal is not None:
+                reason = f"refused: {refusal}"
+                log.info("meta: %s proposal of %s %s", proposal.action, proposal.plugin, reason)
+                run.emit("repair", outcome="refused", proposal=proposal.to_dict(), reason=reason)
+                skipped.append({"proposal": proposal.to_dict(), "reason": reason})
+                report.refused.append({"proposal": proposal.to_dict(), "step": diagnosis.step,
+                                       "kind": diagnosis.kind.value, "reason": refusal})
+                continue
             effect = plan_effect(new_state)
             if effect in effects:  # the identity of an attempt is what it does, not the node id it names
                 number = effects[effect]
@@ -429,6 +517,8 @@ class MetaExecutor:
                               replaced=replaced_steps(proposal, plan_state, diagnosis.step))
             attempt.failure.pop("evidence", None)
             attempt.failure["evidence_keys"] = sorted(diagnosis.failure.evidence)
+            if (signature := _monitor_signature(diagnosis.failure)) is not None:
+                attempt.failure["monitor"] = signature
             report.attempts.append(attempt)
             effects[effect] = attempt.number
             log.info("meta: attempt %d: %s (%s, score %.2f, %s) -> %s", attempt.number, proposal.action,
@@ -452,18 +542,167 @@ class MetaExecutor:
 
     def _save_refinement(self, domain: Any, report: RunReport, start_objects: dict[str, Any],
                          anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]],
-                         goal: list[Any], rebound: dict[str, str] | None = None) -> dict[str, Any] | None:
+                         goal: list[Any], rebound: dict[str, str] | None = None, robot: str | None = None,
+                         refines: list[list[str]] | None = None,
+                         expected: list[dict[str, Any]] | None = None) -> dict[str, Any] | None:
         from bt_meta.meta.refinements import RefinementError
 
+        listing = getattr(self.refinements, "list", None)
+        before = set() if listing is None else {r.id for r in listing(domain=self.base_domain.name)}
         try:
             saved = self.refinements.save_repair(self.base_domain, self.problem, report, start_objects,
                                                  variant=self.variant, names=_world_names(self.world, self.problem),
                                                  facts=(sorted(anchored[0]), sorted(anchored[1])), goal=goal,
-                                                 rebind=rebound or None)
+                                                 rebind=rebound or None, robot=robot, refines=refines,
+                                                 expected=expected or None)
         except RefinementError as error:
             log.info("meta: repaired plan not saved as a refinement: %s", error)
             return {"saved": False, "reason": str(error)}
-        return None if saved is None else saved.to_dict()
+        if saved is None:
+            return None
+        out = saved.to_dict()
+        if saved.id in before:  # an equivalent refinement is stored already: kept once
+            out["kept_once"] = f"equivalent to the stored {saved.method}; not stored again"
+        return out
+
+    # -- learned refinements: which to plan with, and the fallback when a replay fails ----------------------------
+
+    def _learned(self, report: RunReport, robot: str | None) -> tuple[Any, list[str], dict[str, Any]]:
+        """The domain with the learned refinements this run may plan with first, their names, and them by name.
+        Skipped (``report.refinements_skipped``, with why): demoted ones, another robot's, and any whose goal is
+        weaker than the problem's or whose plan leaves out a verification step of the hand-written plan."""
+        candidates = getattr(self.refinements, "candidates", None)
+        if candidates is None:  # a store of another kind: as it offers them
+            domain, added = self.refinements.apply(self.base_domain, self.problem)
+            listing = getattr(self.refinements, "list", None)
+            stored = {} if listing is None else {r.method: r for r in listing(domain=domain.name) if r.method in added}
+            return domain, added, stored
+        fitting, skipped = candidates(self.base_domain, robot)
+        refused = [{"method": r.method, "reason": why} for r in fitting
+                   if (why := self._weaker_refinement(r)) is not None]
+        report.refinements_skipped = skipped + refused
+        excluded = [r["method"] for r in refused]
+        domain, added = self.refinements.apply(self.base_domain, self.problem, robot=robot, exclude=excluded)
+        stored = {r.method: r for r in fitting if r.method in added}
+        return domain, added, stored
+
+    def _weaker_refinement(self, refinement: Any) -> str | None:
+        """Why ``refinement`` would change what counts as done, or ``None``: its goal drops a fact of the problem's
+        without an entity it perceived or rebound to account for it, or its plan leaves out a verification step
+        of the hand-written plan."""
+        goal = refinement.goal_atoms()
+        problem_goal = list(getattr(self.problem, "goal", None) or [])
+        add, delete = refinement.fact_atoms()
+        if goal is not None:
+            weak = weakened_goal(problem_goal, goal, touched_entities([*add, *delete], [refinement.rebind_symbols()]))
+            if weak:
+                return "its goal is weaker than the problem's: " + ", ".join(atom_text(g) for g in weak) + " dropped"
+        base = self._base_plan()
+        if base is None:
+            return None
+        needed = [atom_text(c) for c in verification_calls(self.world, base)]
+        missing = missing_verifications([(c,) for c in needed], [(str(s),) for s in refinement.subtasks])
+        if missing:
+            return "its plan leaves out the verification step(s) " + ", ".join(m[0] for m in missing)
+        return None
+
+    def _base_plan(self, problem: Any = None) -> PlanState | None:
+        """The hand-written methods' plan of the problem from its initial state (``problem``: another start)."""
+        from bt_meta.htn import plan
+
+        if problem is None and getattr(self, "_base", False) is not False:
+            return self._base
+        budget = self.plan_seconds if self.plan_seconds is not None else self.limits.max_seconds
+        try:
+            result = plan(self.base_domain, problem or self.problem, external=self.plugins.external_predicate,
+                          max_seconds=budget)
+        except BtMetaError as error:
+            log.info("meta: the hand-written methods do not plan the problem: %s", error)
+            result = None
+        found = None if result is None or result.status != "success" or result.tree is None \
+            else PlanState(result.tree)
+        if problem is None:
+            self._base = found
+        return found
+
+    def _fall_back(self, report: RunReport, plan_state: PlanState, failures: list[Failure], planned: Any,
+                   run: RunContext, external: Any, budget: float) -> PlanState | None:
+        """After the first failure of a plan from learned refinements: demote them, and the plan state to go on
+        with -- the hand-written plan at the failed step when the learned plan ran as it does up to there, else
+        the hand-written methods planned from the state the world is in now (``None`` when they plan nothing:
+        the learned plan is then repaired as it stands)."""
+        from bt_meta.htn import plan
+
+        failure = failures[-1]
+        reason = f"its replay failed: [{failure.kind.value}] step {failure.step} {failure.message}"
+        for method in report.refinements_used:
+            self._note_replay(method, succeeded=False, reason=reason)
+        report.refinements_demoted = list(report.refinements_used)
+        learned = [[a, *args] for a, args in plan_state.full_plan()]
+        failed = len(learned) if failure.kind is FailureKind.VERIFICATION and failure.step is None \
+            else _failed_step(failures, plan_state)
+        base = self._base_plan(dataclasses.replace(planned, goal=list(getattr(self.problem, "goal", None) or [])))
+        fallback = None
+        if base is not None:
+            hand = [[a, *args] for a, args in base.full_plan()]
+            same = next((i for i, (a, b) in enumerate(zip(learned, hand, strict=False)) if a != b),
+                        min(len(learned), len(hand)))
+            if failed <= same:  # nothing the refinement changed has run: the hand-written plan from here
+                fallback = dataclasses.replace(base, cursor=min(failed, len(hand)), rebound=dict(plan_state.rebound))
+                how = f"the hand-written plan from step {fallback.cursor}"
+        if fallback is None:
+            state = run.state
+            fresh = dataclasses.replace(self.problem, state=state, init=sorted(state))
+            result = plan(self.base_domain, fresh, external=external, max_seconds=budget)
+            if result.status == "success" and result.tree is not None:
+                done = [(str(s[0]), tuple(str(a) for a in s[1:])) for s in learned[:failed]]
+                fallback = PlanState(result.tree, 0, done, rebound=dict(plan_state.rebound))
+                how = f"the hand-written methods planned from where the world is now ({len(result.plan)} step(s))"
+        report.fallback = {"refinements": list(report.refinements_used), "step": failed, "reason": reason,
+                           "to": how if fallback is not None else None}
+        if fallback is None:
+            report.fallback["to"] = None
+            report.fallback["why_not"] = ("the hand-written methods plan nothing from where the world is now: the "
+                                          "learned plan is repaired as it stands")
+        log.info("meta: learned refinement(s) %s demoted (%s); fallback: %s", report.refinements_used, reason,
+                 report.fallback.get("to") or report.fallback.get("why_not"))
+        run.emit("repair", outcome="fallback", fallback=dict(report.fallback),
+                 reason=f"learned plan demoted ({reason}); going on with "
+                        f"{report.fallback.get('to') or 'it as it stands'}")
+        return fallback
+
+    def _note_replay(self, method: str, *, succeeded: bool, reason: str | None = None) -> None:
+        note = getattr(self.refinements, "note_replay", None)
+        if note is not None:
+            note(method, succeeded=succeeded, reason=reason)
+
+    def _weakens(self, proposal: Any, before: PlanState, after: PlanState, failed_step: int, domain: Any,
+                 base_goal: list[Any], origin_plan: list[list[str]], start_state: Any,
+                 anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]], undone: list[tuple[str, ...]],
+                 touched: list[dict[str, Any]]) -> str | None:
+        """Why applying ``proposal`` would change what counts as done (``None``: it does not): a verification step
+        still to pass would not run as it is, or the goal as the repair rewrites it drops a fact of ``base_goal``
+        that no entity the repairs perceived, substituted or rebound accounts for."""
+        # where the new plan resumes, in the old plan's steps (a backtrack resumes earlier, a replan from scratch
+        # commits the steps run): every verification step of the old plan from there must run as it is
+        resume = len(after.committed) + after.cursor - len(before.committed)
+        needed = verification_calls(self.world, before, max(0, min(failed_step, resume)))
+        remaining = [tuple(str(a) for a in n.task) for n in after.steps()[after.cursor:]]
+        missing = missing_verifications(needed, remaining)
+        if missing:
+            return ("it would rewrite, skip or drop the verification step(s) "
+                    + ", ".join(atom_text(c) for c in missing))
+        if not base_goal or (getattr(proposal, "evidence", None) or {}).get("keep_goal"):
+            return None
+        add, delete = proposal_facts(getattr(proposal, "changes", None) or {})
+        facts = (anchored[0] | set(add), anchored[1] | set(delete))
+        goal = self._rewritten_goal(domain, base_goal, origin_plan, [[a, *args] for a, args in after.full_plan()],
+                                    start_state, facts, _still_undone(domain, [*undone, *delete], after))
+        mappings = [*touched, _mapping_of(proposal.to_dict() if hasattr(proposal, "to_dict") else {})]
+        weak = weakened_goal(base_goal, goal, touched_entities([*facts[0], *facts[1]], mappings))
+        if weak:
+            return "it would weaken the goal: " + ", ".join(atom_text(g) for g in weak) + " no longer reached"
+        return None
 
     def _finish(self, report: RunReport, run: RunContext, wall_started: float) -> RunReport:
         report.failures = [f.to_dict() for f in run.failures]
@@ -506,6 +745,83 @@ def _still_undone(domain: Any, undone: list[tuple[str, ...]], plan_state: PlanSt
             continue
         again |= {tuple(str(a) for a in f) for f in added}
     return [f for f in undone if f not in again]
+
+
+def _robot_name(world: Any) -> str | None:
+    """The name of the robot ``world`` runs (``world.robot_name``, or its simulation's robot), ``None`` unknown."""
+    name = getattr(world, "robot_name", None)
+    if name is None:
+        name = getattr(getattr(getattr(world, "sim", None), "robot", None), "name", None)
+    return None if name is None else str(name)
+
+
+def _monitor_signature(failure: Failure) -> list[list[Any]] | None:
+    """What a monitor objected to (each mismatch's kind, plugin and failed relations), ``None`` for a failure no
+    monitor raised (a skill's, a verification)."""
+    mismatches = (failure.evidence or {}).get("mismatches")
+    if not mismatches:
+        return None
+    return sorted([str(m.get("kind")), str(m.get("plugin")), sorted(str(x) for x in (m.get("evidence") or {})
+                                                                   .get("failed") or [])] for m in mismatches)
+
+
+def _passed_through(attempts: list[Attempt], plan: list[list[str]]) -> list[dict[str, Any]]:
+    """The monitor objections of ``attempts`` that a refinement replaying ``plan`` will meet again: the failed step
+    is in ``plan`` at the same place, kept as it ran, because its attempt's plugin keeps a plan that replays the
+    moves this run made before the repair (``evidence["replay_plan"]``)."""
+    out = []
+    for attempt in attempts:
+        failure = attempt.failure
+        monitor = failure.get("monitor")
+        step = failure.get("step")
+        if not monitor or step is None or not (attempt.proposal.get("evidence") or {}).get("replay_plan"):
+            continue
+        call = [str(failure.get("action")), *(str(a) for a in failure.get("args") or [])]
+        if 0 <= int(step) < len(plan) and [str(a) for a in plan[int(step)]] == call:
+            out.append({"step": int(step), "kind": failure.get("kind"), "call": call, "monitor": monitor})
+    return out
+
+
+def _expected_by(failures: list[Failure], plan_state: PlanState, expected: list[dict[str, Any]]
+                 ) -> dict[str, Any] | None:
+    """The entry of ``expected`` (taken out of it) that the segment's failure is: the same monitor objection at the
+    same step of the same plan, with the step's call as it was; ``None`` when it is anything else."""
+    located = [f for f in failures if f.step is not None]
+    if not located or not expected:
+        return None
+    failure = located[-1]
+    signature = _monitor_signature(failure)
+    steps = plan_state.steps()
+    if signature is None or not 0 <= failure.step < len(steps) or len(plan_state.committed):
+        return None
+    call = [str(a) for a in steps[failure.step].task]
+    for index, entry in enumerate(expected):
+        if (int(entry.get("step", -1)) == failure.step and entry.get("kind") == failure.kind.value
+                and [str(a) for a in entry.get("call") or []] == call and entry.get("monitor") == signature):
+            del expected[index]
+            return {**entry, "message": failure.message}
+    return None
+
+
+def _rearranged(before: PlanState, after: PlanState, perceived: set[str]) -> set[str]:
+    """The perceived objects named by steps ``after`` runs differently from ``before`` (from where either resumes)."""
+    def calls(state: PlanState) -> Counter[tuple[str, ...]]:
+        return Counter(tuple(str(a) for a in n.task) for n in state.steps()[state.cursor:])
+
+    old, new = calls(before), calls(after)
+    changed = (old - new) + (new - old)
+    return {str(a) for call in changed for a in call[1:] if str(a) in perceived}
+
+
+def _mapping_of(proposal: dict[str, Any]) -> dict[str, Any]:
+    """The objects a proposal renames or rebinds (``substitute``'s mapping, ``rebind``'s symbols)."""
+    changes = proposal.get("changes") or {}
+    out: dict[str, Any] = {}
+    for key in ("mapping", "symbols"):
+        value = changes.get(key)
+        if isinstance(value, dict):
+            out.update({str(k): str(v) for k, v in value.items()})
+    return out
 
 
 def _rebind(world: Any, before: dict[str, str], after: dict[str, str]) -> None:

@@ -12,7 +12,9 @@ repair's rewrite of the goal (:func:`rewrite_goal`) is kept as :attr:`Refinement
 the refinement is verified against. A repair that grounded a task-file symbol as another object (a spare for a
 missing part, ``rebind``) is kept as :attr:`Refinement.rebind`: the executor rebinds the same symbols when the
 precondition (which then names the spare's starting pose) holds. Refinements live in the episodic memory file
-(table ``refinements``, schema v3; ``facts``, ``goal`` and ``rebind`` ride in its ``repair`` column); the next
+(table ``refinements``, schema v3; ``facts``, ``goal`` and ``rebind`` ride in its ``repair`` column; v4 adds the
+robot that learned it, the plan it refined, its status -- a refinement whose replay failed is demoted -- and its
+replay counts; an equivalent refinement is stored once, :meth:`RefinementStore.equivalent`); the next
 run of the same variant plans with them first, so it succeeds with zero repair attempts; a run whose objects are
 elsewhere (or other) fails the precondition and plans as before.
 
@@ -77,6 +79,10 @@ SEEN_ARITY = 3
 _SYMBOL = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.:+-]*$")  # what a task file reads back as one constant
 log = logging.getLogger("bt_meta.meta")
 
+ACTIVE = "active"
+DEMOTED = "demoted"
+ANY_ROBOT: Any = object()
+"""``robot`` of :meth:`RefinementStore.apply` left out: refinements of any robot."""
 DEFAULT_TOLERANCE = {"position": 0.02, "angle": 0.1}
 """Metres and radians: a refinement applies when every object starts this close to its recorded pose."""
 
@@ -124,6 +130,17 @@ class Refinement:
     """The problem's goal as the repair rewrote it (``None``: unchanged); what a run using it is verified against."""
     rebind: dict[str, str] = field(default_factory=dict)
     """Task-file symbol -> world object the repair grounded it as (a spare standing in for a missing part)."""
+    robot: str | None = None
+    """The robot that learned it (``None``: unknown, stored before v4); another robot does not replay it."""
+    refines: list[list[str]] | None = None
+    """The plan it refined (the hand-written methods' plan): what a repair after a failed replay starts from."""
+    status: str = ACTIVE
+    """``active`` (planned with first) or ``demoted`` (its replay failed; kept, not planned with)."""
+    status_reason: str | None = None
+    replays: int = 0
+    """Replays that succeeded with zero repair attempts."""
+    failures: int = 0
+    """Replays that failed (each demotes it)."""
     id: int | None = None
     created: str = ""
 
@@ -311,11 +328,14 @@ class RefinementStore:
         try:
             cursor = self._connection.execute(
                 "INSERT INTO refinements (created, domain, domain_path, task, method, precondition, subtasks, poses,"
-                " tolerance, problem, variant, repair) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                " tolerance, problem, variant, repair, robot, refines, status, status_reason, replays, failures)"
+                " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (refinement.created, refinement.domain, refinement.domain_path, refinement.task, refinement.method,
                  refinement.precondition,
                  json.dumps(refinement.subtasks), json.dumps(refinement.poses), json.dumps(refinement.tolerance),
-                 refinement.problem, refinement.variant, json.dumps(_repair_column(refinement), default=str)))
+                 refinement.problem, refinement.variant, json.dumps(_repair_column(refinement), default=str),
+                 refinement.robot, None if refinement.refines is None else json.dumps(refinement.refines),
+                 refinement.status, refinement.status_reason, refinement.replays, refinement.failures))
         except sqlite3.IntegrityError:
             raise RefinementError(f"a refinement named {refinement.method} is already stored in {self.path}") from None
         except sqlite3.Error as error:
@@ -327,7 +347,9 @@ class RefinementStore:
                     variant: str | None = None, names: dict[str, str] | None = None,
                     facts: tuple[Iterable[Sequence[str]], Iterable[Sequence[str]]] | None = None,
                     goal: Sequence[Sequence[str]] | None = None,
-                    rebind: dict[str, str] | None = None) -> Refinement:
+                    rebind: dict[str, str] | None = None, robot: str | None = None,
+                    refines: Sequence[Sequence[str]] | None = None,
+                    expected: Sequence[dict[str, Any]] | None = None) -> Refinement:
         """Turn a successful repaired run (``report``, a :class:`~bt_meta.meta.executor.RunReport`) into a
         refinement of the problem's task and store it; the objects' starting poses become its precondition.
 
@@ -337,7 +359,13 @@ class RefinementStore:
         the refinement the world reported are kept, and each ``attribute(obj, value)`` among them that the world
         reported at the start (``start_objects[obj][attribute] == value``) becomes a ``seen`` condition. ``goal``
         is the goal as the repair rewrote it (kept when it differs from the problem's). ``rebind`` are the grounding
-        symbols the repair grounded as other objects (``names`` then already maps them so)."""
+        symbols the repair grounded as other objects (``names`` then already maps them so). ``robot`` is the robot
+        that learned it, ``refines`` the plan it refined (default: the report's initial plan), ``expected`` the
+        monitor objections its plan replays through (kept in :attr:`Refinement.repair`, ``"expected"``).
+
+        A stored refinement equivalent to the new one (:meth:`equivalent`: the same plan, facts, goal, rebinding
+        and robot, its objects' starting poses within the tolerance of the new ones) is kept once: it is returned
+        (made active again if it was demoted) and nothing is added."""
         tasks = list(getattr(problem, "tasks", None) or [])
         if len(tasks) != 1:
             raise RefinementError(f"the problem has {len(tasks)} root tasks; a refinement refines exactly one")
@@ -356,24 +384,50 @@ class RefinementStore:
         goal_atoms = None if goal is None else [[str(a) for a in g] for g in goal]
         if goal_atoms is not None and goal_atoms == [[str(a) for a in g] for g in getattr(problem, "goal", None) or []]:
             goal_atoms = None
-        identity = [subtasks, poses, kept, goal_atoms] + ([rebind] if rebind else [])
+        identity = [subtasks, poses, kept, goal_atoms] + ([rebind] if rebind else []) + ([robot] if robot else [])
         digest = hashlib.sha1(json.dumps(identity, sort_keys=True).encode()).hexdigest()[:8]
         method = f"refined_{task[0]}_{digest}"
-        existing = [r for r in self.list(domain=domain.name) if r.method == method]
-        if existing:
-            return existing[0]
+        candidate = Refinement(domain=domain.name, task=atom_text(task), method=method, precondition="",
+                               subtasks=subtasks, poses=poses, facts=kept, goal=goal_atoms, rebind=rebind, robot=robot)
+        existing = next((r for r in self.list(domain=domain.name)
+                         if r.method == method or self.equivalent(r, candidate)), None)
+        if existing is not None:
+            if existing.status != ACTIVE:
+                self.promote(existing.method, "learned again by a repair from the plan it refines")
+                existing.status, existing.status_reason = ACTIVE, "learned again by a repair from the plan it refines"
+            return existing
         source = getattr(domain, "path", None)
         domain_path = str(Path(source).resolve()) if source and not source.startswith("<") else None
         refinement = Refinement(
             domain=domain.name, domain_path=domain_path, task=atom_text(task), method=method,
             precondition=pose_precondition(poses, self.tolerance, seen), subtasks=subtasks, poses=poses,
-            facts=kept, goal=goal_atoms, rebind=rebind,
+            facts=kept, goal=goal_atoms, rebind=rebind, robot=robot,
+            refines=[[str(a) for a in step] for step in (refines if refines is not None else report.initial_plan)],
             tolerance=dict(self.tolerance), problem=getattr(problem, "name", None), variant=variant,
             repair={"attempts": len(report.attempts), "kinds": [a.kind for a in report.attempts],
                     "proposals": [{"action": a.proposal.get("action"), "plugin": a.proposal.get("plugin"),
-                                   "change": a.change} for a in report.attempts]})
+                                   "change": a.change} for a in report.attempts],
+                    **({"expected": [dict(e) for e in expected]} if expected else {})})
         refinement.to_method(domain_with_pose_predicate(domain))  # it must load before it is stored
         return self.add(refinement)
+
+    def equivalent(self, stored: Refinement, new: Refinement) -> bool:
+        """Whether ``new`` would replay as ``stored`` does: the same task, plan, perceived facts, goal, rebinding
+        and robot, and every object starting within the tolerance (this store's) of where it started for it."""
+        same = (stored.task == new.task and list(stored.subtasks) == list(new.subtasks)
+                and (stored.facts or {}) == (new.facts or {}) and stored.goal == new.goal
+                and (stored.rebind or {}) == (new.rebind or {}) and stored.robot == new.robot
+                and set(stored.poses) == set(new.poses))
+        if not same:
+            return False
+        position, angle = float(self.tolerance["position"]), float(self.tolerance["angle"])
+        for name, pose in new.poses.items():
+            old = stored.poses[name]
+            if math.dist(old[:3], pose[:3]) > position:
+                return False
+            if any(abs(math.remainder(a - b, math.tau)) > angle for a, b in zip(old[3:], pose[3:], strict=True)):
+                return False
+        return True
 
     # -- reading -------------------------------------------------------------------------------------------------
 
@@ -387,8 +441,8 @@ class RefinementStore:
             where.append("task = ?")
             params.append(task)
         sql = ("SELECT id, created, domain, task, method, precondition, subtasks, poses, tolerance, problem, variant,"
-               " repair, domain_path FROM refinements" + (" WHERE " + " AND ".join(where) if where else "")
-               + " ORDER BY id DESC")
+               " repair, domain_path, robot, refines, status, status_reason, replays, failures FROM refinements"
+               + (" WHERE " + " AND ".join(where) if where else "") + " ORDER BY id DESC")
         refinements = []
         for row in self._query(sql, params):
             repair = json.loads(row[11])
@@ -399,16 +453,58 @@ class RefinementStore:
                 id=row[0], created=row[1], domain=row[2], task=row[3], method=row[4], precondition=row[5],
                 subtasks=json.loads(row[6]), poses=json.loads(row[7]), tolerance=json.loads(row[8]),
                 problem=row[9], variant=row[10], repair=repair, domain_path=row[12], facts=facts or {}, goal=goal,
-                rebind=rebind or {}))
+                rebind=rebind or {}, robot=row[13], refines=None if row[14] is None else json.loads(row[14]),
+                status=row[15], status_reason=row[16], replays=row[17], failures=row[18]))
         return refinements
 
-    def apply(self, domain: Any, problem: Any = None) -> tuple[Any, list[str]]:
-        """A copy of ``domain`` with this memory's refinements of it as its first methods (newest first), and the
-        names added; refinements of tasks the domain no longer has are skipped."""
-        fitting = [r for r in self.list(domain=domain.name) if r.task.split("(")[0] in domain.tasks]
+    def candidates(self, domain: Any, robot: Any = ANY_ROBOT, exclude: Iterable[str] = ()
+                   ) -> tuple[list[Refinement], list[dict[str, str]]]:
+        """The refinements of ``domain``'s tasks to plan with first (newest first), and the others with why not: a
+        demoted one (its replay failed), one another robot learned (its motions are that arm's: this robot's own
+        repair from the hand-written method is the safe start), one in ``exclude``. ``robot`` left out: any."""
+        fitting, skipped = [], []
+        excluded = set(exclude)
+        for refinement in self.list(domain=domain.name):
+            if refinement.task.split("(")[0] not in domain.tasks:
+                continue
+            if refinement.method in excluded:
+                continue
+            if refinement.status != ACTIVE:
+                skipped.append({"method": refinement.method, "reason": f"{refinement.status}: "
+                                f"{refinement.status_reason or 'its replay failed'}"})
+            elif robot is not ANY_ROBOT and refinement.robot is not None and refinement.robot != robot:
+                skipped.append({"method": refinement.method, "reason": f"learned by the robot {refinement.robot}, "
+                                f"not by {robot or 'this world'}: not replayed on another robot"})
+            else:
+                fitting.append(refinement)
+        return fitting, skipped
+
+    def apply(self, domain: Any, problem: Any = None, *, robot: Any = ANY_ROBOT,
+              exclude: Iterable[str] = ()) -> tuple[Any, list[str]]:
+        """A copy of ``domain`` with this memory's active refinements of it (learned by ``robot``, or by an unknown
+        robot; any robot when left out) as its first methods (newest first), and the names added; refinements of
+        tasks the domain no longer has, demoted ones and ``exclude`` are skipped (:meth:`candidates`)."""
+        fitting, _ = self.candidates(domain, robot, exclude)
         if not fitting:
             return domain, []
         return with_refinements(domain, fitting)
+
+    def note_replay(self, method: str, *, succeeded: bool, reason: str | None = None) -> None:
+        """Count a replay of ``method``: a success, or a failure that demotes it (kept, no longer planned with,
+        ``reason`` recorded). Read-only stores and unknown methods are left alone."""
+        if self.readonly:
+            return
+        if succeeded:
+            self._query("UPDATE refinements SET replays = replays + 1 WHERE method = ?", (method,))
+        else:
+            self._query("UPDATE refinements SET failures = failures + 1, status = ?, status_reason = ? "
+                        "WHERE method = ?", (DEMOTED, reason or "its replay failed", method))
+
+    def promote(self, method: str, reason: str) -> None:
+        """Make ``method`` active again (a repair found the same refinement again, from the hand-written plan)."""
+        if not self.readonly:
+            self._query("UPDATE refinements SET status = ?, status_reason = ? WHERE method = ?",
+                        (ACTIVE, reason, method))
 
     def export_yaml(self, domain: Any, problems: Iterable[Any] = ()) -> str:
         """The task file of ``domain`` with this memory's refinements of it first, plus ``problems``."""

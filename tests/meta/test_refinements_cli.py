@@ -45,7 +45,8 @@ def test_ls_shows_the_perceived_facts_and_the_rewritten_goal(tmp_path, capsys):
     assert any("splice by object_substitution: b5 -> b5, b6" in line for line in block)
     plain = _block(out, "refined_pose")  # nothing perceived, goal unchanged: no empty lines about them
     assert not any("perceived facts" in line or "goal" in line for line in plain)
-    assert len(plain) == 4
+    assert len(plain) == 5
+    assert plain[1] == "    robot unknown; active; replayed 0 time(s), failed 0"
 
 
 def test_ls_json_carries_facts_and_goal(tmp_path, capsys):

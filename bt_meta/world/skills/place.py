@@ -108,6 +108,15 @@ def symmetry(model: Any) -> float:
     return yaw_period(model)
 
 
+def _lying_period(model: Any, transform: np.ndarray) -> float:
+    """The yaw period of a part as it lies: its shape's about its own z axis when that is near vertical; on a side,
+    its shape label's (the letters' blocks, as their re-orientations were measured), else none (a pin lying
+    down is not symmetric about the vertical)."""
+    if abs(float(transform[2, 2])) >= math.cos(math.radians(30.0)):
+        return symmetry(model)
+    return {"1x1": math.pi / 2.0, "1x2": math.pi}.get(getattr(model, "shape", None) or "", 2.0 * math.pi)
+
+
 def nearest_yaw(yaw: float, period: float, preferred: float) -> float:
     k = round((preferred - yaw) / period)
     return yaw + k * period
@@ -353,7 +362,7 @@ class Place(PhasedSkill):
         if self._yaw is None:
             sim = self.world.sim
             transform = sim.object_transform(self.block)
-            period = symmetry(sim.object_model(self.block))
+            period = _lying_period(sim.object_model(self.block), transform)
             preferred = nearest_yaw(object_yaw(transform), period, sim.robot.arm(self.arm).top_down_yaw)
             if sim.grasps_by_friction(self.block, self.arm):
                 # the fingers close on two of the part's own faces: each quarter turn from the preferred, the

@@ -90,15 +90,18 @@ class GridMapExpectations:
         remembered = remember(memory, context, self.n)
         if remembered is None:
             return None
-        names = {str(a) for a in context.args}
+        names, at_numbers = _named(context)
         traces = []
         for record in remembered.records:
-            maps = record.step.state.grid_maps
-            chosen = [m for m in maps if m.object_name in names] or list(maps)
+            chosen = list(record.step.state.grid_maps)
             if chosen:
                 traces.append({"episode": record.episode_id, "maps": chosen})
         if not traces:
             return None
+        # where the step put it by numbers of a frame (place(b5, 1.5, 1)): there; anything else it names or moved
+        # (carried to a pose symbol, inserted into another part, lifted where it lay): as it looks where it is
+        relative = sorted({str(m.object_name) for t in traces for m in t["maps"]
+                           if not (at_numbers and str(m.object_name) in names)})
         colours = symbol_colours(context) if self.symbol_colours else {}
         call = f"{context.action}({', '.join(str(a) for a in context.args)})"
         return [Expectation(
@@ -111,6 +114,7 @@ class GridMapExpectations:
                 "rotations": self.rotations,
                 "recentre_radius": self.recentre_radius,
                 "colours": colours,
+                "relative": relative,
                 "parent_task": remembered.parent_task,
                 "task_end": remembered.task_end,
                 "matched_by": remembered.key,
@@ -129,6 +133,47 @@ class GridMapExpectations:
         if run is not None and observations.get("image") is not None:
             self._view = (id(run), observations["image"])
         return result
+
+
+def _named(context: Any) -> tuple[set[str], bool]:
+    """(world objects the step's arguments name, whether its other arguments are all numbers -- a point of a
+    frame the step puts the object at)."""
+    world = getattr(context, "world", None)
+    to_world = getattr(world, "object_name", None)
+    names, numbers, counted = set(), True, False
+    for arg in (str(a) for a in getattr(context, "args", ())):
+        try:
+            float(arg)
+            counted = True
+            continue
+        except ValueError:
+            pass
+        name = None
+        if to_world is not None:
+            try:
+                name = str(to_world(arg))
+            except Exception:  # not an object of the world: a pose symbol, a feature
+                name = None
+        if name is None and world is None:
+            name = arg
+        if name is None:
+            numbers = False
+        else:
+            names.add(name)
+    return names, numbers and counted and bool(names)
+
+
+def _located(name: str, observations: dict[str, Any], view: Any) -> Any:
+    """Where (x, y) object ``name`` is observed now: its observed state, else the camera's block named after it;
+    ``None`` when it is not seen."""
+    state = (observations.get("objects") or {}).get(name)
+    pose = state.get("pose") if isinstance(state, dict) else getattr(state, "pose", None)
+    if pose is not None:
+        return (float(pose[0]), float(pose[1]))
+    for block in getattr(view, "blocks", ()) or ():
+        if hasattr(view, "name_of") and view.name_of(block) == name:
+            return tuple(block.centroid)
+    return None
 
 
 def _blobs(grid: np.ndarray) -> tuple[np.ndarray, int]:
@@ -254,6 +299,21 @@ def _off_colour(expected: Any, observed: Any, code: int) -> int:
     return int(np.count_nonzero(moved & wanted & (seen != code)))
 
 
+def _detail(expected: Any, observed: Any, block: Any, off_colour: int, cells: int, wanted: str | None = None
+            ) -> dict[str, Any]:
+    return {
+        "object": expected.object_name,
+        "cells": cells,
+        "off_colour": off_colour,
+        "symbol_colour": wanted,
+        "expected": {"colour": expected.colour, "shape": expected.shape,
+                     "centroid": list(expected.centroid), "grid": render(expected)},
+        "observed": {"colour": observed.colour, "shape": observed.shape,
+                     "centroid": list(observed.centroid), "grid": render(observed),
+                     "block_seen": block is not None},
+    }
+
+
 def colours_from_environment() -> bool:
     """``$BT_META_GRIDMAP_COLOURS``: ``symbols`` (colour matters where the task's symbols name it) or ``occupancy``
     (the paper's colour presence; also when unset)."""
@@ -290,16 +350,26 @@ def compare(expectation: Expectation, observations: dict[str, Any], before: Any 
         return None
     data = expectation.data
     best: dict[str, Any] | None = None
+    relative = set(data.get("relative") or ())
     for trace in data["traces"]:
         details = []
         for expected in trace["maps"]:
-            block = view.block_near(expected.centroid, data["recentre_radius"])
+            centre = expected.centroid
+            if expected.object_name in relative:  # as it looks where it is now
+                centre = _located(str(expected.object_name), observations, view)
+                if centre is None:
+                    centre = expected.centroid if "objects" not in observations else None
+            if centre is None:  # gone from the world: every cell memory expected occupied differs
+                details.append(_detail(expected, view.grid_map_at(expected.centroid), None, 0,
+                                       int(np.count_nonzero(np.asarray(expected.occupancy)))))
+                continue
+            block = view.block_near(centre, data["recentre_radius"])
             if block is not None and block.shape == "unknown":
                 block = None  # blocks merged into one blob: its centroid is nobody's
             if block is not None:
                 observed = view.grid_map_at(block.centroid, z=block.top_z, colour=block.colour, shape=block.shape)
             else:
-                observed = view.grid_map_at(expected.centroid)
+                observed = view.grid_map_at(centre)
             if before is not None and hasattr(before, "grid_map_at") and not data["rotations"]:
                 observed = _without_earlier(expected, observed, before.grid_map_at(
                     observed.centroid, z=None if block is None else block.top_z))
@@ -308,17 +378,7 @@ def compare(expectation: Expectation, observations: dict[str, Any], before: Any 
             off_colour = 0
             if wanted is not None and wanted in getattr(getattr(view, "thresholds", None), "names", ()):
                 off_colour = _off_colour(expected, observed, view.thresholds.code(wanted))
-            details.append({
-                "object": expected.object_name,
-                "cells": cells + off_colour,
-                "off_colour": off_colour,
-                "symbol_colour": wanted,
-                "expected": {"colour": expected.colour, "shape": expected.shape,
-                             "centroid": list(expected.centroid), "grid": render(expected)},
-                "observed": {"colour": observed.colour, "shape": observed.shape,
-                             "centroid": list(observed.centroid), "grid": render(observed),
-                             "block_seen": block is not None},
-            })
+            details.append(_detail(expected, observed, block, off_colour, cells + off_colour, wanted))
         worst = max(d["cells"] for d in details)
         if best is None or worst < best["cells"]:
             best = {"episode": trace["episode"], "cells": worst, "maps": details}

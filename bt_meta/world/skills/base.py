@@ -157,6 +157,8 @@ class SimSkill:
         if sim is not None and hasattr(sim, "object_names"):
             away = off_workspace(self.world)
             self._watched = [n for n in sim.object_names() if n not in away]
+            # where everything was when the step started: what a monitor compares the step's doing with
+            self.world.step_start_poses = {n: [float(v) for v in sim.object_pose(n)] for n in sim.object_names()}
         try:
             self.ground(self.args)
         except SkillAbort as abort:

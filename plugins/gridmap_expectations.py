@@ -2,7 +2,10 @@
 
 For a monitored step the episodic memory gives the states after the same step in the last N successful traces
 (:mod:`bt_meta.perception.recall`). Their grid-maps of the objects the step names (e.g. ``place(b5, 1.5, 1)``:
-b5's map) -- or every map of the state when none is named after an argument -- are the expectation. The
+b5's map), and of every other object the step moved, whatever its type, are the expectation. A step that puts
+an object at numbers of a frame (``place``) is checked where memory had the object; every other object (carried
+to a pose symbol, lifted, inserted, knocked) is checked as it looks where it is observed now
+(``observations["objects"]``), not where it is: its window is centred on it. The
 observation is the top view of camera perception (``observations["image"]``): for each remembered map the block
 seen nearest its centroid (within ``recentre_radius``, default a quarter block) is cropped centred on its own
 centroid, as the paper crops blobs; when no single block is there (nothing, or blocks touching each other merged

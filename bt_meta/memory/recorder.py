@@ -3,8 +3,9 @@
 The recorder listens to ``bt_meta_trace_event`` (``run_start``, ``step_start``, ``step_end``, ``run_end``) and, at
 every ``step_end``, reads what the run left behind from the installed run and its world: the belief state
 (symbolic facts), the object states (pose, attachment point AP in the base frame, attachment normal AN in the
-object frame) and -- when the world is a simulator with a top camera -- the grid-map of each block the step names
-(camera perception's ``object_gridmaps``: the block's 3 lb window centred where it truly lies, the instructor's
+object frame) and -- when the world is a simulator with a top camera -- the grid-map of each object the step names
+or moved (:func:`moved_objects`), of any type (camera perception's ``object_gridmaps`` for blocks, the same view
+cropped for a cylinder, a mesh, a housing: the object's 3 lb window centred where it truly lies, the instructor's
 annotation of section 6.3). Parent task and parent node come from the decomposition tree (given, or planned again
 from the run's domain and problem). At ``run_end`` the trace -- episode, initial state, steps and E_db rows -- is
 written in ONE :meth:`~bt_meta.memory.EpisodicMemory.write` (one transaction): successful runs always, failed runs
@@ -28,6 +29,7 @@ Offers:
 * :class:`RecorderError` -- a run that cannot become a trace (no installed run, no root task, no task file)
 * :func:`object_states_of` -- a world's object states as memory :class:`~bt_meta.memory.ObjectState`
 * :func:`root_task_name` -- the episode key of a problem (its root task)
+* :func:`moved_objects` -- the objects a step shifted or turned (what is watched besides what it names)
 """
 
 from __future__ import annotations

@@ -7,7 +7,11 @@ frame's (a 1x2 block lies along the letter's x axis); a catalogue type with gras
 one instead of its centroid. The symbols x and y are grounded by the world through the
 grounding file's frame (letters: lb = 6.1 cm from the scene's ``letter_origin`` anchor).
 
-After the release the block must rest within ``tolerance`` of the target, else kind ``physical``.
+After the release the block must rest within ``tolerance`` of the target, on its base (within
+:data:`FACE_TOLERANCE`) and at the target's heading up to its shape's yaw period (within
+:data:`HEADING_TOLERANCE`), else kind ``physical``; a turn must leave it at least :data:`TURN_GAIN` nearer standing.
+The target height is what is under it: the frame's ``support:`` (a tray, a fixture, the part to stack on), else
+its anchor's height, else the table (docs/scenes.md, "Supports").
 
 A grounding file's ``mode: turn`` makes it the re-orientation of a block lying on another face (the primitive
 takes only the block): picked top-down at the face it now shows, turned in the gripper by at most a quarter

@@ -366,16 +366,24 @@ def compare(expectation: Expectation, observations: dict[str, Any], before: Any 
                 details.append(_detail(expected, view.grid_map_at(expected.centroid), None, 0,
                                        int(np.count_nonzero(np.asarray(expected.occupancy)))))
                 continue
-            block = view.block_near(centre, data["recentre_radius"])
-            if block is not None and block.shape == "unknown":
-                block = None  # blocks merged into one blob: its centroid is nobody's
-            if block is not None:
-                observed = view.grid_map_at(block.centroid, z=block.top_z, colour=block.colour, shape=block.shape)
+            if expected.object_name in relative:
+                # cropped as the recorder cropped it: centred on the object itself, on the height of what is seen
+                # there (not recentred on another blob: a part resting on it is not it)
+                block = None
+                seen = view.block_near(centre, 0.5 * LB)
+                top = None if seen is None else seen.top_z
+                observed = view.grid_map_at(centre, z=top)
             else:
-                observed = view.grid_map_at(centre)
+                block = view.block_near(centre, data["recentre_radius"])
+                if block is not None and block.shape == "unknown":
+                    block = None  # blocks merged into one blob: its centroid is nobody's
+                top = None if block is None else block.top_z
+                if block is not None:
+                    observed = view.grid_map_at(block.centroid, z=top, colour=block.colour, shape=block.shape)
+                else:
+                    observed = view.grid_map_at(centre)
             if before is not None and hasattr(before, "grid_map_at") and not data["rotations"]:
-                observed = _without_earlier(expected, observed, before.grid_map_at(
-                    observed.centroid, z=None if block is None else block.top_z))
+                observed = _without_earlier(expected, observed, before.grid_map_at(observed.centroid, z=top))
             cells = _distance(expected, observed, data["compare_colour"], data["rotations"])
             wanted = (data.get("colours") or {}).get(str(expected.object_name))
             off_colour = 0

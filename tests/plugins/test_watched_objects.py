@@ -149,3 +149,13 @@ def test_the_recorder_keeps_a_grid_map_of_a_catalogue_cylinder_a_step_names(tmp_
         assert [m.object_name for m in moved] == ["b0", "b1"]  # what a step moved, named or not
     finally:
         world.close()
+
+
+def test_what_the_robot_carries_is_left_to_its_orientation():
+    """A part held, and what is joined to it, is not judged from above (a lifted subassembly hides its parts)."""
+    sim = SimpleNamespace(robot=SimpleNamespace(arms={"right": None, "left": None}),
+                          held=lambda arm: "active" if arm == "right" else None,
+                          attachments=lambda: [("active", "reference"), ("reference", "base_plate"), ("x", "y")])
+    context = SimpleNamespace(world=SimpleNamespace(sim=sim))
+    assert gridmap_plugin._carried(context) == {"active", "reference", "base_plate"}
+    assert gridmap_plugin._carried(SimpleNamespace(world=None)) == set()

@@ -2,7 +2,11 @@
 
 For a monitored step the episodic memory gives the states after the same step in the last N successful traces
 (:mod:`bt_meta.perception.recall`). Their grid-maps of the objects the step names (e.g. ``place(b5, 1.5, 1)``:
-b5's map) -- or every map of the state when none is named after an argument -- are the expectation. The
+b5's map), and of every other object the step moved, whatever its type, are the expectation. A step that puts
+an object at numbers of a frame (``place``) is checked where memory had the object; every other object (carried
+to a pose symbol, lifted, inserted, knocked) is checked as it looks where it is observed now
+(``observations["objects"]``), not where it is: its window is centred on it -- except while the robot carries
+it (held, or joined to what is held: the keypoint plugin watches its orientation there). The
 observation is the top view of camera perception (``observations["image"]``): for each remembered map the block
 seen nearest its centroid (within ``recentre_radius``, default a quarter block) is cropped centred on its own
 centroid, as the paper crops blobs; when no single block is there (nothing, or blocks touching each other merged
@@ -90,15 +94,18 @@ class GridMapExpectations:
         remembered = remember(memory, context, self.n)
         if remembered is None:
             return None
-        names = {str(a) for a in context.args}
+        names, at_numbers = _named(context)
         traces = []
         for record in remembered.records:
-            maps = record.step.state.grid_maps
-            chosen = [m for m in maps if m.object_name in names] or list(maps)
+            chosen = list(record.step.state.grid_maps)
             if chosen:
                 traces.append({"episode": record.episode_id, "maps": chosen})
         if not traces:
             return None
+        # where the step put it by numbers of a frame (place(b5, 1.5, 1)): there; anything else it names or moved
+        # (carried to a pose symbol, inserted into another part, lifted where it lay): as it looks where it is
+        relative = sorted({str(m.object_name) for t in traces for m in t["maps"]
+                           if not (at_numbers and str(m.object_name) in names)})
         colours = symbol_colours(context) if self.symbol_colours else {}
         call = f"{context.action}({', '.join(str(a) for a in context.args)})"
         return [Expectation(
@@ -111,6 +118,7 @@ class GridMapExpectations:
                 "rotations": self.rotations,
                 "recentre_radius": self.recentre_radius,
                 "colours": colours,
+                "relative": relative,
                 "parent_task": remembered.parent_task,
                 "task_end": remembered.task_end,
                 "matched_by": remembered.key,
@@ -125,10 +133,70 @@ class GridMapExpectations:
         before = self._view[1] if run is not None and self._view is not None and self._view[0] == id(run) else None
         if before is None and run is not None:  # the run's first step: the world as the run found it
             before = (getattr(run, "start_observations", None) or {}).get("image")
-        result = compare(expectation, observations, before=before)
+        result = compare(expectation, observations, before=before, carried=_carried(context))
         if run is not None and observations.get("image") is not None:
             self._view = (id(run), observations["image"])
         return result
+
+
+def _named(context: Any) -> tuple[set[str], bool]:
+    """(world objects the step's arguments name, whether its other arguments are all numbers -- a point of a
+    frame the step puts the object at)."""
+    world = getattr(context, "world", None)
+    to_world = getattr(world, "object_name", None)
+    names, numbers, counted = set(), True, False
+    for arg in (str(a) for a in getattr(context, "args", ())):
+        try:
+            float(arg)
+            counted = True
+            continue
+        except ValueError:
+            pass
+        name = None
+        if to_world is not None:
+            try:
+                name = str(to_world(arg))
+            except Exception:  # not an object of the world: a pose symbol, a feature
+                name = None
+        if name is None and world is None:
+            name = arg
+        if name is None:
+            numbers = False
+        else:
+            names.add(name)
+    return names, numbers and counted and bool(names)
+
+
+def _carried(context: Any) -> set[str]:
+    """The objects the robot carries now: held, or joined to a held one (magnetically, transitively). Their
+    orientation is the keypoint plugin's to watch; seen from above in the air, a subassembly hides its parts."""
+    sim = getattr(getattr(context, "world", None), "sim", None)
+    if sim is None or not hasattr(sim, "held"):
+        return set()
+    found = {sim.held(arm) for arm in sim.robot.arms} - {None}
+    pairs = [tuple(p) for p in sim.attachments()] if hasattr(sim, "attachments") else []
+    frontier = list(found)
+    while frontier:
+        current = frontier.pop()
+        for a, b in pairs:
+            other = b if a == current else a if b == current else None
+            if other is not None and other not in found:
+                found.add(other)
+                frontier.append(other)
+    return {str(n) for n in found}
+
+
+def _located(name: str, observations: dict[str, Any], view: Any) -> Any:
+    """Where (x, y) object ``name`` is observed now: its observed state, else the camera's block named after it;
+    ``None`` when it is not seen."""
+    state = (observations.get("objects") or {}).get(name)
+    pose = state.get("pose") if isinstance(state, dict) else getattr(state, "pose", None)
+    if pose is not None:
+        return (float(pose[0]), float(pose[1]))
+    for block in getattr(view, "blocks", ()) or ():
+        if hasattr(view, "name_of") and view.name_of(block) == name:
+            return tuple(block.centroid)
+    return None
 
 
 def _blobs(grid: np.ndarray) -> tuple[np.ndarray, int]:
@@ -254,6 +322,21 @@ def _off_colour(expected: Any, observed: Any, code: int) -> int:
     return int(np.count_nonzero(moved & wanted & (seen != code)))
 
 
+def _detail(expected: Any, observed: Any, block: Any, off_colour: int, cells: int, wanted: str | None = None
+            ) -> dict[str, Any]:
+    return {
+        "object": expected.object_name,
+        "cells": cells,
+        "off_colour": off_colour,
+        "symbol_colour": wanted,
+        "expected": {"colour": expected.colour, "shape": expected.shape,
+                     "centroid": list(expected.centroid), "grid": render(expected)},
+        "observed": {"colour": observed.colour, "shape": observed.shape,
+                     "centroid": list(observed.centroid), "grid": render(observed),
+                     "block_seen": block is not None},
+    }
+
+
 def colours_from_environment() -> bool:
     """``$BT_META_GRIDMAP_COLOURS``: ``symbols`` (colour matters where the task's symbols name it) or ``occupancy``
     (the paper's colour presence; also when unset)."""
@@ -278,8 +361,10 @@ def symbol_colours(context: Any) -> dict[str, str]:
             if len(f) == 3 and f[0] == "colour" and str(f[1]) in names}
 
 
-def compare(expectation: Expectation, observations: dict[str, Any], before: Any = None) -> Comparison | None:
+def compare(expectation: Expectation, observations: dict[str, Any], before: Any = None,
+            carried: set[str] | frozenset[str] = frozenset()) -> Comparison | None:
     """Compare a ``"gridmap"`` expectation with the top view in ``observations["image"]`` (``None`` without);
+    ``carried``: objects the robot holds now (with what is joined to them), whose as-it-looks maps are left out;
     ``before``, the top view the previous step left (for the run's first step, the one it started with:
     ``RunContext.start_observations``), when known: a cell memory expected empty that was occupied
     then and still is holds a block an earlier step put there, not the step's doing."""
@@ -290,36 +375,46 @@ def compare(expectation: Expectation, observations: dict[str, Any], before: Any 
         return None
     data = expectation.data
     best: dict[str, Any] | None = None
+    relative = set(data.get("relative") or ())
     for trace in data["traces"]:
         details = []
         for expected in trace["maps"]:
-            block = view.block_near(expected.centroid, data["recentre_radius"])
-            if block is not None and block.shape == "unknown":
-                block = None  # blocks merged into one blob: its centroid is nobody's
-            if block is not None:
-                observed = view.grid_map_at(block.centroid, z=block.top_z, colour=block.colour, shape=block.shape)
+            centre = expected.centroid
+            if expected.object_name in relative and expected.object_name in carried:
+                continue  # in the robot's hand: watched by its orientation, not from above
+            if expected.object_name in relative:  # as it looks where it is now
+                centre = _located(str(expected.object_name), observations, view)
+                if centre is None:
+                    centre = expected.centroid if "objects" not in observations else None
+            if centre is None:  # gone from the world: every cell memory expected occupied differs
+                details.append(_detail(expected, view.grid_map_at(expected.centroid), None, 0,
+                                       int(np.count_nonzero(np.asarray(expected.occupancy)))))
+                continue
+            if expected.object_name in relative:
+                # cropped as the recorder cropped it: centred on the object itself, on the height of what is seen
+                # there (not recentred on another blob: a part resting on it is not it)
+                block = None
+                seen = view.block_near(centre, 0.5 * LB)
+                top = None if seen is None else seen.top_z
+                observed = view.grid_map_at(centre, z=top)
             else:
-                observed = view.grid_map_at(expected.centroid)
+                block = view.block_near(centre, data["recentre_radius"])
+                if block is not None and block.shape == "unknown":
+                    block = None  # blocks merged into one blob: its centroid is nobody's
+                top = None if block is None else block.top_z
+                if block is not None:
+                    observed = view.grid_map_at(block.centroid, z=top, colour=block.colour, shape=block.shape)
+                else:
+                    observed = view.grid_map_at(centre)
             if before is not None and hasattr(before, "grid_map_at") and not data["rotations"]:
-                observed = _without_earlier(expected, observed, before.grid_map_at(
-                    observed.centroid, z=None if block is None else block.top_z))
+                observed = _without_earlier(expected, observed, before.grid_map_at(observed.centroid, z=top))
             cells = _distance(expected, observed, data["compare_colour"], data["rotations"])
             wanted = (data.get("colours") or {}).get(str(expected.object_name))
             off_colour = 0
             if wanted is not None and wanted in getattr(getattr(view, "thresholds", None), "names", ()):
                 off_colour = _off_colour(expected, observed, view.thresholds.code(wanted))
-            details.append({
-                "object": expected.object_name,
-                "cells": cells + off_colour,
-                "off_colour": off_colour,
-                "symbol_colour": wanted,
-                "expected": {"colour": expected.colour, "shape": expected.shape,
-                             "centroid": list(expected.centroid), "grid": render(expected)},
-                "observed": {"colour": observed.colour, "shape": observed.shape,
-                             "centroid": list(observed.centroid), "grid": render(observed),
-                             "block_seen": block is not None},
-            })
-        worst = max(d["cells"] for d in details)
+            details.append(_detail(expected, observed, block, off_colour, cells + off_colour, wanted))
+        worst = max((d["cells"] for d in details), default=0)
         if best is None or worst < best["cells"]:
             best = {"episode": trace["episode"], "cells": worst, "maps": details}
     assert best is not None

@@ -3,8 +3,9 @@
 The recorder listens to ``bt_meta_trace_event`` (``run_start``, ``step_start``, ``step_end``, ``run_end``) and, at
 every ``step_end``, reads what the run left behind from the installed run and its world: the belief state
 (symbolic facts), the object states (pose, attachment point AP in the base frame, attachment normal AN in the
-object frame) and -- when the world is a simulator with a top camera -- the grid-map of each block the step names
-(camera perception's ``object_gridmaps``: the block's 3 lb window centred where it truly lies, the instructor's
+object frame) and -- when the world is a simulator with a top camera -- the grid-map of each object the step names
+or moved (:func:`moved_objects`), of any type (camera perception's ``object_gridmaps`` for blocks, the same view
+cropped for a cylinder, a mesh, a housing: the object's 3 lb window centred where it truly lies, the instructor's
 annotation of section 6.3). Parent task and parent node come from the decomposition tree (given, or planned again
 from the run's domain and problem). At ``run_end`` the trace -- episode, initial state, steps and E_db rows -- is
 written in ONE :meth:`~bt_meta.memory.EpisodicMemory.write` (one transaction): successful runs always, failed runs
@@ -28,15 +29,19 @@ Offers:
 * :class:`RecorderError` -- a run that cannot become a trace (no installed run, no root task, no task file)
 * :func:`object_states_of` -- a world's object states as memory :class:`~bt_meta.memory.ObjectState`
 * :func:`root_task_name` -- the episode key of a problem (its root task)
+* :func:`moved_objects` -- the objects a step shifted or turned (what is watched besides what it names)
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
+
+import numpy as np
 
 from bt_meta.errors import BtMetaError
 from bt_meta.memory.trace import Episode, Expectation, GridMap, ObjectState, State, Step, Trace
@@ -238,13 +243,14 @@ class TraceRecorder:
         else:
             facts = tuple(_fact_from_text(text) for text in event.get("state") or ())
         objects = object_states_of(world) if world is not None else ()
-        maps = self._grid_maps(world, args, event) if outcome == "success" else ()
         parent_task, parent_node = self._parent(run, node_id, action, args)
         started = record.starts.pop((index, node_id), None)
         if index is not None:
             # A step run again (a repair backtracked to it) undoes the steps recorded from it on.
             while record.steps and record.steps[-1].step is not None and record.steps[-1].step >= index:
                 record.steps.pop()
+        earlier = record.steps[-1].state.objects if record.steps else record.initial.objects
+        maps = self._grid_maps(world, args, event, moved_objects(earlier, objects)) if outcome == "success" else ()
         before = set(record.steps[-1].state.facts) if record.steps else set(record.facts)
         pending = _Pending(
             step=index, action=action, args=args, node_id=node_id, parent_task=parent_task, parent_node=parent_node,
@@ -329,15 +335,22 @@ class TraceRecorder:
                                                 facts=pending.added, grid_map_index=position))
         return Trace(episode, tuple(trace_steps), initial=record.initial, expectations=tuple(expectations))
 
-    def _grid_maps(self, world: Any, args: tuple[str, ...], event: Mapping[str, Any]) -> tuple[GridMap, ...]:
-        """The grid-maps of the blocks the step names: from the event's observations when a driver sends them,
-        else from camera perception looking at the world now."""
+    def _grid_maps(self, world: Any, args: tuple[str, ...], event: Mapping[str, Any],
+                   moved: Iterable[str] = ()) -> tuple[GridMap, ...]:
+        """The grid-maps of the objects the step names and of those it moved (:func:`moved_objects`), whatever
+        their type: from the event's observations when a driver sends them, else from camera perception looking
+        at the world now; an object the camera's per-block maps leave out (a catalogue cylinder, a mesh, the
+        housing) is cropped from the same view, centred where it truly lies."""
         if not self.grid_maps or world is None:
             return ()
         names = _object_names(world, args)
+        names += [name for name in moved if name not in names]
         if not names:
             return ()
-        observed = (event.get("observations") or {}).get("object_gridmaps")
+        observations = event.get("observations") or {}
+        observed = observations.get("object_gridmaps")
+        view = observations.get("image")
+        camera = None
         if observed is None:
             camera = self._camera()
             if camera is None or getattr(world, "sim", None) is None:
@@ -349,6 +362,8 @@ class TraceRecorder:
         maps = []
         for name in names:
             found = observed.get(name)
+            if found is None:
+                found = _cropped(world, view, name)
             if found is not None:
                 maps.append(_memory_grid_map(found, name))
         return tuple(maps)
@@ -391,6 +406,59 @@ class TraceRecorder:
                 log.info("recorder: the run's problem could not be planned again for parent tasks: %s", error)
         self._planned_for = (run, tree)
         return tree
+
+
+MOVED_DISTANCE = 0.01
+"""m: an object whose position changed more than this during a step was moved by it."""
+MOVED_ANGLE = math.radians(10.0)
+"""rad: an object turned more than this during a step was moved by it."""
+
+
+def moved_objects(before: Iterable[ObjectState], after: Iterable[ObjectState]) -> list[str]:
+    """The objects whose pose changed by more than :data:`MOVED_DISTANCE` or :data:`MOVED_ANGLE` between two
+    states (the step carried, turned or knocked them), in the order of ``after``."""
+    old = {state.name: state.pose for state in before}
+    out = []
+    for state in after:
+        pose = old.get(state.name)
+        if pose is None:
+            continue
+        shift = math.dist(pose[:3], state.pose[:3])
+        turn = _angle_between(_rotation(pose[3:]), _rotation(state.pose[3:]))
+        if shift > MOVED_DISTANCE or turn > MOVED_ANGLE:
+            out.append(state.name)
+    return out
+
+
+def _rotation(rpy: Any) -> np.ndarray:
+    roll, pitch, yaw = (float(v) for v in rpy)
+    cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw),
+                              math.sin(yaw))
+    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                     [-sp, cp * sr, cp * cr]])
+
+
+def _angle_between(a: np.ndarray, b: np.ndarray) -> float:
+    return math.acos(max(-1.0, min(1.0, (float(np.trace(a.T @ b)) - 1.0) / 2.0)))
+
+
+def _cropped(world: Any, view: Any, name: str) -> Any:
+    """The grid-map of object ``name`` cropped from ``view`` centred where the simulator has it (``None`` without
+    a view or the object)."""
+    sim = getattr(world, "sim", None)
+    if view is None or not hasattr(view, "grid_map_at") or sim is None or name not in sim.object_names():
+        return None
+    state = sim.object_states().get(name)
+    if state is None:
+        return None
+    block = view.block_near(state.pose[:2], 0.5 * _LB)
+    return view.grid_map_at(state.pose[:2], z=None if block is None else block.top_z, object_name=name,
+                            colour=state.colour, shape=state.shape)
+
+
+_LB = 0.061
+"""m: a Mega Blok's unit, the width of the search for the object's blob (as camera perception names blocks)."""
 
 
 def _object_names(world: Any, args: Iterable[str]) -> list[str]:

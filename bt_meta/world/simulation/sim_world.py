@@ -55,6 +55,7 @@ from bt_meta.world.poses import axis_angle_matrix
 from bt_meta.world.simulation.objects import Box, Cylinder, Mesh, ObjectModel, pose_to_matrix, rpy_to_matrix
 from bt_meta.world.skills import SKILLS
 from bt_meta.world.skills.base import SimSkill, SkillAbort
+from bt_meta.world.symmetry import yaw_period
 
 __all__ = ["HELD_POSE_PREFIX", "POSE_SYMBOL_PREFIX", "Grounding", "PrimitiveSkill", "SimWorld", "held_pose_symbol",
            "load_grounding", "parse_held_pose_symbol", "parse_pose_symbol", "pose_symbol", "quiet_stdout"]
@@ -63,6 +64,10 @@ _PART = "~"  # collision geometry names: "<object>" for the first part, "<object
 
 POSE_SYMBOL_PREFIX = "pose:"
 HELD_POSE_PREFIX = "held:"
+
+
+UNTURNED = math.radians(1.0)
+"""rad: a part turned less than this about the vertical from its scene frame is grasped as if unturned."""
 
 
 def pose_symbol(pose: Sequence[float], digits: int = 4) -> str:
@@ -421,6 +426,7 @@ class SimWorld:
             sim.set_joint_positions({**sim.robot.home, **self._start_pose(sim.robot, grounding)})
             self.scene.build(sim, None if self.variant == "nominal" else self.variant, seed=seed)
             self._check_objects(problem_name)
+            self._check_supports()
         except BaseException:
             self.close()
             raise
@@ -570,6 +576,27 @@ class SimWorld:
                 point = t[:3, :3] @ np.asarray(frame[:3]) + t[:3, 3]
                 return float(point[0]), float(point[1])
         return float(t[0, 3]), float(t[1, 3])
+
+    def own_heading(self, name: str, arm: str) -> float:
+        """How far (rad) ``name`` is turned about the vertical from its scene frame, up to the yaw period of its shape
+        (:func:`~bt_meta.world.symmetry.yaw_period`), the turn nearest zero: a top-down grasp turned by it holds the
+        part as it holds it unturned (so an asymmetric part still arrives along its target, and a parallel gripper
+        closes on the faces it closes on unturned). Zero for a part lying on a side (its re-orientation turns it);
+        for the part ``arm`` holds, the turn its top-down gripper has now (the part rides as it was grasped)."""
+        if self.sim.held(arm) == name:
+            g = self.sim.link_transform(self.end_effector(arm))
+            if float(g[2, 2]) > -math.cos(math.radians(30.0)):  # not top-down: as the grounding says
+                return 0.0
+            turn = math.atan2(float(g[1, 0]), float(g[0, 0])) - self.sim.robot.arm(arm).top_down_yaw
+            return math.atan2(math.sin(turn), math.cos(turn))
+        t = self.sim.object_transform(name)
+        if abs(float(t[2, 2])) < math.cos(math.radians(30.0)):
+            return 0.0
+        period = yaw_period(self.sim.object_model(name))
+        yaw = math.atan2(float(t[1, 0]), float(t[0, 0]))
+        heading = yaw - period * round(yaw / period)
+        # within a degree the part is as demonstrated: the grasp the traces and refinements were made with
+        return 0.0 if abs(heading) < UNTURNED else heading
 
     def grasp_height(self, name: str, arm: str, clearance: float) -> float:
         """Where the end-effector frame goes for a grasp of ``name``, above the top of it (negative: below).
@@ -735,6 +762,8 @@ class SimWorld:
             return pose_to_matrix((x, y, z, math.radians(roll), math.radians(pitch), math.radians(yaw)))
         if "above" in spec:
             name = self.object_name(str(spec["above"]))
+            if "rpy" not in spec:  # grasped relative to itself: as it would be, turned back by its own heading
+                out[:3, :3] = rpy_to_matrix(0.0, 0.0, self.own_heading(name, arm)) @ out[:3, :3]
             if spec.get("touch"):  # a grasp pose: as deep as this gripper grasps
                 height = self.grasp_height(name, arm, height)
             x, y = self.grasp_xy(name)
@@ -893,6 +922,42 @@ class SimWorld:
         c, s = math.cos(yaw), math.sin(yaw)
         return ox + unit * (c * u - s * v), oy + unit * (s * u + c * v), yaw
 
+    def frame_support(self, frame: str) -> tuple[float, str | None]:
+        """(z, support) of a task-file frame: the height (base frame) its anchor gives -- the table top for an
+        anchor ``z: table`` -- and the object or obstacle the frame's ``support:`` names (a tray, a fixture, a part
+        to stack on), or ``None``. What a place into the frame rests the part on (:meth:`surface_under`)."""
+        spec = self.grounding.frames.get(frame)
+        if spec is None:
+            raise SkillAbort(FailureKind.INTERNAL, f"no frame {frame!r} in {self.grounding.path}")
+        (_, _, z), _ = self.anchor(str(spec["anchor"]))
+        support = spec.get("support")
+        return z, None if support is None else str(support)
+
+    def surface_under(self, support: str, points: np.ndarray) -> float | None:
+        """The highest top (base frame z) of the pieces of ``support`` (an object or a static obstacle) that lie
+        under any of ``points`` (x, y rows), or ``None`` when none does: a tray's floor under a slot, not its rim
+        beside it; the top of the part a part is stacked on."""
+        if support in self.sim.object_names():
+            model, transform = self.sim.object_model(support), self.sim.object_transform(support)
+        elif support in self.sim.obstacles():
+            model, transform = self.sim.obstacles()[support]
+        else:
+            return None
+        top: float | None = None
+        for part in model.parts:
+            turn = rpy_to_matrix(*part.rpy)
+            own = (part.corners() - np.asarray(part.position, dtype=float)) @ turn  # in the part's frame
+            low, high = own.min(axis=0), own.max(axis=0)
+            rotation = transform[:3, :3] @ turn
+            centre = transform[:3, :3] @ np.asarray(part.position, dtype=float) + transform[:3, 3]
+            local = (np.column_stack([points[:, 0], points[:, 1], np.full(len(points), centre[2])]) - centre) \
+                @ rotation
+            over = np.all((local[:, :2] >= low[:2] - 1e-4) & (local[:, :2] <= high[:2] + 1e-4), axis=1)
+            if over.any():
+                height = float((part.corners() @ transform[:3, :3].T + transform[:3, 3])[:, 2].max())
+                top = height if top is None else max(top, height)
+        return top
+
     def put_down_problem(self, name: str, frame: str, x: float, y: float, clearance: float = 0.01) -> str | None:
         """Why object ``name`` could not be put down at point (x, y) of ``frame`` as the place skill lays it (its
         axes along the frame's, on the table), or ``None`` when it could: another object or a static obstacle
@@ -940,6 +1005,30 @@ class SimWorld:
         if missing:
             raise ConfigError(f"problem {problem_name!r} names objects the scene {self.scene.name!r} lacks: "
                               f"{', '.join(missing)}", self.scene.path)
+
+    def _check_supports(self) -> None:
+        """Every frame's ``support:`` names an object or obstacle of the scene lying under the frame's anchor,
+        else a located error (the grounding file's line) before anything moves."""
+        for frame, spec in self.grounding.frames.items():
+            support = spec.get("support")
+            if support is None:
+                continue
+            line, column = _position_in(self.grounding.path, ("frames", frame, "support"))
+            if str(support) not in self.sim.object_names() and str(support) not in self.sim.obstacles():
+                known = ", ".join([*self.sim.object_names(), *self.sim.obstacles()]) or "none"
+                raise ConfigError(f"frames.{frame}.support: the scene {self.scene.name!r} has no object or obstacle "
+                                  f"{support!r}; it has {known}", self.grounding.path, line, column)
+            anchor = str(spec.get("anchor"))
+            try:
+                (x, y, _), _ = self.anchor(anchor)
+            except SkillAbort as error:
+                raise ConfigError(f"frames.{frame}.anchor: {error.message}", self.grounding.path) from None
+            if self.surface_under(str(support), np.array([[x, y]])) is None:
+                t = (self.sim.object_transform(str(support)) if str(support) in self.sim.object_names()
+                     else self.sim.obstacles()[str(support)][1])
+                raise ConfigError(f"frames.{frame}.support: {support!r} (at x {t[0, 3]:.3f}, y {t[1, 3]:.3f}) is not "
+                                  f"under the frame's anchor {anchor!r} (at x {x:.3f}, y {y:.3f}, base frame)",
+                                  self.grounding.path, line, column)
 
     def _arm_hand_links(self, arm: str) -> list[str]:
         """Robot links moved by the arm's last joint (hand, gripper, fingers): a held object may touch them.
@@ -996,6 +1085,25 @@ class SimWorld:
                 checker.allow(part, self._geometry.get(b, []))
 
 
+
+
+def _position_in(path: Path, keys: Sequence[str]) -> tuple[int | None, int | None]:
+    """(line, column), 1-based, of the value at ``keys`` in a YAML file; ``None``s when it is not found."""
+    import yaml
+
+    from bt_meta.safe_yaml import compose_yaml
+
+    try:
+        node = compose_yaml(path.read_text(encoding="utf-8"), str(path), ConfigError)
+    except (OSError, ConfigError):
+        return None, None
+    for key in keys:
+        if not isinstance(node, yaml.MappingNode):
+            return None, None
+        node = next((v for k, v in node.value if getattr(k, "value", None) == key), None)
+        if node is None:
+            return None, None
+    return node.start_mark.line + 1, node.start_mark.column + 1
 
 
 def _collision_shapes(model: ObjectModel) -> list[tuple[str, tuple[float, ...], np.ndarray]]:

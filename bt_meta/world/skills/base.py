@@ -9,6 +9,13 @@ Offers:
 * :class:`SkillAbort` -- raised inside a skill to fail it with a kind, a message and evidence
 * :class:`SkillWorld` -- the protocol of the world skills act on
 * :func:`rounded` -- numbers rounded for records (JSON-able, short)
+* :func:`holdings` -- what each arm holds and where (the evidence of every skill failure)
+* :func:`off_workspace` -- the objects off the table's top (fallen off it, or out past its edges)
+
+A skill started for a primitive (``start``) notes which objects are on the table when it starts; when it ends, an
+object that was there and is not any more fails it as ``physical`` naming the object and where it went: the step
+that threw a part off the table is the one that fails, not a later one that cannot reach it. Every failure's
+evidence says what the robot still holds and where (``holding``).
 
 Why the split between ``start`` and ``begin``: HTN primitives pass symbols (``b0``, ``1.5``, ``attach_pose``); a
 skill used by another skill (Place uses MoveTo and Grasp) passes numbers. ``start`` grounds symbols through the
@@ -76,6 +83,44 @@ class SkillAbort(BtMetaError):
         self.evidence = evidence or {}
 
 
+WORKSPACE_DROP = 0.02
+"""m: an object whose lowest point is this far below the table top has fallen off the table."""
+
+
+def holdings(world: Any) -> dict[str, dict[str, Any]]:
+    """``{arm: {"object": name, "pose": [x, y, z, roll, pitch, yaw]}}`` (base frame) of every arm holding something."""
+    sim = getattr(world, "sim", None)
+    if sim is None:
+        return {}
+    out = {}
+    for arm in sim.robot.arms:
+        name = sim.held(arm)
+        if name is not None:
+            out[arm] = {"object": name, "pose": rounded(sim.object_pose(name))}
+    return out
+
+
+def off_workspace(world: Any, names: Iterable[str] | None = None) -> dict[str, list[float]]:
+    """``{object: position}`` of the objects (of ``names``, default all) not held and not on the table's top: their
+    centre beyond its edges, or their lowest point :data:`WORKSPACE_DROP` below it."""
+    sim = getattr(world, "sim", None)
+    table = getattr(sim, "table", None)
+    if sim is None or table is None:
+        return {}
+    (x0, x1), (y0, y1) = table.bounds
+    held = {sim.held(arm) for arm in sim.robot.arms}
+    out = {}
+    for name in sim.object_names() if names is None else names:
+        if name in held or name not in sim.object_names():
+            continue
+        t = sim.object_transform(name)
+        x, y = float(t[0, 3]), float(t[1, 3])
+        lowest = float((sim.object_model(name).points() @ t[:3, :3].T + t[:3, 3])[:, 2].min())
+        if not (x0 <= x <= x1 and y0 <= y <= y1) or lowest < table.top_z - WORKSPACE_DROP:
+            out[name] = rounded(t[:3, 3])
+    return out
+
+
 def rounded(values: Iterable[float] | float, digits: int = 4) -> Any:
     """Round a number or a sequence of numbers for a record."""
     if isinstance(values, (int, float)):
@@ -99,6 +144,8 @@ class SimSkill:
         self.args: tuple[str, ...] = ()
         self.info: dict[str, Any] = {}
         self._started = False
+        self._watched: list[str] = []
+        """Objects on the table when the primitive started (:meth:`start`): one leaving it fails the skill."""
 
     # -- protocol -----------------------------------------------------------------------------------------------
 
@@ -106,6 +153,12 @@ class SimSkill:
         """Ground the primitive's symbolic arguments and begin."""
         self.args = tuple(str(a) for a in args)
         self._reset()
+        sim = getattr(self.world, "sim", None)
+        if sim is not None and hasattr(sim, "object_names"):
+            away = off_workspace(self.world)
+            self._watched = [n for n in sim.object_names() if n not in away]
+            # where everything was when the step started: what a monitor compares the step's doing with
+            self.world.step_start_poses = {n: [float(v) for v in sim.object_pose(n)] for n in sim.object_names()}
         try:
             self.ground(self.args)
         except SkillAbort as abort:
@@ -121,7 +174,13 @@ class SimSkill:
         self.ticks += 1
         try:
             status = self.step()
+            if status != RUNNING:
+                self._check_workspace()
         except SkillAbort as abort:
+            try:
+                self._check_workspace(abort)
+            except SkillAbort as gone:
+                abort = gone
             return self._abort(abort)
         if status != RUNNING:
             self.outcome = status
@@ -157,7 +216,24 @@ class SimSkill:
         self.ticks = 0
         self.info = {}
 
+    def _check_workspace(self, abort: SkillAbort | None = None) -> None:
+        """Raise ``physical`` when an object on the table at the start has left it (a failure of another kind
+        that threw it off becomes ``physical``, the first failure kept in the evidence)."""
+        if not self._watched or (abort is not None and abort.kind == FailureKind.PHYSICAL.value
+                                 and "left_workspace" in abort.evidence):
+            return
+        gone = off_workspace(self.world, self._watched)
+        if not gone:
+            return
+        self._watched = []
+        evidence: dict[str, Any] = {"left_workspace": gone, "objects": sorted(gone)}
+        if abort is not None:
+            evidence["during"] = {"kind": abort.kind, "message": abort.message}
+        where = "; ".join(f"{n} at {p}" for n, p in gone.items())
+        raise SkillAbort(FailureKind.PHYSICAL, f"{self.name}: {', '.join(gone)} left the table ({where})", evidence)
+
     def _abort(self, abort: SkillAbort) -> str:
+        abort.evidence.setdefault("holding", holdings(self.world))
         self.failure = SkillFailure(abort.kind, abort.message, dict(abort.evidence))
         self.outcome = FAILURE
         return FAILURE

@@ -7,7 +7,11 @@ frame's (a 1x2 block lies along the letter's x axis); a catalogue type with gras
 one instead of its centroid. The symbols x and y are grounded by the world through the
 grounding file's frame (letters: lb = 6.1 cm from the scene's ``letter_origin`` anchor).
 
-After the release the block must rest within ``tolerance`` of the target, else kind ``physical``.
+After the release the block must rest within ``tolerance`` of the target, on its base (within
+:data:`FACE_TOLERANCE`) and at the target's heading up to its shape's yaw period (within
+:data:`HEADING_TOLERANCE`), else kind ``physical``; a turn must leave it at least :data:`TURN_GAIN` nearer standing.
+The target height is what is under it: the frame's ``support:`` (a tray, a fixture, the part to stack on), else
+its anchor's height, else the table (docs/scenes.md, "Supports").
 
 A grounding file's ``mode: turn`` makes it the re-orientation of a block lying on another face (the primitive
 takes only the block): picked top-down at the face it now shows, turned in the gripper by at most a quarter
@@ -41,6 +45,7 @@ from bt_meta.world.poses import matrix_to_pose, pose_to_matrix
 from bt_meta.world.skills.base import PhasedSkill, SkillAbort, rounded
 from bt_meta.world.skills.grasp import Grasp
 from bt_meta.world.skills.move_to import MoveTo
+from bt_meta.world.symmetry import heading_matters, yaw_period
 
 __all__ = ["Place", "nearest_yaw", "place_overlap", "symmetry", "top_down", "turned_pose"]
 
@@ -78,6 +83,12 @@ SNUG = 0.003
 """m a block lowered onto its target may press into a neighbour: placing the blocks beside it nudged them up to 3 mm
 its way, and the lowering then collided with the apex 0.3 mm deep in the checker (letters_A s0 0020); the
 simulator pushes the neighbour back. Not the table, not during the carry."""
+FACE_TOLERANCE = math.radians(20.0)
+"""A part placed (or standing) with its base more than this off level did not land on the face it was set down on."""
+HEADING_TOLERANCE = math.radians(15.0)
+"""A part placed more than this (about the vertical, up to its symmetry) off the target's heading is turned wrong."""
+TURN_GAIN = math.radians(45.0)
+"""A turn brings the part's base at least this much nearer standing (half its quarter turn)."""
 FLIP_AXES = ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0))
 """Turn axes tried for a block upside down (base frame)."""
 
@@ -97,17 +108,27 @@ def top_down(x: float, y: float, z: float, yaw: float) -> np.ndarray:
 
 
 def symmetry(model: Any) -> float:
-    shape = getattr(model, "shape", None)
-    if shape == "1x1":
-        return math.pi / 2.0
-    if shape == "1x2":
-        return math.pi
-    return 2.0 * math.pi
+    """The yaw period of an object's shape and features (:func:`~bt_meta.world.symmetry.yaw_period`)."""
+    return yaw_period(model)
+
+
+def _lying_period(model: Any, transform: np.ndarray) -> float:
+    """The yaw period of a part as it lies: its shape's about its own z axis when that is near vertical; on a side,
+    its shape label's (the letters' blocks, as their re-orientations were measured), else none (a pin lying
+    down is not symmetric about the vertical)."""
+    if abs(float(transform[2, 2])) >= math.cos(math.radians(30.0)):
+        return symmetry(model)
+    return {"1x1": math.pi / 2.0, "1x2": math.pi}.get(getattr(model, "shape", None) or "", 2.0 * math.pi)
 
 
 def nearest_yaw(yaw: float, period: float, preferred: float) -> float:
     k = round((preferred - yaw) / period)
     return yaw + k * period
+
+
+def tilt(transform: np.ndarray) -> float:
+    """How far (rad) an object's z axis (its base's normal, reversed) is from pointing up: 0 standing on its base."""
+    return math.acos(max(-1.0, min(1.0, float(transform[2, 2]))))
 
 
 def object_yaw(transform: np.ndarray) -> float:
@@ -164,6 +185,8 @@ class Place(PhasedSkill):
         self.drop = 0.03
         self._turned_pose = np.eye(4)
         self._high = np.eye(4)
+        self._support: tuple[float, str | None] | None = None
+        """(anchor height, support) of the target frame (``SimWorld.frame_support``); ``None``: the table."""
 
     def ground(self, args: tuple[str, ...]) -> None:
         if self.spec.get("mode", "place") == "turn":
@@ -183,11 +206,15 @@ class Place(PhasedSkill):
         frame = str(self.spec.get("frame", "table"))
         goal = self.world.ground_cell(frame, x, y)
         self.approach_height = float(self.spec.get("approach_height", self.approach_height))
-        self.begin(self.world.object_name(block), goal)
+        self.begin(self.world.object_name(block), goal, frame=frame)
 
-    def begin(self, block: str, goal: tuple[float, float, float]) -> Place:
-        """Place ``block`` with its centroid at ``goal`` = (X, Y, yaw of the target frame) in the base frame."""
+    def begin(self, block: str, goal: tuple[float, float, float], *, frame: str | None = None) -> Place:
+        """Place ``block`` with its centroid at ``goal`` = (X, Y, yaw of the target frame) in the base frame, on
+        what is under the target: the support ``frame`` names, else its anchor's height, else the table."""
         self.begin_ground()
+        known = getattr(getattr(self.world, "grounding", None), "frames", None) or {}
+        self._support: tuple[float, str | None] | None = (
+            self.world.frame_support(frame) if frame is not None and frame in known else None)
         if block not in self.world.sim.object_names():
             raise SkillAbort(FailureKind.UNKNOWN_ENTITY, f"place: there is no block {block!r} in the world",
                              {"object": block, "present": list(self.world.sim.object_names())})
@@ -197,6 +224,7 @@ class Place(PhasedSkill):
         self._beside = False
         self._down: np.ndarray | None = None
         self.info.update(block=block, goal=rounded(goal))
+        self._tilt_before = tilt(self.world.sim.object_transform(block))
         self.begin_phases()
         return self
 
@@ -338,11 +366,27 @@ class Place(PhasedSkill):
         if self._yaw is None:
             sim = self.world.sim
             transform = sim.object_transform(self.block)
-            period = symmetry(sim.object_model(self.block))
+            period = _lying_period(sim.object_model(self.block), transform)
             preferred = nearest_yaw(object_yaw(transform), period, sim.robot.arm(self.arm).top_down_yaw)
-            turns = [preferred + k * period for k in range(max(1, round(math.pi / period)))]
-            self._yaw = min(turns, key=self._finger_obstruction)  # ties: the first, the preferred yaw
+            if sim.grasps_by_friction(self.block, self.arm):
+                # the fingers close on two of the part's own faces: each quarter turn from the preferred, the
+                # narrowest across the fingers first (a pin lying down is held across, not along it)
+                turns = [preferred + k * math.pi / 2.0 for k in (0, 1, -1, 2)]
+                self._yaw = min(turns, key=lambda yaw: (self._finger_obstruction(yaw), self._width_across(yaw)))
+            else:
+                turns = [preferred + k * period for k in range(max(1, round(math.pi / period)))]
+                self._yaw = min(turns, key=self._finger_obstruction)  # ties: the first, the preferred yaw
         return self._yaw
+
+    def _width_across(self, yaw: float) -> int:
+        """The part's width (in 5 mm steps) between the fingers of a top-down gripper at ``yaw``."""
+        sim = self.world.sim
+        ee = sim.link_transform(self.world.end_effector(self.arm))
+        local_axis = ee[:3, :3].T @ sim.closing_axis(self.arm)
+        axis = top_down(0.0, 0.0, 0.0, yaw)[:3, :3] @ local_axis
+        t = sim.object_transform(self.block)
+        along = (sim.object_model(self.block).points() @ t[:3, :3].T) @ axis
+        return round(float(along.max() - along.min()) / 0.005)
 
     def _finger_obstruction(self, yaw: float) -> int:
         """How many sample points of the two finger pads, gripping with the gripper at ``yaw``, fall inside other
@@ -430,8 +474,34 @@ class Place(PhasedSkill):
         current = sim.object_transform(self.block)
         x, y, frame_yaw = self.goal
         yaw = nearest_yaw(frame_yaw, symmetry(model), object_yaw(current))
-        z = sim.table.top_z + model.lowest_z(0.0, 0.0) + self.clearance
+        z = self._floor(model, x, y, yaw) + model.lowest_z(0.0, 0.0) + self.clearance
         return pose_to_matrix((x, y, z, 0.0, 0.0, yaw))
+
+    def _floor(self, model: Any, x: float, y: float, yaw: float) -> float:
+        """The height the block's lowest point rests on at the target: the top of the frame's support under the
+        middle of its footprint (a tray's floor, the part it is stacked on), else the frame anchor's height, else
+        the table top. A support not under the target is ``unexpected_configuration`` (it was moved)."""
+        table = float(self.world.sim.table.top_z)
+        if self._support is None:
+            return table
+        floor, support = self._support
+        if support is None:
+            return floor
+        low, high = model.extent()
+        half = 0.25 * (high - low)  # the middle of the footprint: not a neighbour's edge it may touch
+        centre = (low + high) / 2.0
+        c, s = math.cos(yaw), math.sin(yaw)
+        points = []
+        for u, v in ((0.0, 0.0), (half[0], half[1]), (-half[0], half[1]), (half[0], -half[1]), (-half[0], -half[1])):
+            px, py = centre[0] + u, centre[1] + v
+            points.append((x + c * px - s * py, y + s * px + c * py))
+        top = self.world.surface_under(support, np.asarray(points))
+        if top is None:
+            raise SkillAbort(FailureKind.UNEXPECTED_CONFIGURATION,
+                             f"place {self.block}: its support {support} is not under the target",
+                             {"object": self.block, "support": support, "objects": [self.block, support],
+                              "target": rounded((x, y))})
+        return max(top, floor)
 
     def _at_goal(self, height: float) -> np.ndarray:
         gripper = self._goal_block() @ np.linalg.inv(self.world.held_relative(self.arm))
@@ -447,12 +517,45 @@ class Place(PhasedSkill):
         self.world.allow_hand(self.block, self.arm, allowed=False)
         final = sim.object_transform(self.block)
         self.info["final_pose"] = rounded(matrix_to_pose(final))
-        if self.turn:  # how it landed is the re-orientation's business (its next failure counts from it)
+        if self.turn:
+            self._check_turned(final)
             return
         error = float(np.linalg.norm(final[:2, 3] - np.asarray(self.goal[:2])))
         self.info["placement_error"] = rounded(error, 5)
+        evidence = {"object": self.block, "target": rounded(self.goal[:2]), "final_pose": self.info["final_pose"],
+                    "error": error}
         if error > self.tolerance:
             raise SkillAbort(FailureKind.PHYSICAL,
-                             f"place: {self.block} came to rest {error * 100:.1f} cm from its target",
-                             {"object": self.block, "target": rounded(self.goal[:2]),
-                              "final_pose": self.info["final_pose"], "error": error})
+                             f"place: {self.block} came to rest {error * 100:.1f} cm from its target", evidence)
+        goal = self._goal_block()
+        off_face = tilt(final)
+        self.info["face_error_deg"] = rounded(math.degrees(off_face), 2)
+        if off_face > FACE_TOLERANCE:
+            raise SkillAbort(FailureKind.PHYSICAL, f"place: {self.block} came to rest at its target tipped "
+                             f"{math.degrees(off_face):.0f} degrees off the face it was set down on",
+                             {**evidence, "face_error_deg": self.info["face_error_deg"]})
+        model = self.world.sim.object_model(self.block)
+        period = symmetry(model)
+        if heading_matters(model, HEADING_TOLERANCE):  # a part that looks the same at any heading has none
+            heading = abs(nearest_yaw(object_yaw(final), period, object_yaw(goal)) - object_yaw(goal))
+            self.info["heading_error_deg"] = rounded(math.degrees(heading), 2)
+            if heading > HEADING_TOLERANCE:
+                raise SkillAbort(FailureKind.PHYSICAL, f"place: {self.block} came to rest at its target turned "
+                                 f"{math.degrees(heading):.0f} degrees from the heading it was set down at",
+                                 {**evidence, "heading_error_deg": self.info["heading_error_deg"],
+                                  "target_yaw": rounded(object_yaw(goal))})
+
+    def _check_turned(self, final: np.ndarray) -> None:
+        """A turn must leave the part on another face, nearer standing on its base than before: by at least half
+        the quarter turn (:data:`TURN_GAIN`), or still standing when it stood. A part that fell back onto the face
+        it showed (a pin stood on its end topples) fails the turn here, ``physical``, not a later step."""
+        before, after = self._tilt_before, tilt(final)
+        self.info["tilt_deg"] = {"before": rounded(math.degrees(before), 1), "after": rounded(math.degrees(after), 1)}
+        turned = after <= FACE_TOLERANCE if before <= FACE_TOLERANCE else after <= before - TURN_GAIN
+        if not turned:
+            raise SkillAbort(FailureKind.PHYSICAL, f"turn: {self.block} did not come to rest on its next face: its "
+                             f"base is {math.degrees(after):.0f} degrees off standing after the turn, "
+                             f"{math.degrees(before):.0f} before",
+                             {"object": self.block, "tilt_before_deg": self.info["tilt_deg"]["before"],
+                              "tilt_after_deg": self.info["tilt_deg"]["after"],
+                              "final_pose": self.info["final_pose"]})

@@ -133,7 +133,7 @@ class Insert(PhasedSkill):
         # short when the part meets the target), the check phase judges the result.
         self.world.allow_objects(self.part, [self.target])
         return self._move(self._over_hole(0.001), "insert " + self.part, require_arrival=False, check_path=False,
-                          check_held=False, settle_ticks=8)
+                          check_held=False, settle_ticks=8, straight=True)
 
     def _check(self) -> None:
         sim = self.world.sim

@@ -391,6 +391,9 @@ class SimWorld:
         self._hand_links = {arm: self._arm_hand_links(arm) for arm in sim.robot.arms}
         self._geometry: dict[str, list[str]] = {}
         self._put_down_at: dict[str, tuple[str, float, tuple[float, float] | None]] = {}
+        self._turned_at: dict[tuple[str, str], np.ndarray] = {}
+        """(anchor, part) -> the gripper rotation of the last ``turn_up`` pose grounded there while holding it: let
+        go, the gripper leaves as it held it (grounded from the part as it now lies, it would sweep through it)."""
         """Anchor -> the part last put down there, its footprint radius, the spot chosen (:meth:`_clear_of_others`)."""
         t = sim.table
         self.collision.add_box(TABLE, (t.size_x, t.size_y, t.thickness),
@@ -662,6 +665,12 @@ class SimWorld:
                                                    f"known: {known}", {"symbol": symbol})
         return spec
 
+    def top_down_rotation(self, arm: str | None = None) -> np.ndarray:
+        """The gripper's rotation (3x3, base frame) pointing straight down with the arm's ``top_down_yaw``: how
+        the skills grasp from above, on this robot."""
+        yaw = self.sim.robot.arm(arm or self.default_arm).top_down_yaw
+        return rpy_to_matrix(math.pi, 0.0, yaw)
+
     def ground_pose(self, symbol: str, arm: str | None = None) -> np.ndarray:
         """The gripper pose (4x4, base frame) a pose symbol of the task file stands for, now.
 
@@ -718,9 +727,17 @@ class SimWorld:
             position, _ = self.anchor(str(spec["anchor"]))
             offset = [float(v) for v in spec.get("offset", (0.0, 0.0, 0.0))]
             if "turn_up" in spec:
-                flip = [float(v) for v in spec.get("flip_axis", (1.0, 0.0, 0.0))]
-                out[:3, :3] = self.turn_up(str(spec["turn_up"]), math.radians(float(spec.get("turn", 90.0))),
-                                           out[:3, :3], arm, np.asarray(flip)) @ out[:3, :3]
+                part, key = self.object_name(str(spec["turn_up"])), (str(spec["anchor"]), str(spec["turn_up"]))
+                if self.sim.held(arm) != part and key in self._turned_at:
+                    out[:3, :3] = self._turned_at[key]  # let go here after the turn: leave as it was held
+                else:
+                    flip = [float(v) for v in spec.get("flip_axis", (1.0, 0.0, 0.0))]
+                    out[:3, :3] = self.turn_up(str(spec["turn_up"]), math.radians(float(spec.get("turn", 90.0))),
+                                               out[:3, :3], arm, np.asarray(flip)) @ out[:3, :3]
+                    if self.sim.held(arm) == part:
+                        out[:3, :3] = self._reachable_yaw(out[:3, :3], np.asarray(position) + np.asarray(offset),
+                                                          arm, self._turned_at.get(key))
+                        self._turned_at[key] = out[:3, :3].copy()
             position = self._clear_of_others(str(spec["anchor"]), position, spec, arm, out[:3, :3], offset)
             out[:3, 3] = np.asarray(position) + np.asarray(offset)
             if "turn_up" in spec:
@@ -775,6 +792,30 @@ class SimWorld:
         spot = nearest_free_spot(position[:2], radius, footprints, sim.table.bounds, prefer=chosen, accept=reached)
         self._put_down_at[anchor] = (part, radius, spot)
         return position if spot is None else (spot[0], spot[1], position[2])
+
+    def _reachable_yaw(self, rotation: np.ndarray, position: np.ndarray, arm: str,
+                       before: np.ndarray | None) -> np.ndarray:
+        """``rotation`` turned about the vertical by 0, 90, -90 or 180 degrees: the turn chosen last time
+        (``before``) while the arm still reaches ``position`` so (collision-aware IK), else the one whose solution
+        is nearest the arm's joints now. The part held turns about the vertical with it and lands on the same face,
+        while which wrist pose a robot reaches well depends on its arm (the UR5 by the set-down spot)."""
+        import pinocchio as pin
+
+        vertical = np.array([0.0, 0.0, 1.0])
+        q_now = self.current_q()
+        indices = self.kin.arm_indices(arm)
+        best: tuple[float, np.ndarray] | None = None
+        for angle in (0.0, 90.0, -90.0, 180.0):
+            candidate = axis_angle_matrix(vertical, math.radians(angle)) @ rotation
+            solved = self.ik.solve(arm, pin.SE3(candidate, np.asarray(position, float)), q_now, seed=self.seed)
+            if not solved.success or solved.q is None:
+                continue
+            if before is not None and float(np.linalg.norm(pin.log3(before.T @ candidate))) < 1e-3:
+                return candidate
+            distance = float(np.max(np.abs(solved.q[indices] - q_now[indices])))
+            if best is None or distance < best[0]:
+                best = (distance, candidate)
+        return rotation if best is None else best[1]
 
     def held_pose(self, relative_to: str, pose: Sequence[float], arm: str | None = None) -> np.ndarray:
         """The gripper pose that puts the object held now at ``pose`` (x, y, z, roll, pitch, yaw; metres, radians)

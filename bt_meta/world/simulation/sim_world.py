@@ -682,6 +682,9 @@ class SimWorld:
           ``touch: true`` marks a grasp pose: a friction grasp goes as deep as :meth:`grasp_height` says);
         * ``above_feature: FEATURE, height: h`` -- the held object's lowest point ``h`` above the feature's point,
           its centroid over it (the gripper itself when nothing is held);
+        * ``relative_to: OBJECT, offset: [dx, dy, dz]`` -- a point in the object's frame, as it lies now (a pose
+          that joins a part to a reference follows the reference: the paper's R_p is a relation between parts,
+          not a place on the table); pointing down as usual, or with ``rpy`` given in the object's frame;
         * ``anchor: NAME, offset: [dx, dy, dz]`` -- a scene anchor plus an offset; with ``turn_up: OBJECT``
           (and ``turn``, degrees, default 90) the gripper turned by at most that toward standing the object on
           its base (:meth:`turn_up`): a re-orientation's turn for whichever way the part lies; with ``lowest:
@@ -703,6 +706,13 @@ class SimWorld:
                 dx, dy, dz = self.sim.robot.scene_offset
                 x, y, z = x + dx, y + dy, z + dz
             return pose_to_matrix((x, y, z, math.radians(roll), math.radians(pitch), math.radians(yaw)))
+        if "relative_to" in spec:
+            frame = self.sim.object_transform(self.object_name(str(spec["relative_to"])))
+            out[:3, 3] = frame[:3, :3] @ np.asarray([float(v) for v in spec.get("offset", (0.0, 0.0, 0.0))]) \
+                + frame[:3, 3]
+            if "rpy" in spec:
+                out[:3, :3] = frame[:3, :3] @ out[:3, :3]
+            return out
         if "above" in spec:
             name = self.object_name(str(spec["above"]))
             if spec.get("touch"):  # a grasp pose: as deep as this gripper grasps
@@ -747,7 +757,8 @@ class SimWorld:
                 self._lowest_over(out, position, float(spec["lowest"]), float(offset[2]), arm)
             return out
         raise SkillAbort(FailureKind.INTERNAL,
-                         f"pose {symbol!r} in {self.grounding.path}: give pose, above, above_feature or anchor")
+                         f"pose {symbol!r} in {self.grounding.path}: give pose, above, above_feature, relative_to "
+                         "or anchor")
 
     def _clear_of_others(self, anchor: str, position: tuple[float, float, float], spec: Mapping[str, Any], arm: str,
                          rotation: np.ndarray, offset: Sequence[float]) -> tuple[float, float, float]:

@@ -173,6 +173,11 @@ class RobotDescription:
         """A point of this robot's base frame in the scene frame."""
         return tuple(float(v) - d for v, d in zip(point, self.scene_offset, strict=True))  # type: ignore[return-value]
 
+    def frames(self) -> dict[str, Any]:
+        """What an output's poses are in: the robot's base frame, and how the scene frame relates to it."""
+        return {"poses": "base", "base_frame": self.base_frame, "scene_offset": list(self.scene_offset),
+                "scene_to_base": "base = scene + scene_offset (no rotation)"}
+
     @property
     def default_arm(self) -> str:
         """The arm skills use when a grounding file names none: the first one the description lists."""

@@ -51,6 +51,7 @@ from bt_meta.resources import trees_dir
 from bt_meta.world.base import FAILURE, SUCCESS, Atom, SkillFailure, ground_effects
 from bt_meta.world.kinematics.collision import SHRINK
 from bt_meta.world.poses import axis_angle_matrix
+from bt_meta.world.robot.description import available_robots
 from bt_meta.world.simulation.objects import Box, Cylinder, Mesh, ObjectModel, pose_to_matrix, rpy_to_matrix
 from bt_meta.world.skills import SKILLS
 from bt_meta.world.skills.base import SimSkill, SkillAbort
@@ -218,7 +219,8 @@ def load_grounding(domain: str, task_file: str | Path | None = None, path: str |
     robot = data.get("robot")
     if robot is not None:
         if not isinstance(robot, str) or not robot:
-            raise ConfigError("`robot:` names a shipped robot (baxter, panda) or a robot description file", path)
+            raise ConfigError(f"`robot:` names a shipped robot ({', '.join(available_robots())}) or a robot "
+                              "description file", path)
         if robot.endswith((".yaml", ".yml")):
             robot = str(path.parent / robot)
     for key in ("problems", "frames", "poses", "features"):

@@ -90,3 +90,18 @@ def test_bench_ik_on_the_ur5_against_pybullet_in_the_same_run():
     assert report["robot"] == "ur5" and report["arm"] == "arm"
     assert report["ours"]["successes"] >= 5 and report["ours"]["every_returned_solution_collision_free"]
     assert report["pybullet"]["mean_ms"] is not None and report["ratio_mean_time_pybullet_over_ours"] is not None
+
+
+@pytest.mark.slow
+def test_the_ur5_wrist_camera_an_added_frame_sees_the_table():
+    from bt_meta.world.simulation.camera import HandCamera
+    from bt_meta.world.simulation.sim import Simulation
+
+    with Simulation(robot=load_robot("ur5")) as sim:
+        cam = HandCamera(sim, "arm")
+        pose = cam.pose()
+        assert np.allclose(pose, sim.link_transform("wrist_camera"))  # pybullet has the added frame too
+        assert pose[2, 2] < -0.9  # at home it looks down
+        image = cam.capture()
+        centre = cam.pixel_to_point(160.0, 120.0, float(image.depth[120, 160]))
+        assert sim.table.top_z - 0.01 < centre[2] < sim.table.top_z + 0.01  # the table, not the claw

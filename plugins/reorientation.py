@@ -19,7 +19,8 @@ taken out of the state the repair plans from.
 
 How many times: each run of the task (planned one after the other: the method may differ, a held part is set
 down first) turns the part by the rotation between its last set-down pose and the top-down grasp (read from the
-world's pose grounding when it offers ``ground_pose``; else a quarter turn about the robot's x axis); the fewest
+world's pose grounding when it offers ``ground_pose``, against the robot's top-down grasp, ``top_down_rotation``;
+else a quarter turn about the robot's x axis); the fewest
 runs that bring the normal within :data:`ALIGNED_ANGLE` of the demonstrated one.
 
 The proposal is a ``splice`` of the planned steps from the failed step on. Its evidence carries ``replay_plan``: the
@@ -77,7 +78,19 @@ UPSIDE_DOWN = math.radians(135.0)
 """Further off than this a part is upside down (the turn's axis is then the flip axis, not the shortest way)."""
 MAX_TURNS = 3
 TOP_DOWN = rpy_to_matrix(math.pi, 0.0, math.pi)
-"""The shipped groundings' grasp orientation (rpy 180, 0, 180): the turn is measured from it."""
+"""The grasp orientation turns are measured from when the world does not say its own (``top_down_rotation``:
+the robot's top-down yaw; rpy 180, 0, 180 is the Baxter's)."""
+
+
+def top_down(world: Any) -> np.ndarray:
+    """The world's top-down grasp rotation (the robot's), else :data:`TOP_DOWN`."""
+    offered = getattr(world, "top_down_rotation", None)
+    if callable(offered):
+        try:
+            return np.asarray(offered(), float)
+        except Exception as error:  # a world that cannot say: the documented default
+            log.info("reorientation: no top-down rotation from the world (%s)", error)
+    return TOP_DOWN
 
 
 def reorientation_tasks(domain: Any, part_type: str | None = None) -> list[str]:
@@ -156,7 +169,7 @@ class Reorientation:
         if ground is not None and moves:
             try:
                 rotation = np.asarray(ground(str(moves[-1])), float)[:3, :3]
-                return rotation @ TOP_DOWN.T
+                return rotation @ top_down(world).T
             except Exception as error:  # a world that cannot ground it now: the documented default
                 log.info("reorientation: set-down pose %s not grounded (%s); a quarter turn about x", moves[-1], error)
         return _about_x()
@@ -463,7 +476,7 @@ def _held_turned(failure: Any, name: str, wanted: np.ndarray) -> bool:
 
 def _held_tilted(world: Any, run: Any, name: str, wanted: np.ndarray) -> np.ndarray | None:
     """The normal a part that started grossly off and is held now would have under a top-down grasp (the
-    skills' grasp, :data:`TOP_DOWN`), when that is grossly off too; else ``None``. A block picked on its side is
+    skills' grasp, :func:`top_down`), when that is grossly off too; else ``None``. A block picked on its side is
     carried upright with the wrist tilted (the letters' place keeps its tilt in the gripper): its normal as the
     table sees it is the demonstrated one, but no wrist reaches down at the cell so held."""
     start = Reorientation._initial_normal(run, name)
@@ -476,7 +489,7 @@ def _held_tilted(world: Any, run: Any, name: str, wanted: np.ndarray) -> np.ndar
     if pose is None or len(pose) != 6 or observed is None:
         return None
     try:
-        normal = TOP_DOWN @ rpy_to_matrix(*pose[3:]).T @ keypoints_of(observed)[1]
+        normal = top_down(world) @ rpy_to_matrix(*pose[3:]).T @ keypoints_of(observed)[1]
     except KeypointError:
         return None
     return normal if _angle(normal, wanted) > GROSS_ANGLE else None

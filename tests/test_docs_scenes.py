@@ -41,4 +41,24 @@ def test_the_robot_example_loads(tmp_path):
     path = tmp_path / "my_panda.yaml"
     path.write_text(block)
     robot = load_robot(path)
-    assert robot.default_arm == "arm" and robot.scene_offset == (-0.33, 0.2, 0.2)
+    shipped = load_robot("panda")  # the example is the shipped Panda's description, offset included
+    assert robot.default_arm == "arm" and robot.scene_offset == shipped.scene_offset == (-0.22, 0.2, 0.2)
+    assert robot.arm("arm").joints == shipped.arm("arm").joints
+    assert robot.arm("arm").end_effector == shipped.arm("arm").end_effector
+
+
+def test_the_offsets_the_prose_gives_are_the_robot_files():
+    text = DOC.read_text(encoding="utf-8")
+    for name in ("baxter", "panda", "ur5"):
+        offset = "[" + ", ".join(f"{v:g}" if v == 0 else f"{v:.2f}" for v in load_robot(name).scene_offset) + "]"
+        assert offset in text, (name, offset)
+
+
+def test_the_added_frames_example_is_the_ur5s():
+    import yaml
+
+    from bt_meta.resources import robots_dir
+
+    (block,) = [b for b in yaml_blocks() if b.startswith("added_frames:")]
+    shipped = yaml.safe_load((robots_dir() / "ur5.yaml").read_text(encoding="utf-8"))
+    assert yaml.safe_load(block)["added_frames"] == shipped["added_frames"]

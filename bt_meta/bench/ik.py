@@ -46,7 +46,7 @@ from bt_meta.world.kinematics.collision import CollisionChecker
 from bt_meta.world.kinematics.forward import Kinematics
 from bt_meta.world.kinematics.ik import InverseKinematics
 from bt_meta.world.kinematics.mujoco_model import mujoco_urdf_text
-from bt_meta.world.robot.description import RobotDescription, load_robot
+from bt_meta.world.robot.description import RobotDescription, available_robots, load_robot
 
 GOAL_SUCCESS = 0.999
 GOAL_MEAN_S = 1e-3
@@ -388,7 +388,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--n", type=int, default=10_000, help="number of targets (default 10000)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the targets and of the IK restarts")
     parser.add_argument("--robot", default="baxter",
-                        help="robot: a shipped name (baxter, panda) or a robot description YAML file (default baxter)")
+                        help=f"robot: a shipped name ({', '.join(available_robots())}) or a robot description "
+                             "YAML file (default baxter)")
     parser.add_argument("--arm", help="arm to solve for (default: the robot's first, the Baxter's right)")
     parser.add_argument(
         "--pybullet-calls", type=int, default=50, help="cap on repeated pybullet IK calls per target (default 50)"

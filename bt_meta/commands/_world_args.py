@@ -14,7 +14,10 @@ from typing import Any
 
 
 def add_world_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--robot", help="robot to run on: a shipped name (baxter, panda) or a robot description "
+    from bt_meta.resources import robots_dir
+
+    shipped = ", ".join(sorted(path.stem for path in robots_dir().glob("*.yaml")))
+    parser.add_argument("--robot", help=f"robot to run on: a shipped name ({shipped}) or a robot description "
                                         "YAML file (default: the grounding file's `robot:`, else baxter)")
     parser.add_argument("--scene", help="scene file (or shipped scene name) to build instead of the one the "
                                         "grounding file names for the problem")

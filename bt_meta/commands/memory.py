@@ -164,7 +164,7 @@ def _print_state(state: State, out: TextIO, indent: str) -> None:
         pose = " ".join(f"{v:.4f}" for v in item.pose)
         ap = " ".join(f"{v:.4f}" for v in item.ap)
         an = " ".join(f"{v:.4f}" for v in item.an)
-        out.write(f"{indent}{item.name}: pose [{pose}] AP [{ap}] AN [{an}]\n")
+        out.write(f"{indent}{item.name}: pose [{pose}] AP [{ap}] (robot base frame) AN [{an}] (object frame)\n")
     for grid_map in state.grid_maps:
         out.write(f"{indent}{_grid(grid_map)}\n")
 

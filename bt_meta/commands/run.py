@@ -129,7 +129,8 @@ def run(args: argparse.Namespace) -> int:
             if args.repair:
                 plugins.register(rrd, "rerun_recorder", source="bt-meta run --record-rrd")
         out: dict[str, Any] = {"file": str(args.file), "problem": problem.name, "variant": world.variant,
-                               "scene": world.scene.name, "seed": args.seed, "robot": world.sim.robot.name}
+                               "scene": world.scene.name, "seed": args.seed, "robot": world.sim.robot.name,
+                               "frames": world.sim.robot.frames()}  # every pose below is in the robot base frame
         if rrd is not None:
             out["rrd"] = str(rrd.path)
         try:
@@ -354,9 +355,15 @@ def _report(args: argparse.Namespace, out: dict[str, Any], status: str, ticks: i
         for failure in failures:
             print(f"  [{failure['kind']}] {failure.get('node_id') or ''} {failure.get('action') or ''}"
                   f"{tuple(failure.get('args') or ())}: {failure['message']}")
+        robot = world.sim.robot
+        if observed["objects"]:
+            print(f"  object positions: base frame ({robot.base_frame}); "
+                  f"scene frame = base - {list(robot.scene_offset)}")
         for name, state in observed["objects"].items():
             pose = ", ".join(f"{v:.3f}" for v in state["pose"][:3])
-            print(f"  {name:<10} at ({pose})" + (f" held by {state['held_by']}" if state["held_by"] else "")
+            scene = ", ".join(f"{v:.3f}" for v in robot.base_to_scene(state["pose"][:3]))
+            print(f"  {name:<10} at ({pose}) base, ({scene}) scene"
+                  + (f" held by {state['held_by']}" if state["held_by"] else "")
                   + (f" joined to {', '.join(state['attached_to'])}" if state["attached_to"] else ""))
         if recorder is not None:
             print(f"recorded episode {recorder.episode_id} in {Path(recorder.memory.path)}"

@@ -137,7 +137,7 @@ class PerceivedState:
                     # re-derived from where the object is now
                     return None
                 target = world.ground_pose(args[0])
-                gripper = sim.link_transform(world.end_effector("right"))
+                gripper = sim.link_transform(world.end_effector(world.default_arm))
                 return float(np.linalg.norm(gripper[:3, 3] - target[:3, 3])) <= POSE_TOLERANCE
             if name == "holding" and len(args) == 1:
                 part = world.object_name(args[0])

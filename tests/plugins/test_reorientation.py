@@ -374,3 +374,67 @@ def test_a_block_carried_upright_by_a_tilted_wrist_is_seen_as_turned(start, grip
     assert (normal is not None) is tilted
     if tilted:
         assert reorientation._angle(normal, np.array(DOWN)) == pytest.approx(math.pi / 2, abs=1e-6)
+
+
+class TurnedRobotWorld(PartWorld):
+    """A robot whose top-down grasp is turned (the UR5's yaw -90, the Panda's 0): it says so."""
+
+    def __init__(self, yaw: float) -> None:
+        super().__init__("housing", UP, None, None, {"settle_high": (180.0, 0.0, yaw)})
+        self.yaw = yaw
+
+    def top_down_rotation(self) -> np.ndarray:
+        from bt_meta.world.simulation.objects import rpy_to_matrix
+
+        return rpy_to_matrix(math.pi, 0.0, math.radians(self.yaw))
+
+
+@pytest.mark.parametrize("yaw", [-90.0, 0.0, 180.0])
+def test_a_set_down_turn_is_measured_from_the_robots_own_top_down_grasp(yaw):
+    """A set-down pose pointing down as this robot grasps is no turn, whatever its top-down yaw (measured from the
+    Baxter's 180 degrees, the UR5's settle looked like a quarter turn and no settle was proposed)."""
+    turn = reorientation.Reorientation.turn_of(TurnedRobotWorld(yaw), None, [["MoveTo", "settle_high"]])
+    assert turn == pytest.approx(np.eye(3), abs=1e-9)
+
+
+SIDE_VARIANTS = {
+    "active_pitch": "[0.58, -0.40, table, 0, 90, 0]",          # on its side about the other horizontal axis
+    "active_roll_yaw": "[0.58, -0.40, table, -90, 0, 30]",     # on its side about roll, turned 30 degrees
+}
+
+
+@pytest.fixture(scope="module")
+def side_scene(tmp_path_factory):
+    text = (trees_dir() / "scenes" / "magnetic_attach.yaml").read_text(encoding="utf-8")
+    added = "".join(f"  {name}:\n    description: hand-built\n    override:\n      active: {{pose: {pose}}}\n"
+                    for name, pose in SIDE_VARIANTS.items())
+    path = tmp_path_factory.mktemp("scenes") / "magnetic_sides.yaml"
+    path.write_text(text.replace("variants:\n", "variants:\n" + added, 1), encoding="utf-8")
+    return path
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("robot", ["baxter", "ur5"])
+def test_a_part_on_its_side_about_pitch_or_roll_with_yaw_is_re_oriented(tmp_path, capsys, side_scene, robot):
+    """Before, both were reported ``collision`` (every pose sampled from the traces collides once held so) and no
+    re-orientation was tried. Now the turn toward the part's base (``turn_up``), about whichever horizontal axis
+    does it, at a wrist yaw the arm reaches, stands it up (or a held pose the arm reaches joins it as it is held),
+    and the magnets meet in the simulator."""
+    import json
+
+    from bt_meta.cli import main
+
+    memory = tmp_path / "memory.sqlite"
+    assert main(["record", str(MAGNETIC), "--problem", "nominal", "--robot", robot, "--memory", str(memory)]) == 0
+    capsys.readouterr()
+    for variant in SIDE_VARIANTS:
+        code = main(["run", str(MAGNETIC), "--problem", "nominal", "--scene", str(side_scene), "--variant", variant,
+                     "--repair", "--memory", str(memory), "--robot", robot, "--json"])
+        report = json.loads(capsys.readouterr().out)
+        assert code == 0 and report["status"] == "SUCCESS", (variant, report["stop_reason"])
+        repaired = [a["proposal"]["plugin"] for a in report["attempts"] if a["outcome"] == "repaired"]
+        assert repaired and set(repaired) <= {"reorientation", "pose_backtracking"}, (variant, repaired)
+        if variant == "active_pitch":  # no held pose brings the magnet down: only turning it over does
+            assert repaired == ["reorientation"]
+        assert report["attachments"] == [["active", "reference"]]  # the simulator's true state
+        assert report["objects"]["active"]["an"][2] == pytest.approx(-1.0, abs=0.05)  # magnet down, as shown

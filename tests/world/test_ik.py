@@ -65,11 +65,10 @@ def test_far_target_is_a_reachability_failure_without_searching(ik):
     result = ik.solve("right", target)
     assert not result.success and result.q is None
     assert result.kind == REACHABILITY
-    assert "no IK solution for right_gripper at [2.0, -0.2, 0.1]: 1.937 m from the right arm's first joint" in (
-        result.message
-    )
+    assert ("no IK solution for right_gripper at [2.0, -0.2, 0.1] (base frame base): 1.937 m from the right arm's "
+            "first joint") in result.message
     assert "beyond its reach of 1.414 m" in result.message
-    assert result.evidence["target_xyz"] == [2.0, -0.2, 0.1]
+    assert result.evidence["target_xyz"] == [2.0, -0.2, 0.1] and result.evidence["target_frame"] == "base"
     assert result.evidence["distance"] > result.evidence["reach"]
     assert result.attempts == 0 and result.iterations == 0
 

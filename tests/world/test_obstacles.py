@@ -97,7 +97,7 @@ def test_obstacles_are_static_bodies_cameras_and_collision_checks_see(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("robot", ["baxter", "panda"])
+@pytest.mark.parametrize("robot", ["baxter", "panda", "ur5"])
 def test_a_variant_with_an_obstacle_in_the_way_is_a_collision(capsys, robot):
     code = main(["run", str(trees_dir() / "magnetic_attach.yaml"), "--problem", "nominal",
                  "--variant", "shelf_over_reference", "--robot", robot, "--json"])

@@ -59,7 +59,7 @@ def test_unknown_robot_on_the_command_line_is_exit_2(capsys):
     code = main(["run", str(trees_dir() / "letters.yaml"), "--problem", "A", "--robot", "nosuch"])
     err = capsys.readouterr().err
     assert code == 2
-    assert "no robot description 'nosuch'; available: baxter, panda" in err and "Traceback" not in err
+    assert "no robot description 'nosuch'; available: baxter, panda, ur5" in err and "Traceback" not in err
 
 
 def test_a_urdf_that_does_not_load_is_a_located_error(tmp_path: Path):

@@ -187,3 +187,70 @@ def test_urdf_summary(baxter, tmp_path):
     with pytest.raises(ConfigError, match="not well-formed") as caught:
         read_urdf_summary(bad)
     assert caught.value.line == 3
+
+
+URDF_HEAD = '<?xml version="1.0"?>\n<robot name="two">\n  <link name="a"/>\n  <link name="b"/>\n'
+
+
+@pytest.mark.parametrize(("body", "message", "where"), [
+    ('  <joint name="j" type="revolute">\n    <parent link="a"/><child link="c"/>\n  </joint>\n',
+     "joint 'j': its child link 'c' is not in the URDF", (5, 3)),
+    ('  <joint name="j" type="hinge">\n    <parent link="a"/><child link="b"/>\n  </joint>\n',
+     "joint 'j' has an unknown type 'hinge'", (5, 3)),
+    ('  <link name="c"/>\n', "the links do not form one tree: 2 have no parent joint (a, c)", (2, 1)),
+    ('  <joint name="j" type="fixed">\n    <parent link="a"/><child link="b"/>\n  </joint>\n'
+     '  <link name="c"><visual><geometry>\n    <mesh filename="meshes/nothere.stl"/>\n  </geometry></visual></link>\n'
+     '  <joint name="k" type="fixed"><parent link="a"/><child link="c"/></joint>\n',
+     "mesh file 'meshes/nothere.stl' is not there", (9, 5)),
+])
+def test_a_urdf_the_models_would_not_load_is_located(tmp_path, body, message, where):
+    urdf = tmp_path / "two.urdf"
+    urdf.write_text(URDF_HEAD + body + "</robot>\n", encoding="utf-8")
+    if "one tree" in message:  # a and b joined, c on its own
+        urdf.write_text(URDF_HEAD + '  <joint name="j" type="fixed"><parent link="a"/><child link="b"/></joint>\n'
+                        + body + "</robot>\n", encoding="utf-8")
+    with pytest.raises(ConfigError) as caught:
+        read_urdf_summary(urdf)
+    assert str(caught.value) == f"{urdf}:{where[0]}:{where[1]}: {message}"
+
+
+@pytest.mark.parametrize(("old", "new", "needle", "message"), [
+    ("end_effector: right_gripper", "end_effector: right_griper", "right_griper", "unknown frame 'right_griper'"),
+    ("    camera: right_hand_camera_link ", "    camera_frame: right_hand_camera_link ", "camera_frame",
+     "arms.right: unknown key 'camera_frame'"),
+    ("base_frame: base\n", "base_frame: base\nbase_fram: base\n", "base_fram:", "unknown key 'base_fram'"),
+])
+def test_a_bad_robot_file_on_the_command_line_is_exit_2_at_its_line(tmp_path, capsys, old, new, needle, message):
+    from bt_meta.cli import main
+    from bt_meta.resources import trees_dir
+
+    path = write_variant(tmp_path, old, new)
+    line, column = position_of(path, needle)
+    code = main(["run", str(trees_dir() / "letters.yaml"), "--problem", "A", "--robot", str(path)])
+    err = capsys.readouterr().err
+    assert code == 2 and f"{path}:{line}:{column}: " in err and message in err and "Traceback" not in err
+
+
+def test_a_urdf_that_does_not_load_on_the_command_line_is_exit_2(tmp_path, capsys):
+    from bt_meta.cli import main
+    from bt_meta.resources import trees_dir
+
+    share = tmp_path / "share"
+    share.mkdir()
+    source = load_robot("baxter").urdf_path.read_text(encoding="utf-8")
+    broken = source.replace('<child link="right_gripper"/>', '<child link="right_griper"/>', 1)
+    assert broken != source
+    (share / "baxter.urdf").write_text(broken, encoding="utf-8")
+    path = tmp_path / "robot.yaml"
+    path.write_text(BAXTER_TEXT.replace("  distribution: example-robot-data\n", "").replace(
+        "share: cmeel.prefix/share", f"share: {share}").replace(
+        "urdf: example-robot-data/robots/baxter_description/urdf/baxter.urdf", "urdf: baxter.urdf").replace(
+        "  srdf: example-robot-data/robots/baxter_description/srdf/baxter_manipulation.srdf\n", ""))
+    code = main(["run", str(trees_dir() / "letters.yaml"), "--problem", "A", "--robot", str(path)])
+    err = capsys.readouterr().err
+    lines = broken.splitlines()
+    child = next(n for n, text in enumerate(lines, 1) if "right_griper" in text)
+    start = max(n for n, text in enumerate(lines[:child], 1) if "<joint " in text)  # the joint's start tag
+    column = lines[start - 1].index("<joint") + 1
+    assert code == 2 and f"{share / 'baxter.urdf'}:{start}:{column}: joint 'right_endpoint': its child link " \
+        "'right_griper' is not in the URDF" in err

@@ -291,6 +291,8 @@ class _Run:
         self.body = body
         self.frame = frame
         self.target = target
+        self.target_frame = ik.kinematics.robot.base_frame
+        """The frame the target is given in: the robot's base frame (failures say so)."""
         self.base = base
         self.seed = ik.settings.seed if seed is None else seed
         self.collision = ik.collision if check_collisions else None
@@ -441,11 +443,13 @@ class _Run:
             False,
             None,
             REACHABILITY,
-            f"no IK solution for {self.frame} at {target_xyz}: {distance:.3f} m from the {self.arm} arm's first "
+            f"no IK solution for {self.frame} at {target_xyz} (base frame {self.target_frame}): {distance:.3f} m "
+            f"from the {self.arm} arm's first "
             f"joint, beyond its reach of {reach:.3f} m",
             {
                 "frame": self.frame,
                 "target_xyz": target_xyz,
+                "target_frame": self.target_frame,
                 "target_rpy": [round(float(v), 6) for v in pin.rpy.matrixToRpy(self.target.rotation)],
                 "distance": distance,
                 "reach": reach,
@@ -468,10 +472,11 @@ class _Run:
                 False,
                 None,
                 COLLISION,
-                f"every IK solution for {frame} at {target_xyz} collides: {contact}",
+                f"every IK solution for {frame} at {target_xyz} (base frame {self.target_frame}) collides: {contact}",
                 {
                     "frame": frame,
                     "target_xyz": target_xyz,
+                "target_frame": self.target_frame,
                     "target_rpy": target_rpy,
                     "pair": list(contact.pair),
                     "collision_kind": contact.kind,
@@ -489,11 +494,13 @@ class _Run:
             False,
             None,
             REACHABILITY,
-            f"no IK solution for {frame} at {target_xyz} rpy {target_rpy} after {attempts} attempts; "
+            f"no IK solution for {frame} at {target_xyz} rpy {target_rpy} (base frame {self.target_frame}) after "
+            f"{attempts} attempts; "
             f"best residual {position * 1000:.2f} mm, {rotation:.4f} rad",
             {
                 "frame": frame,
                 "target_xyz": target_xyz,
+                "target_frame": self.target_frame,
                 "target_rpy": target_rpy,
                 "best_position_error": position,
                 "best_orientation_error": rotation,

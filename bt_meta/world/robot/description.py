@@ -8,19 +8,27 @@ Offers:
 * :class:`ArmDescription`, :class:`GripperDescription` (how the simulator grasps: ``fixed`` or ``friction``),
   :class:`IKSettings` -- its parts
 * :class:`UrdfSummary` / :func:`read_urdf_summary` -- joint and link names, types and limits of a URDF
+* :class:`AddedFrame` -- a fixed frame the description adds to its URDF (a tool centre point, a camera mount):
+  every model (Pinocchio, MuJoCo, pybullet) then loads the same derived URDF, written once per content
 
 A wrong robot file raises :class:`~bt_meta.errors.ConfigError` located at the offending YAML node
-(``path:line:column``): a missing key, a wrong type, or a joint or frame that the URDF does not have.
+(``path:line:column``): a missing key, a wrong type, or a joint or frame that the URDF does not have; a URDF
+that does not load (not XML, a joint naming a link it lacks, a mesh that is not there) is located in the URDF.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import importlib.metadata
 import math
+import os
+import tempfile
 import xml.etree.ElementTree as ElementTree
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+from xml.parsers import expat
 
 import yaml
 
@@ -30,6 +38,7 @@ from bt_meta.resources import robots_dir
 from bt_meta.world._yaml_nodes import YamlNodeReader, shipped_yaml_path
 
 __all__ = [
+    "AddedFrame",
     "ArmDescription",
     "GripperDescription",
     "IKSettings",
@@ -60,6 +69,9 @@ class GripperDescription:
     fingertip: float = 0.0
     """How far the fingertips reach below the end-effector frame (m): a friction grasp keeps them above the
     surface the part stands on."""
+    closing_axis: tuple[float, float, float] | None = None
+    """Unit vector, in the end-effector frame, across the fingers (the first finger's opening direction): given for
+    a gripper whose fingers do not move (no ``joints``), else read from the first finger joint's axis."""
 
 
 @dataclass(frozen=True)
@@ -92,6 +104,16 @@ class IKSettings:
     escape_step_size: float = 0.15
     escape_converge_steps: int = 4
     seed: int = 0
+
+
+@dataclass(frozen=True)
+class AddedFrame:
+    """A fixed frame the robot file adds to the URDF: ``xyz`` (m) and ``rpy`` (rad) in its ``parent`` link."""
+
+    name: str
+    parent: str
+    xyz: tuple[float, float, float]
+    rpy: tuple[float, float, float]
 
 
 @dataclass(frozen=True)
@@ -138,6 +160,23 @@ class RobotDescription:
     """Where the shared scene frame (scene files, grounding poses: the Baxter's torso frame) lies in this robot's
     base frame: scene coordinates + this = base-frame coordinates. Placement as data, so one scene serves robots
     of different sizes and mounting heights."""
+    added_frames: tuple[AddedFrame, ...] = ()
+    """Fixed frames the file adds to the URDF; ``urdf_path`` is then a derived copy that has them."""
+    source_urdf_path: Path | None = None
+    """The URDF the file names (``urdf_path`` is derived from it when frames are added)."""
+
+    def scene_to_base(self, point: tuple[float, float, float] | list[float]) -> tuple[float, float, float]:
+        """A point of the scene frame in this robot's base frame."""
+        return tuple(float(v) + d for v, d in zip(point, self.scene_offset, strict=True))  # type: ignore[return-value]
+
+    def base_to_scene(self, point: tuple[float, float, float] | list[float]) -> tuple[float, float, float]:
+        """A point of this robot's base frame in the scene frame."""
+        return tuple(float(v) - d for v, d in zip(point, self.scene_offset, strict=True))  # type: ignore[return-value]
+
+    def frames(self) -> dict[str, Any]:
+        """What an output's poses are in: the robot's base frame, and how the scene frame relates to it."""
+        return {"poses": "base", "base_frame": self.base_frame, "scene_offset": list(self.scene_offset),
+                "scene_to_base": "base = scene + scene_offset (no rotation)"}
 
     @property
     def default_arm(self) -> str:
@@ -187,42 +226,141 @@ def _parsed_with_files(path: Path) -> tuple[RobotDescription, tuple[Any, ...]]:
 
 
 def _model_files(description: RobotDescription) -> tuple[Any, ...]:
-    return (file_signature(description.urdf_path), file_signature(description.srdf_path))
+    urdf = description.source_urdf_path or description.urdf_path
+    return (file_signature(urdf), file_signature(description.srdf_path), description.urdf_path.is_file())
 
 
 # --------------------------------------------------------------------------------------------------------------
 # URDF
 
 
-def read_urdf_summary(path: Path) -> UrdfSummary:
+def read_urdf_summary(path: Path, package_dirs: tuple[Path, ...] = ()) -> UrdfSummary:
+    """Names, types, limits and mimic relations of a URDF, checked so that the models load it: every joint joins
+    two links the file has, every link but one (the root) has a parent, and every mesh file exists (``package://``
+    URIs under ``package_dirs``, when given). Errors are located at the element (``path:line:column``)."""
     text = path.read_text(encoding="utf-8")
     if "<!DOCTYPE" in text or "<!ENTITY" in text:
         raise ConfigError("URDF files with a DOCTYPE or entities are not accepted", path)
-    try:
-        root = ElementTree.fromstring(text)
-    except ElementTree.ParseError as error:
-        line, column = error.position
-        raise ConfigError(f"URDF is not well-formed XML: {error}", path, line, column + 1) from None
+    root, where = _located_xml(text, path)
     if root.tag != "robot":
         raise ConfigError(f"URDF root element is <{root.tag}>, expected <robot>", path, 1)
+
+    def error(message: str, element: ElementTree.Element) -> ConfigError:
+        line, column = where.get(id(element), (1, 1))
+        return ConfigError(message, path, line, column)
+
     links = tuple(el.get("name", "") for el in root.findall("link"))
+    for el in root.findall("link"):
+        if not el.get("name"):
+            raise error("a <link> has no name", el)
+    if len(set(links)) != len(links):
+        twice = next(el for i, el in enumerate(root.findall("link")) if el.get("name") in links[:i])
+        raise error(f"link {twice.get('name')!r} is defined twice", twice)
     joints: dict[str, str] = {}
     limits: dict[str, tuple[float, float]] = {}
     mimic: dict[str, tuple[str, float, float]] = {}
+    parent_of: dict[str, str] = {}
     for el in root.findall("joint"):
         jname, kind = el.get("name", ""), el.get("type", "")
+        if not jname or jname in joints:
+            raise error(f"a <joint> has no name or repeats one ({jname!r})", el)
+        if kind not in ("revolute", "continuous", "prismatic", "fixed", "floating", "planar"):
+            raise error(f"joint {jname!r} has an unknown type {kind!r}", el)
+        for end in ("parent", "child"):
+            link_el = el.find(end)
+            link = link_el.get("link", "") if link_el is not None else ""
+            if link not in links:
+                raise error(f"joint {jname!r}: its {end} link {link!r} is not in the URDF", el)
+        child = el.find("child").get("link", "")  # type: ignore[union-attr]
+        if child in parent_of:
+            raise error(f"joint {jname!r}: link {child!r} already has a parent joint", el)
+        parent_of[child] = el.find("parent").get("link", "")  # type: ignore[union-attr]
         joints[jname] = kind
         if kind == "continuous":
             limits[jname] = (-math.inf, math.inf)
         elif kind in ("revolute", "prismatic"):
             limit = el.find("limit")
-            lower = float(limit.get("lower", "0")) if limit is not None else 0.0
-            upper = float(limit.get("upper", "0")) if limit is not None else 0.0
+            try:
+                lower = float(limit.get("lower", "0")) if limit is not None else 0.0
+                upper = float(limit.get("upper", "0")) if limit is not None else 0.0
+            except ValueError:
+                raise error(f"joint {jname!r}: its limits are not numbers", limit) from None
             limits[jname] = (lower, upper)
         m = el.find("mimic")
         if m is not None:
             mimic[jname] = (m.get("joint", ""), float(m.get("multiplier", "1")), float(m.get("offset", "0")))
+    roots = [link for link in links if link not in parent_of]
+    if links and len(roots) != 1:
+        raise error(f"the links do not form one tree: {len(roots)} have no parent joint ({', '.join(roots[:4])})",
+                    root)
+    for mesh in root.iter("mesh"):
+        filename = mesh.get("filename", "")
+        if filename.startswith("package://") and not package_dirs:
+            continue
+        if filename and _mesh_file(filename, path, package_dirs) is None:
+            raise error(f"mesh file {filename!r} is not there", mesh)
     return UrdfSummary(root.get("name", ""), links, joints, limits, mimic)
+
+
+def _mesh_file(filename: str, urdf: Path, package_dirs: tuple[Path, ...]) -> Path | None:
+    """The file a URDF mesh reference names, ``None`` when there is none."""
+    if filename.startswith("package://"):
+        relative = filename[len("package://"):]
+        return next((Path(base) / relative for base in package_dirs if (Path(base) / relative).is_file()), None)
+    local = Path(filename[len("file://"):] if filename.startswith("file://") else filename)
+    local = local if local.is_absolute() else urdf.parent / local
+    return local if local.is_file() else None
+
+
+def _located_xml(text: str, path: Path) -> tuple[ElementTree.Element, dict[int, tuple[int, int]]]:
+    """The parsed XML and, per element (by id), where its start tag is (line, column)."""
+    where: dict[int, tuple[int, int]] = {}
+    builder = ElementTree.TreeBuilder()
+    parser = expat.ParserCreate()
+
+    def start(tag: str, attrs: dict[str, str]) -> None:
+        element = builder.start(tag, attrs)
+        where[id(element)] = (parser.CurrentLineNumber, parser.CurrentColumnNumber + 1)
+
+    parser.StartElementHandler = start
+    parser.EndElementHandler = builder.end
+    try:
+        parser.Parse(text, True)
+    except expat.ExpatError as error:
+        raise ConfigError(f"URDF is not well-formed XML: {expat.ErrorString(error.code)}: line {error.lineno}, "
+                          f"column {error.offset}", path, error.lineno, error.offset + 1) from None
+    return builder.close(), where
+
+
+def _urdf_with_frames(source: Path, frames: tuple[AddedFrame, ...]) -> Path:
+    """A copy of ``source`` with ``frames`` added as massless links on fixed joints, local mesh paths made
+    absolute; written once per content (the name is its digest) where every process finds it."""
+    root = ElementTree.fromstring(source.read_text(encoding="utf-8"))
+    for mesh in root.iter("mesh"):
+        filename = mesh.get("filename", "")
+        if filename and "://" not in filename and not Path(filename).is_absolute():
+            mesh.set("filename", str(source.parent / filename))
+    for frame in frames:
+        link = ElementTree.SubElement(root, "link", {"name": frame.name})
+        inertial = ElementTree.SubElement(link, "inertial")
+        ElementTree.SubElement(inertial, "mass", {"value": "0"})
+        ElementTree.SubElement(inertial, "origin", {"xyz": "0 0 0", "rpy": "0 0 0"})
+        ElementTree.SubElement(inertial, "inertia", {k: "0" for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")})
+        joint = ElementTree.SubElement(root, "joint", {"name": f"{frame.name}_fixed_joint", "type": "fixed"})
+        ElementTree.SubElement(joint, "parent", {"link": frame.parent})
+        ElementTree.SubElement(joint, "child", {"link": frame.name})
+        ElementTree.SubElement(joint, "origin", {"xyz": " ".join(repr(v) for v in frame.xyz),
+                                                 "rpy": " ".join(repr(v) for v in frame.rpy)})
+    text = ElementTree.tostring(root, encoding="unicode")
+    digest = hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
+    folder = Path(tempfile.gettempdir()) / "bt_meta_robot_models"
+    out = folder / f"{source.stem}-{digest}.urdf"
+    if not out.is_file():
+        folder.mkdir(parents=True, exist_ok=True)
+        partial = folder / f".{out.name}.{os.getpid()}"
+        partial.write_text(text, encoding="utf-8")
+        os.replace(partial, out)  # atomic: a process reading it never sees half a file
+    return out
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -269,15 +407,23 @@ class _RobotFile(YamlNodeReader):
         top = self.mapping(root, "robot description")
         self.check_keys(
             top,
-            {"name", "files", "base_frame", "arms", "head", "home", "joint_limits", "joint_limit_margin", "ik",
-             "workcell"},
+            {"name", "files", "added_frames", "base_frame", "arms", "head", "home", "joint_limits",
+             "joint_limit_margin", "ik", "workcell"},
             "robot description",
         )
         name = self.string(self.require(top, "name", root, "robot description"), "name")
 
         files_node = self.require(top, "files", root, "robot description")
         urdf_path, srdf_path, package_dirs, prefix = self.files(files_node)
-        urdf = read_urdf_summary(urdf_path)
+        urdf = read_urdf_summary(urdf_path, package_dirs)
+        source_urdf = urdf_path
+        added: tuple[AddedFrame, ...] = ()
+        if "added_frames" in top:
+            added = self.added_frames(top["added_frames"][1], urdf)
+            urdf = dataclasses.replace(
+                urdf, links=urdf.links + tuple(f.name for f in added),
+                joints={**urdf.joints, **{f"{f.name}_fixed_joint": "fixed" for f in added}})
+            urdf_path = _urdf_with_frames(source_urdf, added)
 
         base_frame = self.frame(self.require(top, "base_frame", root, "robot description"), "base_frame", urdf)
 
@@ -358,7 +504,34 @@ class _RobotFile(YamlNodeReader):
             ik=ik,
             urdf=urdf,
             scene_offset=scene_offset,
+            added_frames=added,
+            source_urdf_path=source_urdf,
         )
+
+    def added_frames(self, node: yaml.Node, urdf: UrdfSummary) -> tuple[AddedFrame, ...]:
+        """``added_frames: {NAME: {parent: LINK, xyz: [m, m, m], rpy: [deg, deg, deg]}}``: frames the URDF lacks."""
+        out: list[AddedFrame] = []
+        for name, (key_node, value_node) in self.mapping(node, "added_frames").items():
+            what = f"added_frames.{name}"
+            if name in urdf.frames or f"{name}_fixed_joint" in urdf.frames:
+                raise self.error(f"{what}: the URDF already has a link or joint named {name!r}", key_node)
+            entries = self.mapping(value_node, what)
+            self.check_keys(entries, {"parent", "xyz", "rpy"}, what)
+            parent_node = self.require(entries, "parent", value_node, what)
+            parent = self.string(parent_node, f"{what}.parent")
+            if parent not in urdf.links and parent not in {f.name for f in out}:
+                raise self.error(f"{what}.parent: unknown link {parent!r} (not in the URDF)", parent_node)
+            triples = {}
+            for key in ("xyz", "rpy"):
+                triples[key] = (0.0, 0.0, 0.0)
+                if key in entries:
+                    items = self.sequence(entries[key][1], f"{what}.{key}")
+                    if len(items) != 3:
+                        raise self.error(f"{what}.{key} must be three numbers", entries[key][1])
+                    triples[key] = tuple(self.number(item, f"{what}.{key}") for item in items)
+            rpy = tuple(math.radians(v) for v in triples["rpy"])
+            out.append(AddedFrame(name, parent, triples["xyz"], rpy))  # type: ignore[arg-type]
+        return tuple(out)
 
     def limit_margin(self, node: yaml.Node, limits: dict[str, tuple[float, float]],
                      arms: dict[str, ArmDescription], named: set[str]) -> None:
@@ -442,8 +615,8 @@ class _RobotFile(YamlNodeReader):
 
     def gripper(self, what: str, node: yaml.Node, urdf: UrdfSummary) -> GripperDescription:
         entries = self.mapping(node, what)
-        self.check_keys(entries, {"joints", "open", "closed", "opening", "grasp", "force", "depth", "fingertip"},
-                        what)
+        self.check_keys(entries, {"joints", "open", "closed", "opening", "grasp", "force", "depth", "fingertip",
+                                  "closing_axis"}, what)
         joints_node = self.require(entries, "joints", node, what)
         joints = tuple(self.joint(n, f"{what}.joints", urdf) for n in self.sequence(joints_node, f"{what}.joints"))
         values = {}
@@ -464,8 +637,21 @@ class _RobotFile(YamlNodeReader):
             grasp = self.string(entries["grasp"][1], f"{what}.grasp")
             if grasp not in ("fixed", "friction"):
                 raise self.error(f"{what}.grasp must be 'fixed' or 'friction', not {grasp!r}", entries["grasp"][1])
-        options = {key: self.number(entries[key][1], f"{what}.{key}", positive=key == "force")
-                   for key in ("force", "depth", "fingertip") if key in entries}
+        options: dict[str, Any] = {key: self.number(entries[key][1], f"{what}.{key}", positive=key == "force")
+                                   for key in ("force", "depth", "fingertip") if key in entries}
+        if "closing_axis" in entries:
+            axis_node = entries["closing_axis"][1]
+            items = self.sequence(axis_node, f"{what}.closing_axis")
+            axis = [self.number(item, f"{what}.closing_axis") for item in items]
+            norm = math.sqrt(sum(v * v for v in axis))
+            if len(axis) != 3 or norm < 1e-9:
+                raise self.error(f"{what}.closing_axis must be three numbers, not all zero", axis_node)
+            options["closing_axis"] = tuple(v / norm for v in axis)
+        elif not joints:
+            raise self.error(f"{what}: a gripper without finger joints needs closing_axis (in the end-effector "
+                             "frame)", node)
+        if not joints and grasp == "friction":
+            raise self.error(f"{what}.grasp: a friction grasp needs finger joints", entries["grasp"][1])
         return GripperDescription(joints, values["open"], values["closed"], opening, grasp, **options)
 
     def ik(self, node: yaml.Node) -> IKSettings:

@@ -886,6 +886,9 @@ class Simulation:
         gripper = self.robot.arm(arm).gripper
         if gripper is None:
             raise SimulationError(f"arm {arm!r} has no gripper")
+        if gripper.closing_axis is not None:  # fingers that do not move: the description says across what
+            world = self.link_transform(self.robot.arm(arm).end_effector)[:3, :3] @ np.asarray(gripper.closing_axis)
+            return world / max(float(np.linalg.norm(world)), 1e-12)
         joint = self._joint_index[gripper.joints[0]]
         axis = np.array(pybullet.getJointInfo(self.robot_id, joint, physicsClientId=self.client)[13], dtype=float)
         state = pybullet.getLinkState(self.robot_id, joint, computeForwardKinematics=True,

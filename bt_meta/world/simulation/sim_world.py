@@ -52,6 +52,7 @@ from bt_meta.resources import trees_dir
 from bt_meta.world.base import FAILURE, SUCCESS, Atom, SkillFailure, ground_effects
 from bt_meta.world.kinematics.collision import SHRINK
 from bt_meta.world.poses import axis_angle_matrix
+from bt_meta.world.robot.description import available_robots
 from bt_meta.world.simulation.objects import Box, Cylinder, Mesh, ObjectModel, pose_to_matrix, rpy_to_matrix
 from bt_meta.world.skills import SKILLS
 from bt_meta.world.skills.base import SimSkill, SkillAbort
@@ -236,7 +237,8 @@ def load_grounding(domain: str, task_file: str | Path | None = None, path: str |
     robot = data.get("robot")
     if robot is not None:
         if not isinstance(robot, str) or not robot:
-            raise ConfigError("`robot:` names a shipped robot (baxter, panda) or a robot description file", path)
+            raise ConfigError(f"`robot:` names a shipped robot ({', '.join(available_robots())}) or a robot "
+                              "description file", path)
         if robot.endswith((".yaml", ".yml")):
             robot = str(path.parent / robot)
     for key in ("problems", "frames", "poses", "features"):
@@ -436,6 +438,9 @@ class SimWorld:
         self._hand_links = {arm: self._arm_hand_links(arm) for arm in sim.robot.arms}
         self._geometry: dict[str, list[str]] = {}
         self._put_down_at: dict[str, tuple[str, float, tuple[float, float] | None]] = {}
+        self._turned_at: dict[tuple[str, str], np.ndarray] = {}
+        """(anchor, part) -> the gripper rotation of the last ``turn_up`` pose grounded there while holding it: let
+        go, the gripper leaves as it held it (grounded from the part as it now lies, it would sweep through it)."""
         """Anchor -> the part last put down there, its footprint radius, the spot chosen (:meth:`_clear_of_others`)."""
         t = sim.table
         self.collision.add_box(TABLE, (t.size_x, t.size_y, t.thickness),
@@ -728,6 +733,12 @@ class SimWorld:
                                                    f"known: {known}", {"symbol": symbol})
         return spec
 
+    def top_down_rotation(self, arm: str | None = None) -> np.ndarray:
+        """The gripper's rotation (3x3, base frame) pointing straight down with the arm's ``top_down_yaw``: how
+        the skills grasp from above, on this robot."""
+        yaw = self.sim.robot.arm(arm or self.default_arm).top_down_yaw
+        return rpy_to_matrix(math.pi, 0.0, yaw)
+
     def ground_pose(self, symbol: str, arm: str | None = None) -> np.ndarray:
         """The gripper pose (4x4, base frame) a pose symbol of the task file stands for, now.
 
@@ -739,6 +750,9 @@ class SimWorld:
           ``touch: true`` marks a grasp pose: a friction grasp goes as deep as :meth:`grasp_height` says);
         * ``above_feature: FEATURE, height: h`` -- the held object's lowest point ``h`` above the feature's point,
           its centroid over it (the gripper itself when nothing is held);
+        * ``relative_to: OBJECT, offset: [dx, dy, dz]`` -- a point in the object's frame, as it lies now (a pose
+          that joins a part to a reference follows the reference: the paper's R_p is a relation between parts,
+          not a place on the table); pointing down as usual, or with ``rpy`` given in the object's frame;
         * ``anchor: NAME, offset: [dx, dy, dz]`` -- a scene anchor plus an offset; with ``turn_up: OBJECT``
           (and ``turn``, degrees, default 90) the gripper turned by at most that toward standing the object on
           its base (:meth:`turn_up`): a re-orientation's turn for whichever way the part lies; with ``lowest:
@@ -760,6 +774,13 @@ class SimWorld:
                 dx, dy, dz = self.sim.robot.scene_offset
                 x, y, z = x + dx, y + dy, z + dz
             return pose_to_matrix((x, y, z, math.radians(roll), math.radians(pitch), math.radians(yaw)))
+        if "relative_to" in spec:
+            frame = self.sim.object_transform(self.object_name(str(spec["relative_to"])))
+            out[:3, 3] = frame[:3, :3] @ np.asarray([float(v) for v in spec.get("offset", (0.0, 0.0, 0.0))]) \
+                + frame[:3, 3]
+            if "rpy" in spec:
+                out[:3, :3] = frame[:3, :3] @ out[:3, :3]
+            return out
         if "above" in spec:
             name = self.object_name(str(spec["above"]))
             if "rpy" not in spec:  # grasped relative to itself: as it would be, turned back by its own heading
@@ -786,9 +807,17 @@ class SimWorld:
             position, _ = self.anchor(str(spec["anchor"]))
             offset = [float(v) for v in spec.get("offset", (0.0, 0.0, 0.0))]
             if "turn_up" in spec:
-                flip = [float(v) for v in spec.get("flip_axis", (1.0, 0.0, 0.0))]
-                out[:3, :3] = self.turn_up(str(spec["turn_up"]), math.radians(float(spec.get("turn", 90.0))),
-                                           out[:3, :3], arm, np.asarray(flip)) @ out[:3, :3]
+                part, key = self.object_name(str(spec["turn_up"])), (str(spec["anchor"]), str(spec["turn_up"]))
+                if self.sim.held(arm) != part and key in self._turned_at:
+                    out[:3, :3] = self._turned_at[key]  # let go here after the turn: leave as it was held
+                else:
+                    flip = [float(v) for v in spec.get("flip_axis", (1.0, 0.0, 0.0))]
+                    out[:3, :3] = self.turn_up(str(spec["turn_up"]), math.radians(float(spec.get("turn", 90.0))),
+                                               out[:3, :3], arm, np.asarray(flip)) @ out[:3, :3]
+                    if self.sim.held(arm) == part:
+                        out[:3, :3] = self._reachable_yaw(out[:3, :3], np.asarray(position) + np.asarray(offset),
+                                                          arm, self._turned_at.get(key))
+                        self._turned_at[key] = out[:3, :3].copy()
             position = self._clear_of_others(str(spec["anchor"]), position, spec, arm, out[:3, :3], offset)
             out[:3, 3] = np.asarray(position) + np.asarray(offset)
             if "turn_up" in spec:
@@ -798,7 +827,8 @@ class SimWorld:
                 self._lowest_over(out, position, float(spec["lowest"]), float(offset[2]), arm)
             return out
         raise SkillAbort(FailureKind.INTERNAL,
-                         f"pose {symbol!r} in {self.grounding.path}: give pose, above, above_feature or anchor")
+                         f"pose {symbol!r} in {self.grounding.path}: give pose, above, above_feature, relative_to "
+                         "or anchor")
 
     def _clear_of_others(self, anchor: str, position: tuple[float, float, float], spec: Mapping[str, Any], arm: str,
                          rotation: np.ndarray, offset: Sequence[float]) -> tuple[float, float, float]:
@@ -843,6 +873,30 @@ class SimWorld:
         spot = nearest_free_spot(position[:2], radius, footprints, sim.table.bounds, prefer=chosen, accept=reached)
         self._put_down_at[anchor] = (part, radius, spot)
         return position if spot is None else (spot[0], spot[1], position[2])
+
+    def _reachable_yaw(self, rotation: np.ndarray, position: np.ndarray, arm: str,
+                       before: np.ndarray | None) -> np.ndarray:
+        """``rotation`` turned about the vertical by 0, 90, -90 or 180 degrees: the turn chosen last time
+        (``before``) while the arm still reaches ``position`` so (collision-aware IK), else the one whose solution
+        is nearest the arm's joints now. The part held turns about the vertical with it and lands on the same face,
+        while which wrist pose a robot reaches well depends on its arm (the UR5 by the set-down spot)."""
+        import pinocchio as pin
+
+        vertical = np.array([0.0, 0.0, 1.0])
+        q_now = self.current_q()
+        indices = self.kin.arm_indices(arm)
+        best: tuple[float, np.ndarray] | None = None
+        for angle in (0.0, 90.0, -90.0, 180.0):
+            candidate = axis_angle_matrix(vertical, math.radians(angle)) @ rotation
+            solved = self.ik.solve(arm, pin.SE3(candidate, np.asarray(position, float)), q_now, seed=self.seed)
+            if not solved.success or solved.q is None:
+                continue
+            if before is not None and float(np.linalg.norm(pin.log3(before.T @ candidate))) < 1e-3:
+                return candidate
+            distance = float(np.max(np.abs(solved.q[indices] - q_now[indices])))
+            if best is None or distance < best[0]:
+                best = (distance, candidate)
+        return rotation if best is None else best[1]
 
     def held_pose(self, relative_to: str, pose: Sequence[float], arm: str | None = None) -> np.ndarray:
         """The gripper pose that puts the object held now at ``pose`` (x, y, z, roll, pitch, yaw; metres, radians)

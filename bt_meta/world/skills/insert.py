@@ -132,8 +132,17 @@ class Insert(PhasedSkill):
         # The part goes into the target: they may touch in collision checks; the motion is guarded (it may stop
         # short when the part meets the target), the check phase judges the result.
         self.world.allow_objects(self.part, [self.target])
+        # A part whose insertable end faces the hole goes down the straight line (a joint-space line bends: the
+        # UR5's swung the housing into the hole's rim); one that does not face it fails the check either way.
         return self._move(self._over_hole(0.001), "insert " + self.part, require_arrival=False, check_path=False,
-                          check_held=False, settle_ticks=8)
+                          check_held=False, settle_ticks=8, straight=self._facing())
+
+    def _facing(self) -> bool:
+        """Whether the part's insertable end faces the target's hole (normals opposed within the tolerance)."""
+        _, hole_normal = self._hole()
+        _, end_normal = self.world.sim.feature(self.part)
+        angle = math.acos(max(-1.0, min(1.0, float(np.dot(end_normal, hole_normal)))))
+        return (math.pi - angle) <= self.angle_tolerance
 
     def _check(self) -> None:
         sim = self.world.sim

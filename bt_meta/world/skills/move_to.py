@@ -48,8 +48,10 @@ class MoveTo(SimSkill):
     def __init__(self, world: Any, arm: str = "right", *, position_tolerance: float = 0.003,
                  orientation_tolerance: float = 0.05, settle_ticks: int = 12, require_arrival: bool = True,
                  check_path: bool = True, check_held: bool = True, carried_clearance: float = 0.0,
-                 speed: float = 1.0) -> None:
+                 speed: float = 1.0, straight: bool = False) -> None:
         super().__init__(world, arm)
+        self.straight = straight
+        """Move the gripper frame along the straight line (an insertion), where IK follows it; else joint space."""
         if not 0.0 < speed <= 1.0:
             raise ValueError(f"move_to speed must be in (0, 1] of the world's joint speed, got {speed}")
         self.speed = speed
@@ -165,8 +167,8 @@ class MoveTo(SimSkill):
         start, goal = q_now[indices], result.q[indices]
         max_step = self._max_step()
         count = max(1, math.ceil(float(np.max(np.abs(goal - start))) / max_step))
-        waypoints = []
-        for k in range(1, count + 1):
+        waypoints = (self._straight_line(q_now, count) if self.straight else None) or []
+        for k in range(1, count + 1) if not waypoints else ():
             q = q_now.copy()
             q[indices] = start + (goal - start) * (k / count)
             waypoints.append(q)

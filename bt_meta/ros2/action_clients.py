@@ -16,6 +16,7 @@ Offers:
 
 from __future__ import annotations
 
+import contextlib
 import threading
 from collections.abc import Sequence
 from typing import Any
@@ -94,10 +95,8 @@ class ActionClient:
         with self._lock:
             handles = list(self._active)
         for handle in handles:
-            try:
+            with contextlib.suppress(ConnectionLost):
                 self._on_executor(handle.cancel_goal_async, timeout, "no answer to a cancel request")
-            except ConnectionLost:
-                pass
         return len(handles)
 
 

@@ -18,6 +18,7 @@ Offers:
 from __future__ import annotations
 
 import re
+import signal
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -112,7 +113,13 @@ class SimServer:
         from bt_meta.ros2.trajectory_server import TrajectoryServer
 
         context = rclpy.Context()
-        rclpy.init(context=context)  # installs the SIGINT / SIGTERM handlers that shut the context down
+        # SIGINT and SIGTERM shut the context down, and the spin below ends between two callbacks (not by an
+        # exception in the middle of a physics step); rclpy's own handlers are not installed
+        from rclpy.signals import SignalHandlerOptions
+
+        previous = {signum: signal.signal(signum, lambda _signum, _frame: context.try_shutdown())
+                    for signum in (signal.SIGINT, signal.SIGTERM)}
+        rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
         node = rclpy.create_node(self.node_name, context=context)
         executor = SingleThreadedExecutor(context=context)
         try:
@@ -142,4 +149,6 @@ class SimServer:
             node.destroy_node()
             if context.ok():
                 context.try_shutdown()
+            for signum, handler in previous.items():
+                signal.signal(signum, handler)
             self.sim.close()

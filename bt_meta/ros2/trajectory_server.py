@@ -15,6 +15,7 @@ Offers:
 
 from __future__ import annotations
 
+import sys
 from typing import Any
 
 from bt_meta.ros2.messages import duration_seconds, to_duration
@@ -56,6 +57,8 @@ class TrajectoryServer:
 
         Result = FollowJointTrajectory.Result
         number = self.server.count_goal()
+        if number == 1:
+            print(f"bt-meta sim: first goal on {self.action}", file=sys.stderr, flush=True)
         trajectory = handle.request.trajectory
         names = list(trajectory.joint_names)
         sim = self.server.sim

@@ -6,12 +6,14 @@ from __future__ import annotations
 import json
 import signal
 import subprocess
+import sys
 import time
 
 import pytest
 
 from bt_meta.memory.store import EpisodicMemory
-from tests.ros2.conftest import BT_META
+
+BT_META = [sys.executable, "-m", "bt_meta.cli"]
 
 LETTERS = "trees/letters.yaml"
 START = ("--joint", "left_s0=0.8")

@@ -6,11 +6,14 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from tests.ros2.conftest import BT_META, ROOT
+ROOT = Path(__file__).resolve().parents[2]
+BT_META = [sys.executable, "-m", "bt_meta.cli"]
 
 LETTERS = "trees/letters.yaml"
 START = ("--joint", "left_s0=0.8")  # the letters grounding's robot_pose for the Baxter

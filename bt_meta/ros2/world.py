@@ -201,11 +201,6 @@ class RosWorld(SimWorld):
         finally:
             super().close()
 
-    def record_goals(self) -> dict[str, Any]:
-        """Goals sent and feedback received per action (for reports)."""
-        return {client.action: {"succeeded": client.succeeded, "feedback": client.feedback}
-                for client in self.connection.trajectory.values()}
-
 
 @hookimpl
 def bt_meta_make_world(name: str, domain: Any, problem: Any, options: dict[str, Any]) -> RosWorld | None:

@@ -13,6 +13,7 @@ Offers:
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import threading
 import time
@@ -50,6 +51,10 @@ class Connection:
         self.executor.add_node(self.node)
         self._thread = threading.Thread(target=self._spin, name="bt-meta-ros2", daemon=True)
         self._thread.start()
+        self._closed = False
+        # a command that never closes its world (tick) must not leave rclpy's threads to the interpreter's exit:
+        # the process aborts there ("terminate called without an active exception")
+        atexit.register(self.close)
 
     def _spin(self) -> None:
         from rclpy.executors import ExternalShutdownException
@@ -84,6 +89,10 @@ class Connection:
         return sum(client.cancel_active() for client in [*self.trajectory.values(), *self.gripper.values()])
 
     def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        atexit.unregister(self.close)
         try:
             self.cancel_all()
         finally:

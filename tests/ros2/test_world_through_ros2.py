@@ -68,3 +68,11 @@ def test_a_repaired_variant_through_ros2_matches_its_in_process_run(serve, tmp_p
     assert [r["changes"] for r in ros["repairs"]] == [r["changes"] for r in local["repairs"]]
     assert ros["refinement_saved"]["subtasks"] == local["refinement_saved"]["subtasks"]
     _poses_within(ros, local)
+
+
+@pytest.mark.slow
+def test_tick_acts_through_ros2_too_and_exits_cleanly(serve):
+    served = serve("--scene", "letters_A", *START)
+    done = served.run("tick", LETTERS, "--problem", "A", "--world", "ros2", "--ticks", "2000", "--json")
+    assert done.returncode == 0, done.stderr[-2000:]  # tick never closes its world: the connection closes at exit
+    assert json.loads(done.stdout)["status"] == "SUCCESS"

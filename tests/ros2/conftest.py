@@ -26,7 +26,11 @@ _DOMAINS = itertools.count(100 + (os.getpid() % 50) * 2)
 
 
 def _skip_reason() -> str | None:
-    if importlib.util.find_spec("rclpy") is None:
+    try:
+        found = importlib.util.find_spec("rclpy") is not None
+    except (ImportError, ValueError):  # blocked in sys.modules
+        found = False
+    if not found:
         return "needs the [ros2] extra: pip install 'bt-meta[ros2]'"
     for tool in ("unshare", "nsenter", "ip"):
         if shutil.which(tool) is None:

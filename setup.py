@@ -29,6 +29,8 @@ setup(
         "bt_meta_plugins": ["*.yaml"],
         "bt_meta.bench": ["problems/*.yaml"],
         "bt_meta.campaign": ["specs/*.yaml"],
+        "bt_meta.ros2": ["interfaces/*/CMakeLists.txt", "interfaces/*/package.xml", "interfaces/*/LICENSE",
+                         "interfaces/*/msg/*.msg", "interfaces/*/action/*.action"],
     },
     include_package_data=False,
 )

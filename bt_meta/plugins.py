@@ -56,7 +56,7 @@ __all__ = [
 
 ENTRY_POINT_GROUP = "bt_meta"
 BUILTIN_PLUGINS: tuple[tuple[str, str], ...] = (("fake_world", "bt_meta.world.fake"),)
-LAZY_WORLDS: dict[str, str] = {"sim": "bt_meta.world.simulation.sim_world"}
+LAZY_WORLDS: dict[str, str] = {"sim": "bt_meta.world.simulation.sim_world", "ros2": "bt_meta.ros2.world"}
 
 
 P = TypeVar("P")

@@ -5,12 +5,17 @@ Offers:
 * :func:`add_world_arguments` -- ``--robot NAME|FILE`` and ``--scene FILE``
 * :func:`world_options` -- the keyword arguments those options give
   :class:`~bt_meta.world.simulation.sim_world.SimWorld`
+* :func:`add_ros2_arguments` -- ``--world sim|ros2`` and ``--ros2 CONFIG.yaml`` (commands that can act through ROS 2)
+* :func:`world_factory` -- the world class those options choose (a RosWorld with its config, or the SimWorld)
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 from typing import Any
+
+from bt_meta.errors import UserInputError
 
 
 def add_world_arguments(parser: argparse.ArgumentParser) -> None:
@@ -34,3 +39,29 @@ def world_options(args: argparse.Namespace) -> dict[str, Any]:
     if scene:
         load_scene(scene)
     return {"robot": load_robot(robot) if robot else None, "scene": scene or None}
+
+
+def add_ros2_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--world", choices=("sim", "ros2"), default="sim",
+                        help="sim: the in-process pybullet simulator (default); ros2: a robot (or `bt-meta sim serve "
+                             "--ros2`) reached through ROS 2, needs pip install 'bt-meta[ros2]' (docs/ros2.md)")
+    parser.add_argument("--ros2", metavar="CONFIG.yaml", dest="ros2_config",
+                        help="with --world ros2: controllers, joints, topics and frames (default: what `bt-meta sim "
+                             "serve --ros2` uses for the same robot)")
+
+
+def world_factory(args: argparse.Namespace) -> Any:
+    """The SimWorld class, or the RosWorld with ``--ros2``'s config bound, as ``--world`` says."""
+    world = getattr(args, "world", "sim")
+    if getattr(args, "ros2_config", None) and world != "ros2":
+        raise UserInputError("--ros2 CONFIG needs --world ros2", "--ros2")
+    if world != "ros2":
+        from bt_meta.world.simulation.sim_world import SimWorld
+
+        return SimWorld
+    if getattr(args, "gui", False):
+        raise UserInputError("--gui shows the in-process simulator; with --world ros2 watch the robot (or RViz)",
+                             "--gui")
+    from bt_meta.ros2.world import RosWorld
+
+    return functools.partial(RosWorld, ros2_config=args.ros2_config)

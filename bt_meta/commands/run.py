@@ -54,7 +54,7 @@ from bt_meta.commands._groot2_args import (
     start_groot2,
 )
 from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
-from bt_meta.commands._world_args import add_world_arguments, world_options
+from bt_meta.commands._world_args import add_ros2_arguments, add_world_arguments, world_factory, world_options
 from bt_meta.errors import PlanningError, UserInputError
 from bt_meta.memory import ENV_VAR, add_memory_argument, resolve_memory_path
 from bt_meta.plugins import hookimpl
@@ -81,6 +81,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--record-rrd", metavar="FILE.rrd",
                         help="record the episode for the Rerun viewer (needs the extra: pip install 'bt-meta[rerun]')")
     add_world_arguments(parser)
+    add_ros2_arguments(parser)
     add_memory_argument(parser)
     add_plugin_arguments(parser)
     add_groot2_arguments(parser)
@@ -89,7 +90,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from bt_meta.htn import load_task_file
-    from bt_meta.world.simulation.sim_world import SimWorld, load_grounding, quiet_stdout
+    from bt_meta.world.simulation.sim_world import load_grounding, quiet_stdout
 
     if args.max_ticks < 1:
         raise UserInputError("--max-ticks must be at least 1")
@@ -103,6 +104,7 @@ def run(args: argparse.Namespace) -> int:
     grounding = load_grounding(task_file.domain.name, args.file, args.grounding)
     grounding.problem(problem.name)
     options = world_options(args)
+    make_world = world_factory(args)
     plugins = plugin_host_from_args(args, args.file)
     with _memory(args) as memory:
         recorder = None
@@ -114,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
             plugins.register(recorder, "recorder", source="bt-meta run --record")
         started = time.perf_counter()
         with quiet_stdout():
-            world = SimWorld(task_file.domain, problem, grounding, variant=args.variant, seed=args.seed, gui=args.gui,
+            world = make_world(task_file.domain, problem, grounding, variant=args.variant, seed=args.seed, gui=args.gui,
                              **options)
         built = time.perf_counter()
         rrd = None

@@ -51,7 +51,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _main(args: argparse.Namespace) -> int:
     from bt_meta.campaign.families import family
-    from bt_meta.demo.configurations import CONFIGURATIONS
+    from bt_meta.configurations import CONFIGURATIONS
 
     family(args.family)
     if args.configuration not in CONFIGURATIONS:

@@ -15,7 +15,7 @@ Offers:
 * :func:`run_population` -- run (part of) a population; returns ``{key: outcome}``
 * :func:`differences` -- what changed between a baseline and observed outcomes
 * :func:`load_population` / :func:`load_baseline` -- the population and its baseline
-* :data:`POPULATION` -- the shipped population's folder; :data:`COMPARED` -- the fields that fail the guard
+* :func:`default_population` -- the repository's population folder; :data:`COMPARED` -- the fields that fail the guard
 """
 
 from __future__ import annotations
@@ -31,16 +31,25 @@ from typing import Any
 from bt_meta.commands._common import print_json
 from bt_meta.errors import ConfigError, UserInputError
 
-__all__ = ["COMPARED", "POPULATION", "differences", "load_baseline", "load_population", "register",
+__all__ = ["COMPARED", "POPULATION", "default_population", "differences", "load_baseline", "load_population", "register",
            "run_population"]
 
-POPULATION = Path(__file__).resolve().parents[2] / "tests" / "data" / "guard"
-"""The population kept in the repository (a source checkout; give ``--population`` elsewhere)."""
+POPULATION = Path("tests") / "data" / "guard"
+"""Where the population is kept in the repository, relative to its root."""
 COMPARED = ("status", "success", "achieved", "kinds", "attempts", "repairs", "second_exposure")
 """Outcome fields that fail the guard when they change."""
 NOTED = ("simulated_seconds",)
 """Fields printed when they change, without failing the guard."""
 BASELINE = "baseline.json"
+
+
+def default_population() -> Path:
+    """The population of the source checkout bt-meta runs from, else of the current directory.
+
+    An installed wheel carries no tests/ folder, so a guard run from a clone of the repository finds it there.
+    """
+    checkout = Path(__file__).resolve().parents[2] / POPULATION
+    return checkout if checkout.is_dir() else Path.cwd() / POPULATION
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -56,13 +65,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="run only this variant (FAMILY/VARIANT or VARIANT; repeatable)")
     parser.add_argument("--workers", type=int, default=1, help="processes running episodes (default 1)")
     parser.add_argument("--population", type=Path, default=None,
-                        help=f"population folder (default {POPULATION})")
+                        help=f"population folder (default {POPULATION} of the source checkout, or of the "
+                             "current directory when bt-meta is installed from a wheel)")
     parser.add_argument("--json", action="store_true", help="print JSON (outcomes and differences)")
     parser.set_defaults(func=_main)
 
 
 def _main(args: argparse.Namespace) -> int:
-    folder = args.population or POPULATION
+    folder = args.population or default_population()
     population = load_population(folder)
     if not 1 <= args.workers <= 64:
         raise UserInputError("--workers must be between 1 and 64", "<command line>")

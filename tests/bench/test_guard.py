@@ -4,11 +4,15 @@ from __future__ import annotations
 
 import json
 import shutil
+from pathlib import Path
 
 import pytest
 
-from bt_meta.bench.guard import POPULATION, differences, load_baseline, load_population
+from bt_meta.bench.guard import differences, load_baseline, load_population
 from bt_meta.cli import main
+
+POPULATION = Path(__file__).resolve().parents[1] / "data" / "guard"
+"""The population beside these tests (CI installs bt-meta as a wheel, which carries no tests/)."""
 
 # One or two per family and outcome: a nominal success, a substitution, a pose repair, a reorientation, the
 # reachability and collision limits (letters_H is left to the whole population: its memory takes longest to record).
@@ -46,16 +50,16 @@ def test_differences_name_each_changed_field_and_note_simulated_time():
 
 
 def test_bad_arguments_exit_2(capsys, tmp_path):
-    assert main(["bench", "guard", "--only", "no_such_variant"]) == 2
+    assert main(["bench", "guard", "--population", str(POPULATION), "--only", "no_such_variant"]) == 2
     assert "--only 'no_such_variant': no such variant" in capsys.readouterr().err
-    assert main(["bench", "guard", "--update", "--only", SUBSET[0]]) == 2
+    assert main(["bench", "guard", "--population", str(POPULATION), "--update", "--only", SUBSET[0]]) == 2
     assert main(["bench", "guard", "--population", str(tmp_path)]) == 2
     assert "population.json" in capsys.readouterr().err
 
 
 @pytest.mark.slow
 def test_a_subset_of_the_population_keeps_its_recorded_outcomes(capsys):
-    code = main(["bench", "guard", *_only(SUBSET), "--json"])
+    code = main(["bench", "guard", "--population", str(POPULATION), *_only(SUBSET), "--json"])
     out = json.loads(capsys.readouterr().out)
     assert out["failing"] == [], out["failing"]
     assert code == 0 and out["variants"] == len(SUBSET)
@@ -87,7 +91,7 @@ def test_a_changed_outcome_fails_the_guard_and_update_records_it(capsys, tmp_pat
 def test_the_whole_population_keeps_its_recorded_outcomes(request, capsys):
     if "guard" not in (request.config.option.markexpr or ""):
         pytest.skip("the whole outcome-guard population (40 variants, minutes): run with -m guard")
-    code = main(["bench", "guard", "--json"])
+    code = main(["bench", "guard", "--population", str(POPULATION), "--json"])
     out = json.loads(capsys.readouterr().out)
     assert out["failing"] == [], out["failing"]
     assert code == 0 and out["variants"] >= 40

@@ -31,8 +31,8 @@ from typing import Any
 from bt_meta.commands._common import print_json
 from bt_meta.errors import ConfigError, UserInputError
 
-__all__ = ["COMPARED", "POPULATION", "default_population", "differences", "load_baseline", "load_population", "register",
-           "run_population"]
+__all__ = ["COMPARED", "POPULATION", "default_population", "differences", "load_baseline", "load_population",
+           "register", "run_population"]
 
 POPULATION = Path("tests") / "data" / "guard"
 """Where the population is kept in the repository, relative to its root."""

@@ -70,6 +70,15 @@ def _keys(folder):
         return connection.execute("SELECT variant, configuration, seed FROM episodes").fetchall()
 
 
+def _busy(node) -> bool:
+    """Whether the node's one CPU is taken (an episode leased there), as its raylet last reported to the head: a
+    resource fully in use is left out of the node's available resources."""
+    from ray._private.state import available_resources_per_node
+
+    available = available_resources_per_node().get(node.node_id)
+    return available is not None and available.get("CPU", 0.0) < 1.0
+
+
 def test_a_two_node_cluster_gives_the_local_pool_s_outcomes(population, cluster, tmp_path):
     source, pool = population
     folder = tmp_path / "C"
@@ -90,20 +99,25 @@ def test_a_worker_node_lost_mid_campaign_loses_no_episode_and_counts_none_twice(
     shutil.copytree(source, folder)
     process = subprocess.Popen(_run(folder, cluster[0].address), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                text=True)
+    doomed = cluster[1][1]
     deadline = time.monotonic() + 240
+    ray.init(address=cluster[0].address, include_dashboard=False, log_to_driver=False)
     try:
+        # Lose the node while it holds an episode (its CPU taken), after another episode has been stored: removing
+        # it between two of its episodes would lose nothing and test nothing.
         while time.monotonic() < deadline and process.poll() is None:
             try:
-                if (folder / "campaign.sqlite").exists() and len(_keys(folder)) >= 1:
+                if (folder / "campaign.sqlite").exists() and len(_keys(folder)) >= 1 and _busy(doomed):
                     break
             except sqlite3.OperationalError:  # the file is there, its table not yet
                 pass
-            time.sleep(0.1)
+            time.sleep(0.05)
         assert process.poll() is None, "the campaign ended before a node could be lost"
         before = len(_keys(folder))
-        cluster[0].remove_node(cluster[1][1])
+        cluster[0].remove_node(doomed, allow_graceful=False)  # killed, as a node that crashes or loses power
         stdout, stderr = process.communicate(timeout=240)
     finally:
+        ray.shutdown()
         if process.poll() is None:
             process.kill()
     assert process.returncode == 0, stderr[-3000:]

@@ -108,6 +108,11 @@ def _main(argv: Sequence[str] | None) -> int:
         parser.print_help()
         return EXIT_USAGE
     try:
+        if getattr(args, "json", False):
+            from bt_meta.commands._common import json_document_stdout
+
+            with json_document_stdout():
+                return int(args.func(args) or EXIT_OK)
         return int(args.func(args) or EXIT_OK)
     except UserInputError as error:
         print(_one_line(error.location_message()), file=sys.stderr)

@@ -17,7 +17,6 @@ directory, a campaign of another robot, a demonstration that fails, a Ray addres
 from __future__ import annotations
 
 import argparse
-import contextlib
 import sys
 from pathlib import Path
 
@@ -156,12 +155,9 @@ def _run(args: argparse.Namespace) -> int:
         raise CampaignInputError("--seeds must be between 1 and 100", "<command line>")
     if args.workers is not None and args.workers < 1:
         raise CampaignInputError("--workers must be at least 1", "<command line>")
-    # With --json, stdout carries the JSON document alone: what the run's engines print (Ray's driver prints a lost
-    # node's raylet log to stdout) goes to stderr.
-    with contextlib.redirect_stdout(sys.stderr) if args.json else contextlib.nullcontext():
-        result = run_campaign(args.dir, configurations=configurations, seeds=args.seeds, workers=args.workers,
-                              ray_address=args.ray, perfect_sensing=args.perfect_sensing,
-                              progress=not args.no_progress, robot=args.robot)
+    result = run_campaign(args.dir, configurations=configurations, seeds=args.seeds, workers=args.workers,
+                          ray_address=args.ray, perfect_sensing=args.perfect_sensing,
+                          progress=not args.no_progress, robot=args.robot)
     if args.json:
         print_json(result)
     else:

@@ -23,7 +23,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, TextIO
 
-from bt_meta.commands._common import print_json
+from bt_meta.commands._common import json_stream, print_json
 from bt_meta.errors import UserInputError
 from bt_meta.memory import (
     SCHEMA_VERSION,
@@ -214,7 +214,7 @@ def _export(args: argparse.Namespace) -> int:
                 raise
             print(f"exported {count} episodes to {target}", file=sys.stderr)
         else:
-            _write_export(memory, sys.stdout, args.json)
+            _write_export(memory, json_stream(), args.json)
     return 0
 
 

@@ -44,6 +44,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from bt_meta._stdio import flush_c_stdio
 from bt_meta.bt.failures import FailureKind
 from bt_meta.errors import BtMetaError, ConfigError
 from bt_meta.hookspecs import hookimpl
@@ -131,19 +132,9 @@ def quiet_stdout() -> Iterator[None]:
             yield
     finally:
         sys.stdout.flush()
-        _flush_c_stdout()
+        flush_c_stdio()  # pybullet's printf text, while fd 1 still points at /dev/null
         os.dup2(saved, fd)
         os.close(saved)
-
-
-def _flush_c_stdout() -> None:
-    """Flush the C library's stdout buffer (pybullet's printf output) while fd 1 still points at /dev/null."""
-    try:
-        import ctypes
-
-        ctypes.CDLL(None).fflush(None)
-    except (OSError, AttributeError):  # pragma: no cover - no C library to flush
-        pass
 
 
 # --------------------------------------------------------------------------------------------------------------

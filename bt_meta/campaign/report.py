@@ -20,7 +20,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from bt_meta.campaign.stats import correct, summarise
+from bt_meta.campaign.stats import correct, perturbation_classes, summarise
 
 __all__ = ["build_report", "print_summary"]
 
@@ -33,7 +33,7 @@ def build_report(folder: str | Path, out: str | Path) -> dict[str, Any]:
     manifest = read_manifest(folder)
     with CampaignDatabase.open(folder, manifest_digest(folder), create=False) as database:
         rows = database.rows()
-    summary = summarise(rows)
+    summary = summarise(rows, classes=perturbation_classes(manifest))
     summary["family"] = manifest["family"]
     summary["variants"] = len(manifest["variants"])
     summary["failing"] = [{"variant": r["variant"], "configuration": r["configuration"], "seed": r["seed"],
@@ -148,6 +148,12 @@ def print_summary(summary: dict[str, Any]) -> None:
               f"{r['attempts']['mean']:>8.2f} {r['seconds']['mean']:>8.1f} {r['loops']:>5}")
     print("confusion (expected: kinds): " + "; ".join(
         f"{k}: " + ", ".join(f"{kind} {n}" for kind, n in sorted(v.items())) for k, v in summary["confusion"].items()))
+    if summary.get("classes"):
+        print(f"{'perturbation class':<20} {'configuration':<15} {'episodes':>8} {'reached':>7} "
+              f"{'rate [Wilson 95%]':>19}")
+        for r in summary["classes"]:
+            rate = f"{r['rate']:.2f} [{r['wilson95'][0]:.2f}, {r['wilson95'][1]:.2f}]"
+            print(f"{r['class']:<20} {r['configuration']:<15} {r['episodes']:>8} {r['correct']:>7} {rate:>19}")
     fa, second = summary["false_alarms"], summary["second_exposure"]
     print(f"loops {summary['loops']}; false alarms {fa['count']}/{fa['of']}; second exposure: "
           f"{second['zero_attempts']}/{second['repaired']} repaired runs with zero attempts; crashed "

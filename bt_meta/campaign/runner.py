@@ -325,4 +325,7 @@ def run_campaign(folder: str | Path, *, configurations: Sequence[str] = ("dual",
     episodes = [{k: r.get(k) for k in ("variant", "configuration", "seed", "expected", "status", "success",
                                        "attempts", "kinds", "repairs", "loop", "stop_reason", "second_exposure",
                                        "seconds", "simulated_seconds", "run_report", "error")} for r in rows]
-    return {"episodes": episodes, "summary": summarise(rows, configurations=configurations)}
+    from bt_meta.campaign.stats import perturbation_classes
+
+    return {"episodes": episodes, "summary": summarise(rows, configurations=configurations,
+                                                       classes=perturbation_classes(manifest))}

@@ -19,7 +19,9 @@ Offers:
 
 * :func:`wilson_interval` -- (low, high)
 * :func:`correct` -- whether an episode row reached its expected outcome
-* :func:`summarise` -- the summary dict (``table``, ``confusion``, ``loops``, ``false_alarms``, ``second_exposure``)
+* :func:`summarise` -- the summary dict (``table``, ``confusion``, ``loops``, ``false_alarms``, ``second_exposure``;
+  ``classes`` when given each variant's perturbation classes)
+* :func:`perturbation_classes` -- a manifest's variants by perturbation class (shift, turn, on a side, ...)
 """
 
 from __future__ import annotations
@@ -28,7 +30,11 @@ from collections import Counter
 from collections.abc import Iterable, Sequence
 from typing import Any
 
-__all__ = ["correct", "summarise", "wilson_interval"]
+__all__ = ["CLASSES", "correct", "perturbation_classes", "summarise", "wilson_interval"]
+
+CLASSES = ("none", "shift", "turn", "on a side", "upside down", "colour", "shape replaced", "missing, spare",
+           "missing, no spare", "distractor", "obstacle", "out of reach")
+"""The perturbation classes a variant is counted under, in the order tables show them."""
 
 
 def wilson_interval(successes: int, n: int, level: float = 0.95) -> tuple[float, float]:
@@ -69,7 +75,50 @@ def _mean(values: Sequence[float], seed: int = 0, resamples: int = 2000) -> dict
     return {"mean": mean, "low": float(np.quantile(means, 0.025)), "high": float(np.quantile(means, 0.975))}
 
 
-def summarise(rows: Iterable[dict[str, Any]], *, configurations: Sequence[str] | None = None) -> dict[str, Any]:
+def perturbation_classes(manifest: dict[str, Any]) -> dict[str, list[str]]:
+    """Each variant's perturbation classes, from the changes the generator recorded in the manifest.
+
+    A variant with several changes counts under each of its classes; one with none is ``none``.
+    """
+    out = {}
+    for variant in manifest.get("variants") or []:
+        classes = [_change_class(change) for change in variant.get("changes") or []]
+        out[variant["name"]] = list(dict.fromkeys(classes)) or ["none"]
+    return out
+
+
+def _change_class(change: dict[str, Any]) -> str:
+    kind = change.get("kind")
+    if kind == "rotate":
+        roll, pitch = (abs(float(a)) % 360.0 for a in (change.get("rpy") or [0, 0, 0])[:2])
+        return "upside down" if 135.0 <= max(roll, pitch) <= 225.0 else "on a side"
+    if kind == "remove":
+        return "missing, spare" if change.get("spare") else "missing, no spare"
+    return {"obstacles": "obstacle", "out_of_reach": "out of reach", "replace_shape": "shape replaced"}.get(
+        str(kind), str(kind))
+
+
+def _class_table(rows: list[dict[str, Any]], classes: dict[str, list[str]],
+                 configurations: Sequence[str]) -> list[dict[str, Any]]:
+    """Per perturbation class x configuration: episodes that reached their expected outcome, Wilson 95 %."""
+    seen = {c for names in classes.values() for c in names}
+    order = [c for c in CLASSES if c in seen] + sorted(seen - set(CLASSES))
+    table = []
+    for name in order:
+        for configuration in configurations:
+            chosen = [r for r in rows if r["configuration"] == configuration and name in classes.get(r["variant"], ())]
+            if not chosen:
+                continue
+            ok = sum(correct(r) for r in chosen)
+            low, high = wilson_interval(ok, len(chosen))
+            table.append({"class": name, "configuration": configuration, "episodes": len(chosen), "correct": ok,
+                          "rate": ok / len(chosen), "wilson95": [low, high],
+                          "expected": dict(Counter(r["expected"] for r in chosen))})
+    return table
+
+
+def summarise(rows: Iterable[dict[str, Any]], *, configurations: Sequence[str] | None = None,
+              classes: dict[str, list[str]] | None = None) -> dict[str, Any]:
     rows = list(rows)
     if not configurations:  # the paper's order first, then any other, as first seen
         seen = list(dict.fromkeys(r["configuration"] for r in rows))
@@ -103,6 +152,7 @@ def summarise(rows: Iterable[dict[str, Any]], *, configurations: Sequence[str] |
     second = [r for r in rows if r.get("second_exposure")]
     return {
         "episodes": len(rows), "configurations": configurations, "table": table,
+        "classes": _class_table(rows, classes, configurations) if classes else [],
         "confusion": {k: dict(v) for k, v in confusion.items()},
         "loops": sum(bool(r.get("loop")) for r in rows),
         "false_alarms": {"count": len(false_alarms), "of": len(nominal),

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from bt_meta.campaign.ablation import verdicts
-from bt_meta.campaign.stats import correct, summarise, wilson_interval
+from bt_meta.campaign.stats import correct, perturbation_classes, summarise, wilson_interval
 from bt_meta.experiments.ablation import wilson
 
 
@@ -73,3 +73,31 @@ def test_dual_beats_only_with_disjoint_intervals():
     assert found["symbolic"]["beats"]  # 1.0 [0.89, 1] against 0.5 [0.33, 0.67]
     few = verdicts(summarise([_row("repairable", "success"), _row("repairable", configuration="retry")]))
     assert not few["retry"]["beats"] and not few["retry"]["beaten"]  # one run each: the intervals overlap
+
+
+def test_each_variant_counts_under_every_perturbation_class_it_carries():
+    manifest = {"variants": [
+        {"name": "v0", "changes": []},
+        {"name": "v1", "changes": [{"kind": "shift", "object": "a"}, {"kind": "turn", "object": "a"}]},
+        {"name": "v2", "changes": [{"kind": "rotate", "object": "a", "rpy": [90, 0, 30]}]},
+        {"name": "v3", "changes": [{"kind": "rotate", "object": "a", "rpy": [0, -180, 0]}]},
+        {"name": "v4", "changes": [{"kind": "remove", "object": "a", "spare": "spare_a"},
+                                   {"kind": "remove", "object": "b", "spare": None}]},
+        {"name": "v5", "changes": [{"kind": "obstacles"}, {"kind": "out_of_reach", "object": "a"}]}]}
+    assert perturbation_classes(manifest) == {
+        "v0": ["none"], "v1": ["shift", "turn"], "v2": ["on a side"], "v3": ["upside down"],
+        "v4": ["missing, spare", "missing, no spare"], "v5": ["obstacle", "out of reach"]}
+
+
+def test_the_class_table_counts_reached_outcomes_per_class_and_configuration():
+    rows = [{**_row("repairable", "success"), "variant": "v1"}, {**_row("repairable", "failed"), "variant": "v2"},
+            {**_row("repairable", "failed"), "variant": "v1", "configuration": "retry"},
+            {**_row("limit:reachability", "failed", ["reachability"]), "variant": "v5"}]
+    classes = {"v1": ["shift", "turn"], "v2": ["on a side"], "v5": ["out of reach"]}
+    table = {(r["class"], r["configuration"]): r for r in summarise(rows, classes=classes)["classes"]}
+    assert [(c, n) for c, n in table] == [("shift", "dual"), ("shift", "retry"), ("turn", "dual"),
+                                          ("turn", "retry"), ("on a side", "dual"), ("out of reach", "dual")]
+    assert table[("shift", "dual")]["correct"] == 1 and table[("shift", "retry")]["correct"] == 0
+    assert table[("on a side", "dual")]["rate"] == 0.0 and table[("out of reach", "dual")]["rate"] == 1.0
+    assert table[("turn", "dual")]["expected"] == {"repairable": 1}
+    assert summarise(rows)["classes"] == []

@@ -7,7 +7,7 @@ dual *beats* another configuration when its Wilson 95 % interval lies wholly abo
 
 Offers:
 
-* :func:`run_ablation` -- ``{"families": {family: {"summary", "verdicts"}}, ...}``
+* :func:`run_ablation` -- ``{"families": {family: {"summary", "verdicts"}}, "classes": [...], ...}``
 * :func:`verdicts` -- dual against each other configuration, from a campaign summary
 * :data:`ABLATION_FAMILIES`
 """
@@ -48,6 +48,7 @@ def run_ablation(out: str | Path, *, n: int, seeds: int = 3, seed: int = 0,
     grounding's); a folder generated for another robot is refused."""
     from bt_meta.campaign.generator import generate
     from bt_meta.campaign.runner import run_campaign
+    from bt_meta.campaign.stats import pool_classes
 
     out = Path(out)
     result: dict[str, Any] = {"out": str(out), "n": n, "seeds": seeds, "seed": seed, "robot": robot,
@@ -61,4 +62,5 @@ def run_ablation(out: str | Path, *, n: int, seeds: int = 3, seed: int = 0,
                            ray_address=ray_address, perfect_sensing=perfect_sensing, progress=progress, echo=echo,
                            robot=robot)
         result["families"][name] = {"summary": run["summary"], "verdicts": verdicts(run["summary"])}
+    result["classes"] = pool_classes(entry["summary"]["classes"] for entry in result["families"].values())
     return result

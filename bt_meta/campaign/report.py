@@ -22,7 +22,7 @@ from typing import Any
 
 from bt_meta.campaign.stats import correct, perturbation_classes, summarise
 
-__all__ = ["build_report", "print_summary"]
+__all__ = ["build_report", "print_class_matrix", "print_summary"]
 
 
 def build_report(folder: str | Path, out: str | Path) -> dict[str, Any]:
@@ -158,3 +158,18 @@ def print_summary(summary: dict[str, Any]) -> None:
     print(f"loops {summary['loops']}; false alarms {fa['count']}/{fa['of']}; second exposure: "
           f"{second['zero_attempts']}/{second['repaired']} repaired runs with zero attempts; crashed "
           f"{summary['crashed']}")
+
+
+def print_class_matrix(classes: list[dict[str, Any]], configurations: list[str]) -> None:
+    """A class table as rows of perturbation classes and a column per configuration: rate [Wilson 95 %] (n)."""
+    cells = {(r["class"], r["configuration"]): r for r in classes}
+    names = list(dict.fromkeys(r["class"] for r in classes))
+    print(f"{'perturbation class':<18}" + "".join(f" {c:>24}" for c in configurations))
+    for name in names:
+        line = f"{name:<18}"
+        for configuration in configurations:
+            r = cells.get((name, configuration))
+            text = "-" if r is None else (f"{r['rate']:.2f} [{r['wilson95'][0]:.2f}, {r['wilson95'][1]:.2f}] "
+                                          f"({r['episodes']})")
+            line += f" {text:>24}"
+        print(line)

@@ -22,6 +22,7 @@ Offers:
 * :func:`summarise` -- the summary dict (``table``, ``confusion``, ``loops``, ``false_alarms``, ``second_exposure``;
   ``classes`` when given each variant's perturbation classes)
 * :func:`perturbation_classes` -- a manifest's variants by perturbation class (shift, turn, on a side, ...)
+* :func:`pool_classes` -- class tables of several campaigns added up (the ablation's families)
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from collections import Counter
 from collections.abc import Iterable, Sequence
 from typing import Any
 
-__all__ = ["CLASSES", "correct", "perturbation_classes", "summarise", "wilson_interval"]
+__all__ = ["CLASSES", "correct", "perturbation_classes", "pool_classes", "summarise", "wilson_interval"]
 
 CLASSES = ("none", "shift", "turn", "on a side", "upside down", "colour", "shape replaced", "missing, spare",
            "missing, no spare", "distractor", "obstacle", "out of reach")
@@ -115,6 +116,26 @@ def _class_table(rows: list[dict[str, Any]], classes: dict[str, list[str]],
                           "rate": ok / len(chosen), "wilson95": [low, high],
                           "expected": dict(Counter(r["expected"] for r in chosen))})
     return table
+
+
+def pool_classes(tables: Iterable[Sequence[dict[str, Any]]]) -> list[dict[str, Any]]:
+    """Class tables (``summary["classes"]``) of several campaigns added up, the Wilson interval of the sums."""
+    pooled: dict[tuple[str, str], dict[str, Any]] = {}
+    for table in tables:
+        for r in table:
+            row = pooled.setdefault((r["class"], r["configuration"]), {"class": r["class"],
+                                    "configuration": r["configuration"], "episodes": 0, "correct": 0,
+                                    "expected": Counter()})
+            row["episodes"] += r["episodes"]
+            row["correct"] += r["correct"]
+            row["expected"].update(r.get("expected") or {})
+    order = {name: k for k, name in enumerate(CLASSES)}
+    out = []
+    for row in sorted(pooled.values(), key=lambda r: (order.get(r["class"], len(order)), r["class"])):
+        low, high = wilson_interval(row["correct"], row["episodes"])
+        out.append({**row, "rate": row["correct"] / row["episodes"], "wilson95": [low, high],
+                    "expected": dict(row["expected"])})
+    return out
 
 
 def summarise(rows: Iterable[dict[str, Any]], *, configurations: Sequence[str] | None = None,

@@ -157,7 +157,7 @@ def _generated(args: argparse.Namespace) -> int:
     if args.json:
         print_json(result)
         return 0
-    from bt_meta.campaign.report import print_summary
+    from bt_meta.campaign.report import print_class_matrix, print_summary
 
     for name, entry in result["families"].items():
         print(f"\n== {name} ({result['sensing']} sensing, {args.generated} variants x {args.seeds} seed(s))")
@@ -166,6 +166,8 @@ def _generated(args: argparse.Namespace) -> int:
             word = "beats" if verdict["beats"] else ("is beaten by" if verdict["beaten"] else "overlaps")
             d, o = verdict["dual"], verdict["other"]
             print(f"  dual {d[0]:.2f} [{d[1]:.2f}, {d[2]:.2f}] {word} {other} {o[0]:.2f} [{o[1]:.2f}, {o[2]:.2f}]")
+    print("\n== every family, per perturbation class (expected outcome reached, Wilson 95 %, episodes)")
+    print_class_matrix(result["classes"], list(configurations))
     return 0
 
 

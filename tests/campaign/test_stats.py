@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from bt_meta.campaign.ablation import verdicts
-from bt_meta.campaign.stats import correct, perturbation_classes, summarise, wilson_interval
+from bt_meta.campaign.stats import correct, perturbation_classes, pool_classes, summarise, wilson_interval
 from bt_meta.experiments.ablation import wilson
 
 
@@ -101,3 +101,14 @@ def test_the_class_table_counts_reached_outcomes_per_class_and_configuration():
     assert table[("on a side", "dual")]["rate"] == 0.0 and table[("out of reach", "dual")]["rate"] == 1.0
     assert table[("turn", "dual")]["expected"] == {"repairable": 1}
     assert summarise(rows)["classes"] == []
+
+
+def test_class_tables_of_several_campaigns_add_up():
+    one = [{"class": "shift", "configuration": "dual", "episodes": 3, "correct": 2, "expected": {"repairable": 3}}]
+    two = [{"class": "shift", "configuration": "dual", "episodes": 2, "correct": 2, "expected": {"repairable": 2}},
+           {"class": "none", "configuration": "dual", "episodes": 1, "correct": 0,
+            "expected": {"nominal_equivalent": 1}}]
+    pooled = pool_classes([one, two])
+    assert [(r["class"], r["episodes"], r["correct"]) for r in pooled] == [("none", 1, 0), ("shift", 5, 4)]
+    assert pooled[1]["expected"] == {"repairable": 5}
+    assert list(pooled[1]["wilson95"]) == list(wilson_interval(4, 5))

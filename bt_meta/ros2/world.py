@@ -43,10 +43,12 @@ from bt_meta.world.poses import matrix_to_pose
 from bt_meta.world.simulation.sim_world import SimWorld
 from bt_meta.world.skills.base import SkillAbort
 
-__all__ = ["START_TOLERANCE", "RosWorld", "bt_meta_make_world"]
+__all__ = ["START_TOLERANCE", "SYNC_TOLERANCE", "RosWorld", "bt_meta_make_world"]
 
 START_TOLERANCE = 0.01
 """rad (or m): how far a joint may be from the grounding's start pose when the run starts."""
+SYNC_TOLERANCE = 1e-9
+"""Largest difference of a reported object pose (transform entries: m, rotation) still taken as the model's own."""
 _GRIPPER_EFFORT = 50.0
 
 
@@ -185,7 +187,8 @@ class RosWorld(SimWorld):
         sim.set_joint_positions({n: v for n, v in measured.items() if n in sim.robot.home})
         names = set(sim.object_names())
         for name, pose in self.connection.state.objects().items():
-            if name in names:
+            # only a real move: re-applying a pose that differs by the messages' float noise resets the body
+            if name in names and np.abs(sim.object_transform(name) - pose).max() > SYNC_TOLERANCE:
                 sim.move_object(name, matrix_to_pose(pose))
         pybullet.performCollisionDetection(physicsClientId=sim.client)
 

@@ -12,7 +12,8 @@ are closed and :meth:`SimServer.serve` returns.
 
 Offers:
 
-* :class:`Faults` -- ``--fault`` specs: ``reject@N`` / ``abort@N[:CODE]`` for the N-th trajectory goal
+* :class:`Faults` -- ``--fault`` specs: ``reject@N`` / ``abort@N[:CODE]`` for the N-th trajectory goal,
+  ``no-feedback`` for trajectory goals that succeed without feedback (what mismatched definitions look like)
 * :class:`SimServer` -- ``serve()`` until a signal
 """
 
@@ -38,14 +39,20 @@ class Faults:
     make a controller refuse or give up, which a healthy simulation never does."""
 
     trajectory: dict[int, str] = field(default_factory=dict)
+    no_feedback: bool = False
+    """Trajectory goals succeed but never send feedback: the client sees what a definitions mismatch shows."""
 
     @classmethod
     def parse(cls, specs: Iterable[str]) -> Faults:
         out = cls()
         for spec in specs:
+            if spec == "no-feedback":
+                out.no_feedback = True
+                continue
             match = _FAULT.match(spec)
             if match is None:
-                raise UserInputError(f"bad --fault {spec!r}: expected reject@N or abort@N[:CODE]", "--fault")
+                raise UserInputError(f"bad --fault {spec!r}: expected reject@N, abort@N[:CODE] or no-feedback",
+                                     "--fault")
             kind, number, code = match.groups()
             out.trajectory[int(number)] = kind if code is None else f"{kind}:{code}"
         return out

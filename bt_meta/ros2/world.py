@@ -56,7 +56,7 @@ class RosWorld(SimWorld):
     """A :class:`SimWorld` whose moves go through ROS 2 (see the module docstring)."""
 
     def __init__(self, domain: Any, problem: Any, grounding: Any, *, ros2_config: str | Path | None = None,
-                 **options: Any) -> None:
+                 record_mcap: str | Path | None = None, **options: Any) -> None:
         from bt_meta.ros2.config import load_config
         from bt_meta.ros2.connection import Connection
 
@@ -64,6 +64,7 @@ class RosWorld(SimWorld):
         options.pop("realtime", None)
         super().__init__(domain, problem, grounding, **options)
         self.connection: Any = None
+        self.recording: Any = None
         try:
             self.config = load_config(ros2_config, self.sim.robot)
             self._commanded = {arm: np.array([self.sim.joint_positions()[j] for j in spec.joints])
@@ -72,6 +73,11 @@ class RosWorld(SimWorld):
             self._lost: str | None = None
             self._warned_feedback = False
             self.connection = Connection(self.config)
+            if record_mcap is not None:
+                from bt_meta.ros2.mcap_recording import McapRecording
+
+                self.recording = McapRecording(record_mcap)
+                self.connection.record(self.recording.write)
             self.connection.open()
             self._check_start()
             self._sync()
@@ -202,7 +208,11 @@ class RosWorld(SimWorld):
                 self.connection.close()
                 self.connection = None
         finally:
-            super().close()
+            try:
+                if self.recording is not None:  # after the connection: no message arrives any more
+                    self.recording.close()
+            finally:
+                super().close()
 
 
 @hookimpl

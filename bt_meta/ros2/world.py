@@ -18,7 +18,8 @@ skill, monitor and repair run in-process exactly as in the simulator.
 A goal rejected or aborted fails the skill (``physical``; evidence: action, ``error_code``, ``error_string``); a
 result or state that does not come within the config's result timeout is a lost connection: the running goals are
 cancelled and every later skill fails at once, so the run stops within that bound (and a failed run stores no
-trace). What stays in-process, and why, is in docs/ros2.md.
+trace). With ``record_mcap`` the states received and the goals sent are written as MCAP
+(:mod:`~bt_meta.ros2.mcap_recording`). What stays in-process, and why, is in docs/ros2.md.
 
 Offers:
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 from collections import Counter
+from pathlib import Path
 
 import pytest
 
@@ -15,7 +16,8 @@ START = ("--joint", "left_s0=0.8")
 
 
 def test_record_mcap_needs_the_ros2_world(capsys, tmp_path):
-    assert main(["run", LETTERS, "--problem", "A", "--record-mcap", str(tmp_path / "run.mcap")]) == 2
+    letters = str(Path(__file__).resolve().parents[2] / LETTERS)
+    assert main(["run", letters, "--problem", "A", "--record-mcap", str(tmp_path / "run.mcap")]) == 2
     assert "--record-mcap records the ROS 2 messages of a run: it needs --world ros2" in capsys.readouterr().err
     assert not (tmp_path / "run.mcap").exists()
 

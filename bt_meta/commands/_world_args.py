@@ -55,6 +55,9 @@ def world_factory(args: argparse.Namespace) -> Any:
     world = getattr(args, "world", "sim")
     if getattr(args, "ros2_config", None) and world != "ros2":
         raise UserInputError("--ros2 CONFIG needs --world ros2", "--ros2")
+    if getattr(args, "record_mcap", None) and world != "ros2":
+        raise UserInputError("--record-mcap records the ROS 2 messages of a run: it needs --world ros2",
+                             "--record-mcap")
     if world != "ros2":
         from bt_meta.world.simulation.sim_world import SimWorld
 
@@ -64,4 +67,4 @@ def world_factory(args: argparse.Namespace) -> Any:
                              "--gui")
     from bt_meta.ros2.world import RosWorld
 
-    return functools.partial(RosWorld, ros2_config=args.ros2_config)
+    return functools.partial(RosWorld, ros2_config=args.ros2_config, record_mcap=getattr(args, "record_mcap", None))

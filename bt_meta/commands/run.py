@@ -80,6 +80,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="with --repair: at most this many applied repairs (default 5)")
     parser.add_argument("--record-rrd", metavar="FILE.rrd",
                         help="record the episode for the Rerun viewer (needs the extra: pip install 'bt-meta[rerun]')")
+    parser.add_argument("--record-mcap", metavar="FILE.mcap",
+                        help="with --world ros2: record the run's ROS 2 messages as MCAP (docs/ros2.md)")
     add_world_arguments(parser)
     add_ros2_arguments(parser)
     add_memory_argument(parser)

@@ -38,7 +38,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     serve.add_argument("--config", dest="ros2_config", metavar="CONFIG.yaml",
                        help="controllers, joints and topics to serve (default: the robot's defaults, docs/ros2.md)")
     serve.add_argument("--fault", action="append", default=[], metavar="SPEC",
-                       help="make a controller fail on purpose: reject@N, abort@N[:CODE] (the N-th trajectory goal)")
+                       help="make a controller fail on purpose: reject@N, abort@N[:CODE] (the N-th trajectory goal), "
+                            "no-feedback (goals succeed, feedback is never sent)")
     serve.add_argument("--camera-rate", type=float, default=1.0, help="camera frames per second while "
                                                                       "subscribed (0: none; default 1)")
     serve.set_defaults(func=serve_command)

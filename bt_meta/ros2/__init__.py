@@ -17,4 +17,5 @@ Offers (one concept per module):
 * :mod:`~bt_meta.ros2.action_clients` -- goals with timeouts, cancelled on the way out
 * :mod:`~bt_meta.ros2.robot_state` -- the latest joint states and object poses, waited for by stamp
 * :mod:`~bt_meta.ros2.world` -- :class:`~bt_meta.ros2.world.RosWorld`, the World acting through ROS 2
+* :mod:`~bt_meta.ros2.mcap_recording` -- the run's ROS 2 messages as MCAP (``--record-mcap``)
 """

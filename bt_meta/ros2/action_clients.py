@@ -109,6 +109,8 @@ class TrajectoryClient(ActionClient):
         self.joints = tuple(joints)
         self.succeeded = 0
         self.feedback = 0
+        self.tap: Any = None
+        """``tap(topic, trajectory)`` sees every trajectory sent (the MCAP recording), else ``None``."""
 
     def follow(self, points: Sequence[tuple[Sequence[float], float]], timeout: float) -> Any:
         """Execute ``(positions in joint order, seconds from start)`` points; the result, or raise."""
@@ -118,6 +120,8 @@ class TrajectoryClient(ActionClient):
         trajectory = JointTrajectory(joint_names=list(self.joints), points=[
             JointTrajectoryPoint(positions=[float(v) for v in positions], time_from_start=to_duration(at))
             for positions, at in points])
+        if self.tap is not None:
+            self.tap(f"{self.action}/goal_trajectory", trajectory)
         wrapped = self._send(FollowJointTrajectory.Goal(trajectory=trajectory), timeout, self._on_feedback)
         result = wrapped.result
         if result.error_code != FollowJointTrajectory.Result.SUCCESSFUL or wrapped.status != _succeeded():

@@ -85,6 +85,12 @@ class Connection:
         names = sorted(name for name, _types in get_action_names_and_types(self.node))
         return ", ".join(names) or "none"
 
+    def record(self, tap: Any) -> None:
+        """``tap(topic, message)`` sees the states received and the trajectories sent from now on."""
+        self.state.tap = tap
+        for client in self.trajectory.values():
+            client.tap = tap
+
     def cancel_all(self) -> int:
         return sum(client.cancel_active() for client in [*self.trajectory.values(), *self.gripper.values()])
 

@@ -34,18 +34,25 @@ class RobotState:
         self._object_stamp = -1
         self.frame = config.base_frame
         self.wrong_frames: set[str] = set()
+        self.tap: Any = None
+        """``tap(topic, message)`` sees every message received (the MCAP recording), else ``None``."""
+        self._topics = (config.joint_states, config.object_poses)
         node.create_subscription(JointState, config.joint_states, self._on_joints, 10,
                                  callback_group=callback_group)
         node.create_subscription(MarkerArray, config.object_poses, self._on_objects, 10,
                                  callback_group=callback_group)
 
     def _on_joints(self, message: Any) -> None:
+        if self.tap is not None:
+            self.tap(self._topics[0], message)
         with self._condition:
             self._joints.update(zip(message.name, (float(v) for v in message.position), strict=False))
             self._joint_stamp = max(self._joint_stamp, nanoseconds(message.header.stamp))
             self._condition.notify_all()
 
     def _on_objects(self, message: Any) -> None:
+        if self.tap is not None:
+            self.tap(self._topics[1], message)
         with self._condition:
             stamp = self._object_stamp
             for marker in message.markers:

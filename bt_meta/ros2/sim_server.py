@@ -7,11 +7,13 @@ GripperCommand per gripper (:mod:`~bt_meta.ros2.trajectory_server`, :mod:`~bt_me
 publishes ``/joint_states`` and the ground-truth object poses after every executed point and at
 ``state_rate`` Hz (:mod:`~bt_meta.ros2.state_publishers`), and the top-view camera at ``camera_rate`` Hz while
 subscribed (:mod:`~bt_meta.ros2.camera_publisher`). Everything runs on one thread (the physics is not shared).
-SIGINT and SIGTERM end the spin; the node and the simulation are closed and :meth:`SimServer.serve` returns.
+SIGINT and SIGTERM end the spin between two callbacks (within 0.1 s of the last); the node and the simulation
+are closed and :meth:`SimServer.serve` returns.
 
 Offers:
 
-* :class:`Faults` -- ``--fault`` specs: ``reject@N`` / ``abort@N[:CODE]`` for the N-th trajectory goal
+* :class:`Faults` -- ``--fault`` specs: ``reject@N`` / ``abort@N[:CODE]`` for the N-th trajectory goal,
+  ``no-feedback`` for trajectory goals that succeed without feedback (what mismatched definitions look like)
 * :class:`SimServer` -- ``serve()`` until a signal
 """
 
@@ -19,6 +21,7 @@ from __future__ import annotations
 
 import re
 import signal
+import threading
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -36,14 +39,20 @@ class Faults:
     make a controller refuse or give up, which a healthy simulation never does."""
 
     trajectory: dict[int, str] = field(default_factory=dict)
+    no_feedback: bool = False
+    """Trajectory goals succeed but never send feedback: the client sees what a definitions mismatch shows."""
 
     @classmethod
     def parse(cls, specs: Iterable[str]) -> Faults:
         out = cls()
         for spec in specs:
+            if spec == "no-feedback":
+                out.no_feedback = True
+                continue
             match = _FAULT.match(spec)
             if match is None:
-                raise UserInputError(f"bad --fault {spec!r}: expected reject@N or abort@N[:CODE]", "--fault")
+                raise UserInputError(f"bad --fault {spec!r}: expected reject@N, abort@N[:CODE] or no-feedback",
+                                     "--fault")
             kind, number, code = match.groups()
             out.trajectory[int(number)] = kind if code is None else f"{kind}:{code}"
         return out
@@ -113,11 +122,13 @@ class SimServer:
         from bt_meta.ros2.trajectory_server import TrajectoryServer
 
         context = rclpy.Context()
-        # SIGINT and SIGTERM shut the context down, and the spin below ends between two callbacks (not by an
-        # exception in the middle of a physics step); rclpy's own handlers are not installed
+        # SIGINT and SIGTERM only ask to stop: the spin below ends between two callbacks and the context is shut
+        # down after it. Shutting it down in the handler broke the callback it interrupted (a publish on a shut
+        # context raises RCLError: exit 1 instead of 0). rclpy's own handlers are not installed.
         from rclpy.signals import SignalHandlerOptions
 
-        previous = {signum: signal.signal(signum, lambda _signum, _frame: context.try_shutdown())
+        stop = threading.Event()
+        previous = {signum: signal.signal(signum, lambda _signum, _frame: stop.set())
                     for signum in (signal.SIGINT, signal.SIGTERM)}
         rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
         node = rclpy.create_node(self.node_name, context=context)
@@ -138,7 +149,7 @@ class SimServer:
             if ready is not None:
                 ready()
             try:
-                while context.ok():
+                while not stop.is_set() and context.ok():
                     executor.spin_once(timeout_sec=0.1)
             except (KeyboardInterrupt, ExternalShutdownException):
                 pass

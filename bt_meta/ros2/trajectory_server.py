@@ -5,8 +5,8 @@ A goal names exactly the controller's joints (else it is rejected, as the contro
 executed in order: each point's positions become the motors' targets and the physics runs for the point's share of
 the time (``time_from_start`` differences, in whole physics steps). The simulation's clock advances only while a
 goal runs (lock-step: the same goals give the same physics as in-process). Feedback (desired, actual, error) is
-published after every point, the state topics too. An empty trajectory or times that do not increase abort with
-``INVALID_GOAL``; a cancel request stops between points.
+published after every point (not with ``--fault no-feedback``), the state topics too. An empty trajectory or
+times that do not increase abort with ``INVALID_GOAL``; a cancel request stops between points.
 
 Offers:
 
@@ -93,6 +93,7 @@ class TrajectoryServer:
                                                    time_from_start=to_duration(at))
             feedback.error = JointTrajectoryPoint(positions=[target[n] - actual[n] for n in names],
                                                   time_from_start=to_duration(at))
-            handle.publish_feedback(feedback)
+            if not self.server.faults.no_feedback:
+                handle.publish_feedback(feedback)
         handle.succeed()
         return Result(error_code=Result.SUCCESSFUL, error_string="")

@@ -18,7 +18,8 @@ skill, monitor and repair run in-process exactly as in the simulator.
 A goal rejected or aborted fails the skill (``physical``; evidence: action, ``error_code``, ``error_string``); a
 result or state that does not come within the config's result timeout is a lost connection: the running goals are
 cancelled and every later skill fails at once, so the run stops within that bound (and a failed run stores no
-trace). What stays in-process, and why, is in docs/ros2.md.
+trace). With ``record_mcap`` the states received and the goals sent are written as MCAP
+(:mod:`~bt_meta.ros2.mcap_recording`). What stays in-process, and why, is in docs/ros2.md.
 
 Offers:
 
@@ -43,10 +44,12 @@ from bt_meta.world.poses import matrix_to_pose
 from bt_meta.world.simulation.sim_world import SimWorld
 from bt_meta.world.skills.base import SkillAbort
 
-__all__ = ["START_TOLERANCE", "RosWorld", "bt_meta_make_world"]
+__all__ = ["START_TOLERANCE", "SYNC_TOLERANCE", "RosWorld", "bt_meta_make_world"]
 
 START_TOLERANCE = 0.01
 """rad (or m): how far a joint may be from the grounding's start pose when the run starts."""
+SYNC_TOLERANCE = 1e-9
+"""Largest difference of a reported object pose (transform entries: m, rotation) still taken as the model's own."""
 _GRIPPER_EFFORT = 50.0
 
 
@@ -54,7 +57,7 @@ class RosWorld(SimWorld):
     """A :class:`SimWorld` whose moves go through ROS 2 (see the module docstring)."""
 
     def __init__(self, domain: Any, problem: Any, grounding: Any, *, ros2_config: str | Path | None = None,
-                 **options: Any) -> None:
+                 record_mcap: str | Path | None = None, **options: Any) -> None:
         from bt_meta.ros2.config import load_config
         from bt_meta.ros2.connection import Connection
 
@@ -62,6 +65,7 @@ class RosWorld(SimWorld):
         options.pop("realtime", None)
         super().__init__(domain, problem, grounding, **options)
         self.connection: Any = None
+        self.recording: Any = None
         try:
             self.config = load_config(ros2_config, self.sim.robot)
             self._commanded = {arm: np.array([self.sim.joint_positions()[j] for j in spec.joints])
@@ -70,6 +74,11 @@ class RosWorld(SimWorld):
             self._lost: str | None = None
             self._warned_feedback = False
             self.connection = Connection(self.config)
+            if record_mcap is not None:
+                from bt_meta.ros2.mcap_recording import McapRecording
+
+                self.recording = McapRecording(record_mcap)
+                self.connection.record(self.recording.write)
             self.connection.open()
             self._check_start()
             self._sync()
@@ -185,7 +194,8 @@ class RosWorld(SimWorld):
         sim.set_joint_positions({n: v for n, v in measured.items() if n in sim.robot.home})
         names = set(sim.object_names())
         for name, pose in self.connection.state.objects().items():
-            if name in names:
+            # only a real move: re-applying a pose that differs by the messages' float noise resets the body
+            if name in names and np.abs(sim.object_transform(name) - pose).max() > SYNC_TOLERANCE:
                 sim.move_object(name, matrix_to_pose(pose))
         pybullet.performCollisionDetection(physicsClientId=sim.client)
 
@@ -199,7 +209,11 @@ class RosWorld(SimWorld):
                 self.connection.close()
                 self.connection = None
         finally:
-            super().close()
+            try:
+                if self.recording is not None:  # after the connection: no message arrives any more
+                    self.recording.close()
+            finally:
+                super().close()
 
 
 @hookimpl

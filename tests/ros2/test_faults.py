@@ -92,3 +92,22 @@ def test_ctrl_c_cancels_and_exits_130(serve, tmp_path):
     assert run.returncode == 130, err[-2000:]
     assert "interrupted" in err
     assert served.process.poll() is None  # the served robot is unharmed and still serving
+
+
+@pytest.mark.slow
+def test_feedback_that_never_arrives_is_named_as_a_definitions_mismatch(serve):
+    served = serve("--scene", "letters_A", *START, "--fault", "no-feedback")
+    done = served.run(*RUN, "--json")
+    assert done.returncode == 0, done.stderr[-2000:]  # goals and results still work: only feedback is lost
+    assert json.loads(done.stdout)["status"] == "SUCCESS"
+    warning = [line for line in done.stderr.splitlines() if line.startswith("bt-meta: warning:")]
+    assert len(warning) == 1, done.stderr[-2000:]
+    assert "/right_arm_controller/follow_joint_trajectory: 10 goals succeeded without any feedback" in warning[0]
+    assert "control_msgs definitions of another ROS 2 distro" in warning[0]
+
+
+def test_a_bad_fault_spec_exits_2(capsys):
+    from bt_meta.cli import main
+
+    assert main(["sim", "serve", "--ros2", "--scene", "letters_A", "--fault", "no-results"]) == 2
+    assert "expected reject@N, abort@N[:CODE] or no-feedback" in capsys.readouterr().err

@@ -37,6 +37,7 @@ def test_letter_a_through_ros2_ends_as_in_process(serve):
     served = serve("--scene", "letters_A", *START)
     done = served.run("run", LETTERS, "--problem", "A", "--world", "ros2", "--json")
     assert done.returncode == 0, done.stderr[-2000:]
+    assert "without any feedback" not in done.stderr  # the served controller sends feedback: no false alarm
     ros = json.loads(done.stdout)
     local = _in_process("run", LETTERS, "--problem", "A")
     assert ros["status"] == local["status"] == "SUCCESS"

@@ -78,6 +78,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="diagnose and repair failures with the meta-reasoner (memory, refinements, repairs)")
     parser.add_argument("--max-attempts", type=int, default=5,
                         help="with --repair: at most this many applied repairs (default 5)")
+    parser.add_argument("--report", metavar="FILE.html",
+                        help="write the run's HTML report: steps, failures, repairs, ground truth, top views, trees")
     parser.add_argument("--record-rrd", metavar="FILE.rrd",
                         help="record the episode for the Rerun viewer (needs the extra: pip install 'bt-meta[rerun]')")
     add_world_arguments(parser)
@@ -114,11 +116,23 @@ def run(args: argparse.Namespace) -> int:
             recorder = TraceRecorder(memory, record_failed=args.record_failed, seed=args.seed,
                                      config={"command": "bt-meta run" + (" --repair" if args.repair else "")})
             plugins.register(recorder, "recorder", source="bt-meta run --record")
+        capture = None
+        if args.report:
+            from bt_meta.runs.capture import Progress, RunCapture
+
+            capture = RunCapture(Progress(quiet=True), echo=False)
+            plugins.register(capture, "run_report_capture", source="bt-meta run --report")
         started = time.perf_counter()
         with quiet_stdout():
             world = make_world(task_file.domain, problem, grounding, variant=args.variant, seed=args.seed, gui=args.gui,
                              **options)
         built = time.perf_counter()
+        before_png = None
+        if capture is not None:
+            from bt_meta.runs.capture import top_view_png
+
+            capture.world = world
+            before_png, _ = top_view_png(world)
         rrd = None
         if args.record_rrd:
             from bt_meta.world.simulation.rerun_log import RerunRecorder
@@ -137,8 +151,13 @@ def run(args: argparse.Namespace) -> int:
             out["rrd"] = str(rrd.path)
         try:
             if args.repair:
-                return _run_repaired(args, task_file, problem, world, plugins, memory, recorder, out, started, built)
-            return _run_plain(args, problem, world, plugins, memory, recorder, out, started, built, rrd)
+                code = _run_repaired(args, task_file, problem, world, plugins, memory, recorder, out, started, built,
+                                     capture)
+            else:
+                code = _run_plain(args, problem, world, plugins, memory, recorder, out, started, built, rrd, capture)
+            if capture is not None:
+                _write_report(args, task_file, problem, world, out, capture, before_png)
+            return code
         finally:
             if rrd is not None:
                 rrd.close()
@@ -180,7 +199,7 @@ def _memory(args: argparse.Namespace) -> Iterator[Any]:
 
 
 def _run_plain(args: argparse.Namespace, problem: Any, world: Any, plugins: Any, memory: Any, recorder: Any,
-               out: dict[str, Any], started: float, built: float, rrd: Any = None) -> int:
+               out: dict[str, Any], started: float, built: float, rrd: Any = None, capture: Any = None) -> int:
     from bt_meta.bt.failures import Failure, FailureKind
     from bt_meta.testing import TreeHarness
 
@@ -193,6 +212,10 @@ def _run_plain(args: argparse.Namespace, problem: Any, world: Any, plugins: Any,
         harness.run.memory = memory  # what the grid-map and keypoint expectation plugins read
     if recorder is not None:
         recorder.tree = harness.compiled.plan_result.tree
+    if capture is not None:  # one segment: the tree ticked here, with the statuses its step events report
+        from bt_meta.runs.capture import Segment
+
+        capture.segments.append(Segment(1, harness.root, 0))
     plan = [" ".join((p.name, *p.args)) for p in harness.compiled.plan_result.plan]
     if not args.json:
         print(f"{problem.name} in scene {world.scene.name} ({world.variant}), seed {args.seed}: "
@@ -229,14 +252,18 @@ def _run_plain(args: argparse.Namespace, problem: Any, world: Any, plugins: Any,
 
 
 def _run_repaired(args: argparse.Namespace, task_file: Any, problem: Any, world: Any, plugins: Any, memory: Any,
-                  recorder: Any, out: dict[str, Any], started: float, built: float) -> int:
+                  recorder: Any, out: dict[str, Any], started: float, built: float, capture: Any = None) -> int:
     from bt_meta.meta.executor import MetaExecutor
     from bt_meta.meta.reasoner import Limits
     from bt_meta.meta.refinements import RefinementStore
+    from bt_meta.runs.capture import CapturingExecutor
 
     groot2 = follow_groot2(args)
+    # --report: the executor that also snapshots each segment's tree and the reasoner's decisions
+    base: type[MetaExecutor] = MetaExecutor if capture is None else CapturingExecutor
+    extra: dict[str, Any] = {} if capture is None else {"capture": capture}
 
-    class Executor(MetaExecutor):
+    class Executor(base):  # type: ignore[valid-type,misc]
         """Hands the recorder every segment's decomposition tree (the parent tasks of repaired steps), and Groot2
         every segment's behaviour tree."""
 
@@ -253,8 +280,10 @@ def _run_repaired(args: argparse.Namespace, task_file: Any, problem: Any, world:
     with RefinementStore.open(memory.path) as refinements:
         report = Executor(task_file.domain, problem, world, plugins, task_file=task_file, variant=world.variant,
                           memory=memory, refinements=refinements, limits=Limits(max_attempts=args.max_attempts,
-                                                                 max_ticks=args.max_ticks)).run()
+                                                                 max_ticks=args.max_ticks), **extra).run()
     status = "SUCCESS" if report.ok else "FAILURE"
+    if capture is not None:
+        out["segments"] = report.to_dict().get("segments")
     out.update({
         "attempts": [a.to_dict() for a in report.attempts],
         "repairs": report.repairs,
@@ -371,6 +400,42 @@ def _report(args: argparse.Namespace, out: dict[str, Any], status: str, ticks: i
             print(f"recorded episode {recorder.episode_id} in {Path(recorder.memory.path)}"
                   if recorder.episode_id is not None else f"not recorded: {out['recording']}")
     return 0 if status == "SUCCESS" else 1
+
+
+def _write_report(args: argparse.Namespace, task_file: Any, problem: Any, world: Any, out: dict[str, Any],
+                  capture: Any, before_png: bytes | None) -> None:
+    """``--report FILE.html``: the run's page, with the task's goal checked on the simulator's true state. Written
+    after the run's result is printed and recorded; a path that cannot be written is exit 2 naming it."""
+    from bt_meta.judge.success import SuccessError, success_check
+    from bt_meta.runs.capture import top_view_png
+    from bt_meta.runs.report import run_pictures, write_run_report
+
+    try:
+        judge = success_check(task_file, problem, world.grounding, scene_objects=[o.name for o in world.scene.objects])
+        achieved, truth = judge.evaluate(world)
+    except SuccessError as error:  # a goal predicate no geometric check covers: the verdict is unknown, not failed
+        achieved, truth = None, f"not checked: {error}"
+    status = "success" if out["status"] == "SUCCESS" else "failed"
+    def steps(key: str) -> list[list[str]]:  # plans are kept as "name arg ..." lines
+        return [line.split() for line in out.get(key) or []]
+
+    report = {key: out.get(key) for key in ("attempts", "failures", "reported", "stop_reason", "ticks", "segments")}
+    report["segments"] = report["segments"] or len(capture.segments)
+    report.update({"status": status, "achieved": achieved, "truth": truth, "executed": capture.steps,
+                   "initial_plan": steps("initial_plan"), "plan": steps("plan"),
+                   "simulated_seconds": round(world.sim.steps * world.sim.time_step, 3)})
+    run = {key: out.get(key) for key in ("file", "problem", "scene", "robot", "variant", "seed")}
+    run.update({"status": status, "kinds": sorted({str(f.get("kind")) for f in out.get("failures") or []}),
+                "seconds": out.get("run_seconds"), "report": report})
+    pictures = run_pictures(capture, before_png, top_view_png(world))
+    title = f"bt-meta run {Path(args.file).name} {problem.name} ({world.variant})"
+    try:
+        path = write_run_report(run, args.report, title=title, pictures=pictures)
+    except OSError as error:
+        raise UserInputError(f"cannot write the report: {error.strerror or error} (the run's result above stands)",
+                             args.report) from None
+    if not args.json:
+        print(f"report: {path} (task done in the simulator: {achieved}; {truth})")
 
 
 __all__ = ["register", "run"]

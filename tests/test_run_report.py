@@ -1,0 +1,98 @@
+"""``bt-meta run --report FILE.html``: the demo's run page for a shipped task and for the tutorial's own task, and
+an unwritable report path (exit 2, the run's result still printed and recorded)."""
+
+from __future__ import annotations
+
+import re
+import sys
+from pathlib import Path
+
+import pytest
+
+from bt_meta.cli import main
+from bt_meta.resources import trees_dir
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from test_tutorial import tutorial_steps  # the tutorial's own files, as the tutorial writes them
+
+
+def run_cli(capsys, *args: str) -> tuple[int, str, str]:
+    code = main(["run", *args])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def facts(page: str) -> dict[str, str]:
+    """The report's fact table: header -> cell text (tags stripped)."""
+    rows = re.findall(r"<tr><th>([^<]*)</th><td>(.*?)</td></tr>", page)
+    return {k: " ".join(re.sub(r"<[^>]+>", " ", v).split()) for k, v in rows}
+
+
+@pytest.mark.slow
+def test_a_shipped_variant_that_is_not_repaired_gets_its_page(tmp_path, capsys):
+    page = tmp_path / "run.html"
+    code, out, _ = run_cli(capsys, str(trees_dir() / "magnetic_attach.yaml"), "--problem", "nominal", "--variant",
+                           "active_on_side", "--repair", "--memory", str(tmp_path / "m.sqlite"), "--report", str(page))
+    assert code == 1 and f"report: {page}" in out
+    html = page.read_text(encoding="utf-8")
+    table = facts(html)
+    assert table["variant"] == "active_on_side" and table["status"] == "failed"
+    assert table["failure kinds"] == "verification"
+    assert table["task done (simulator)"].startswith("no")  # the goal checked on the true state, not bookkeeping
+    assert "reference" in table["task done (simulator)"]
+    assert "Not repaired: what was tried" in html and "retry_repair" in html
+    assert html.count("data:image/png;base64,") == 2  # top views before and after
+    assert "<svg" in html and "MoveTo" in html  # the tree as ticked
+
+
+@pytest.mark.slow
+def test_a_nominal_run_page_says_the_goal_holds(tmp_path, capsys):
+    page = tmp_path / "nominal.html"
+    code, _, _ = run_cli(capsys, str(trees_dir() / "magnetic_attach.yaml"), "--problem", "nominal",
+                         "--report", str(page))
+    assert code == 0
+    table = facts(page.read_text(encoding="utf-8"))
+    assert table["status"] == "success" and table["task done (simulator)"].startswith("yes")
+    assert table["repair attempts"] == "0" and "1 segment(s)" in table["time"]
+
+
+def _tutorial_files(folder: Path) -> None:
+    for kind, text in tutorial_steps():
+        if kind == "file":
+            name, body = text.split("\n", 1)
+            (folder / name).parent.mkdir(parents=True, exist_ok=True)
+            (folder / name).write_text(body, encoding="utf-8")
+
+
+@pytest.mark.slow
+def test_the_tutorials_repaired_run_gets_its_page(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("BT_META_MEMORY", raising=False)
+    _tutorial_files(tmp_path)
+    assert main(["record", "peg.yaml", "--memory", "memory.sqlite"]) == 0
+    capsys.readouterr()
+    code, out, err = run_cli(capsys, "peg.yaml", "--variant", "peg_on_side", "--repair", "--memory", "memory.sqlite",
+                             "--report", "report.html")
+    assert code == 0, out[-2000:] + err
+    html = Path("report.html").read_text(encoding="utf-8")
+    table = facts(html)
+    assert table["status"] == "success" and table["task done (simulator)"].startswith("yes")
+    assert int(table["repair attempts"]) >= 1 and "pose_backtracking" in html
+    assert "unexpected_configuration" in table["failure kinds"]
+    assert len(re.findall(r"segment \d+ \(from step \d+\)", html)) >= 2  # a tree per segment the executor ran
+
+
+@pytest.mark.slow
+def test_an_unwritable_report_path_is_exit_2_and_the_run_is_kept(tmp_path, monkeypatch, capsys):
+    monkeypatch.delenv("BT_META_MEMORY", raising=False)
+    blocker = tmp_path / "not_a_folder"
+    blocker.write_text("a file where the report's folder should be", encoding="utf-8")
+    page = blocker / "run.html"
+    memory = tmp_path / "m.sqlite"
+    code, out, err = run_cli(capsys, str(trees_dir() / "magnetic_attach.yaml"), "--problem", "nominal", "--record",
+                             "--memory", str(memory), "--report", str(page))
+    assert code == 2
+    assert str(page) in err and "cannot write the report" in err and "Traceback" not in err
+    assert "SUCCESS after" in out and "recorded episode" in out  # the result was printed and stored first
+    assert main(["memory", "ls", "--memory", str(memory)]) == 0
+    assert "nominal" in capsys.readouterr().out

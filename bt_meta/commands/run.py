@@ -5,7 +5,7 @@ Offers:
 * :func:`register` -- adds ``run FILE [--problem P] [--variant V] [--seed S] [--json] [--plugins DIR]
   [--max-ticks N] [--gui] [--grounding FILE] [--robot R] [--scene FILE] [--record-rrd FILE.rrd] [--memory PATH]
   [--record] [--record-failed] [--repair] [--max-attempts N] [--groot2 [PORT]] [--groot2-host ADDRESS] [--hold]
-  [--btlog FILE]``
+  [--btlog FILE] [--report FILE.html]``
 * :func:`run` -- the handler
 
 The problem is planned and compiled with a Monitor around every primitive, then ticked on a
@@ -28,6 +28,10 @@ the :class:`~bt_meta.meta.executor.MetaExecutor` with the plugin host, the memor
 failures are diagnosed and repaired (at most ``--max-attempts``), a successful repair is saved as a refinement; it
 prints the attempts and repairs (JSON gains ``attempts``, ``repairs``, ``refinement_saved``,
 ``refinements_used``, ``stop_reason``, ``reported``, ``initial_plan``).
+
+``--report FILE.html`` writes the run's page (:mod:`bt_meta.runs.report`, the demo's): failures, repairs, the
+goal checked on the simulator's true state (:func:`bt_meta.judge.success.success_check`), top views, the trees
+as ticked; written after the result is printed and recorded, an unwritable path is exit 2 naming it.
 
 Groot2: ``--groot2 [PORT]`` serves the running tree to Groot2 (with ``--repair``: each segment's tree as it
 runs), ``--hold`` keeps serving after the last tick, ``--btlog FILE`` logs it for replay (docs/groot2.md; not with

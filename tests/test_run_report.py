@@ -3,6 +3,7 @@ an unwritable report path (exit 2, the run's result still printed and recorded).
 
 from __future__ import annotations
 
+import html
 import re
 import sys
 from pathlib import Path
@@ -25,29 +26,29 @@ def run_cli(capsys, *args: str) -> tuple[int, str, str]:
 def facts(page: str) -> dict[str, str]:
     """The report's fact table: header -> cell text (tags stripped)."""
     rows = re.findall(r"<tr><th>([^<]*)</th><td>(.*?)</td></tr>", page)
-    return {k: " ".join(re.sub(r"<[^>]+>", " ", v).split()) for k, v in rows}
+    return {k: html.unescape(" ".join(re.sub(r"<[^>]+>", " ", v).split())) for k, v in rows}
 
 
 @pytest.mark.slow
 def test_a_shipped_variant_that_is_not_repaired_gets_its_page(tmp_path, capsys):
-    page = tmp_path / "run.html"
+    page = tmp_path / "run.page_text"
     code, out, _ = run_cli(capsys, str(trees_dir() / "magnetic_attach.yaml"), "--problem", "nominal", "--variant",
                            "active_on_side", "--repair", "--memory", str(tmp_path / "m.sqlite"), "--report", str(page))
     assert code == 1 and f"report: {page}" in out
-    html = page.read_text(encoding="utf-8")
-    table = facts(html)
+    page_text = page.read_text(encoding="utf-8")
+    table = facts(page_text)
     assert table["variant"] == "active_on_side" and table["status"] == "failed"
     assert table["failure kinds"] == "verification"
     assert table["task done (simulator)"].startswith("no")  # the goal checked on the true state, not bookkeeping
     assert "reference" in table["task done (simulator)"]
-    assert "Not repaired: what was tried" in html and "retry_repair" in html
-    assert html.count("data:image/png;base64,") == 2  # top views before and after
-    assert "<svg" in html and "MoveTo" in html  # the tree as ticked
+    assert "Not repaired: what was tried" in page_text and "retry_repair" in page_text
+    assert page_text.count("data:image/png;base64,") == 2  # top views before and after
+    assert "<svg" in page_text and "MoveTo" in page_text  # the tree as ticked
 
 
 @pytest.mark.slow
 def test_a_nominal_run_page_says_the_goal_holds(tmp_path, capsys):
-    page = tmp_path / "nominal.html"
+    page = tmp_path / "nominal.page_text"
     code, _, _ = run_cli(capsys, str(trees_dir() / "magnetic_attach.yaml"), "--problem", "nominal",
                          "--report", str(page))
     assert code == 0
@@ -72,14 +73,14 @@ def test_the_tutorials_repaired_run_gets_its_page(tmp_path, monkeypatch, capsys)
     assert main(["record", "peg.yaml", "--memory", "memory.sqlite"]) == 0
     capsys.readouterr()
     code, out, err = run_cli(capsys, "peg.yaml", "--variant", "peg_on_side", "--repair", "--memory", "memory.sqlite",
-                             "--report", "report.html")
+                             "--report", "report.page_text")
     assert code == 0, out[-2000:] + err
-    html = Path("report.html").read_text(encoding="utf-8")
-    table = facts(html)
+    page_text = Path("report.page_text").read_text(encoding="utf-8")
+    table = facts(page_text)
     assert table["status"] == "success" and table["task done (simulator)"].startswith("yes")
-    assert int(table["repair attempts"]) >= 1 and "pose_backtracking" in html
+    assert int(table["repair attempts"]) >= 1 and "pose_backtracking" in page_text
     assert "unexpected_configuration" in table["failure kinds"]
-    assert len(re.findall(r"segment \d+ \(from step \d+\)", html)) >= 2  # a tree per segment the executor ran
+    assert len(re.findall(r"segment \d+ \(from step \d+\)", page_text)) >= 2  # a tree per segment the executor ran
 
 
 @pytest.mark.slow
@@ -87,7 +88,7 @@ def test_an_unwritable_report_path_is_exit_2_and_the_run_is_kept(tmp_path, monke
     monkeypatch.delenv("BT_META_MEMORY", raising=False)
     blocker = tmp_path / "not_a_folder"
     blocker.write_text("a file where the report's folder should be", encoding="utf-8")
-    page = blocker / "run.html"
+    page = blocker / "run.page_text"
     memory = tmp_path / "m.sqlite"
     code, out, err = run_cli(capsys, str(trees_dir() / "magnetic_attach.yaml"), "--problem", "nominal", "--record",
                              "--memory", str(memory), "--report", str(page))
@@ -96,3 +97,15 @@ def test_an_unwritable_report_path_is_exit_2_and_the_run_is_kept(tmp_path, monke
     assert "SUCCESS after" in out and "recorded episode" in out  # the result was printed and stored first
     assert main(["memory", "ls", "--memory", str(memory)]) == 0
     assert "nominal" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_a_shipped_task_is_judged_through_its_family_files_success_mapping(tmp_path, capsys):
+    """housing_insertion's goal has gripper_open(), which no check is named after: trees/families/housing.yaml
+    maps it, as the campaigns and the demo judge it."""
+    page = tmp_path / "housing.page_text"
+    code, _, _ = run_cli(capsys, str(trees_dir() / "housing_insertion.yaml"), "--problem", "nominal",
+                         "--report", str(page))
+    assert code == 0
+    verdict = facts(page.read_text(encoding="utf-8"))["task done (simulator)"]
+    assert verdict.startswith("yes") and "in board's hole" in verdict and "holds nothing" in verdict

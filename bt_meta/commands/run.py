@@ -30,8 +30,9 @@ prints the attempts and repairs (JSON gains ``attempts``, ``repairs``, ``refinem
 ``refinements_used``, ``stop_reason``, ``reported``, ``initial_plan``).
 
 ``--report FILE.html`` writes the run's page (:mod:`bt_meta.runs.report`, the demo's): failures, repairs, the
-goal checked on the simulator's true state (:func:`bt_meta.judge.success.success_check`), top views, the trees
-as ticked; written after the result is printed and recorded, an unwritable path is exit 2 naming it.
+goal checked on the simulator's true state (:func:`bt_meta.judge.success.success_check`; a shipped task through its
+family file's ``success:``), top views, the trees as ticked; written after the result is printed and recorded, an
+unwritable path is exit 2 naming it.
 
 Groot2: ``--groot2 [PORT]`` serves the running tree to Groot2 (with ``--repair``: each segment's tree as it
 runs), ``--hold`` keeps serving after the last tick, ``--btlog FILE`` logs it for replay (docs/groot2.md; not with
@@ -410,12 +411,15 @@ def _write_report(args: argparse.Namespace, task_file: Any, problem: Any, world:
                   capture: Any, before_png: bytes | None) -> None:
     """``--report FILE.html``: the run's page, with the task's goal checked on the simulator's true state. Written
     after the run's result is printed and recorded; a path that cannot be written is exit 2 naming it."""
-    from bt_meta.judge.success import SuccessError, success_check
+    from bt_meta.judge.success import SuccessError, success_check, success_check_file
     from bt_meta.runs.capture import top_view_png
     from bt_meta.runs.report import run_pictures, write_run_report
 
+    objects = [o.name for o in world.scene.objects]
     try:
-        judge = success_check(task_file, problem, world.grounding, scene_objects=[o.name for o in world.scene.objects])
+        family = _shipped_family_file(Path(args.file), problem.name)
+        judge = (success_check(task_file, problem, world.grounding, scene_objects=objects) if family is None
+                 else success_check_file(family, task_file, problem, world.grounding, scene_objects=objects))
         achieved, truth = judge.evaluate(world)
     except SuccessError as error:  # a goal predicate no geometric check covers: the verdict is unknown, not failed
         achieved, truth = None, f"not checked: {error}"
@@ -440,6 +444,21 @@ def _write_report(args: argparse.Namespace, task_file: Any, problem: Any, world:
                              args.report) from None
     if not args.json:
         print(f"report: {path} (task done in the simulator: {achieved}; {truth})")
+
+
+def _shipped_family_file(task: Path, problem: str) -> Path | None:
+    """The shipped campaign family file of ``task``'s ``problem`` (its ``success:`` maps goal predicates such as
+    ``gripper_open``), so a run is judged as its campaigns and the demo judge it; ``None``: the goal alone."""
+    import yaml
+
+    from bt_meta.resources import trees_dir
+
+    for path in sorted((trees_dir() / "families").glob("*.yaml")):
+        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+        if (isinstance(data, dict) and data.get("problem") == problem and data.get("task")
+                and (path.parent / str(data["task"])).resolve() == task.resolve()):
+            return path
+    return None
 
 
 __all__ = ["register", "run"]

@@ -31,7 +31,7 @@ def facts(page: str) -> dict[str, str]:
 
 @pytest.mark.slow
 def test_a_shipped_variant_that_is_not_repaired_gets_its_page(tmp_path, capsys):
-    page = tmp_path / "run.page_text"
+    page = tmp_path / "run.html"
     code, out, _ = run_cli(capsys, str(trees_dir() / "magnetic_attach.yaml"), "--problem", "nominal", "--variant",
                            "active_on_side", "--repair", "--memory", str(tmp_path / "m.sqlite"), "--report", str(page))
     assert code == 1 and f"report: {page}" in out
@@ -48,7 +48,7 @@ def test_a_shipped_variant_that_is_not_repaired_gets_its_page(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_a_nominal_run_page_says_the_goal_holds(tmp_path, capsys):
-    page = tmp_path / "nominal.page_text"
+    page = tmp_path / "nominal.html"
     code, _, _ = run_cli(capsys, str(trees_dir() / "magnetic_attach.yaml"), "--problem", "nominal",
                          "--report", str(page))
     assert code == 0
@@ -73,9 +73,9 @@ def test_the_tutorials_repaired_run_gets_its_page(tmp_path, monkeypatch, capsys)
     assert main(["record", "peg.yaml", "--memory", "memory.sqlite"]) == 0
     capsys.readouterr()
     code, out, err = run_cli(capsys, "peg.yaml", "--variant", "peg_on_side", "--repair", "--memory", "memory.sqlite",
-                             "--report", "report.page_text")
+                             "--report", "report.html")
     assert code == 0, out[-2000:] + err
-    page_text = Path("report.page_text").read_text(encoding="utf-8")
+    page_text = Path("report.html").read_text(encoding="utf-8")
     table = facts(page_text)
     assert table["status"] == "success" and table["task done (simulator)"].startswith("yes")
     assert int(table["repair attempts"]) >= 1 and "pose_backtracking" in page_text
@@ -88,7 +88,7 @@ def test_an_unwritable_report_path_is_exit_2_and_the_run_is_kept(tmp_path, monke
     monkeypatch.delenv("BT_META_MEMORY", raising=False)
     blocker = tmp_path / "not_a_folder"
     blocker.write_text("a file where the report's folder should be", encoding="utf-8")
-    page = blocker / "run.page_text"
+    page = blocker / "run.html"
     memory = tmp_path / "m.sqlite"
     code, out, err = run_cli(capsys, str(trees_dir() / "magnetic_attach.yaml"), "--problem", "nominal", "--record",
                              "--memory", str(memory), "--report", str(page))
@@ -103,7 +103,7 @@ def test_an_unwritable_report_path_is_exit_2_and_the_run_is_kept(tmp_path, monke
 def test_a_shipped_task_is_judged_through_its_family_files_success_mapping(tmp_path, capsys):
     """housing_insertion's goal has gripper_open(), which no check is named after: trees/families/housing.yaml
     maps it, as the campaigns and the demo judge it."""
-    page = tmp_path / "housing.page_text"
+    page = tmp_path / "housing.html"
     code, _, _ = run_cli(capsys, str(trees_dir() / "housing_insertion.yaml"), "--problem", "nominal",
                          "--report", str(page))
     assert code == 0

@@ -121,23 +121,20 @@ def run(args: argparse.Namespace) -> int:
             recorder = TraceRecorder(memory, record_failed=args.record_failed, seed=args.seed,
                                      config={"command": "bt-meta run" + (" --repair" if args.repair else "")})
             plugins.register(recorder, "recorder", source="bt-meta run --record")
-        capture = None
+        page = capture = None
         if args.report:
-            from bt_meta.runs.capture import Progress, RunCapture
+            from bt_meta.runs.report import RunPage
 
-            capture = RunCapture(Progress(quiet=True), echo=False)
+            page = RunPage("bt-meta run")
+            capture = page.capture
             plugins.register(capture, "run_report_capture", source="bt-meta run --report")
         started = time.perf_counter()
         with quiet_stdout():
             world = make_world(task_file.domain, problem, grounding, variant=args.variant, seed=args.seed, gui=args.gui,
                              **options)
         built = time.perf_counter()
-        before_png = None
-        if capture is not None:
-            from bt_meta.runs.capture import top_view_png
-
-            capture.world = world
-            before_png, _ = top_view_png(world)
+        if page is not None:
+            page.start(world)
         rrd = None
         if args.record_rrd:
             from bt_meta.world.simulation.rerun_log import RerunRecorder
@@ -160,8 +157,11 @@ def run(args: argparse.Namespace) -> int:
                                      capture)
             else:
                 code = _run_plain(args, problem, world, plugins, memory, recorder, out, started, built, rrd, capture)
-            if capture is not None:
-                _write_report(args, task_file, problem, world, out, capture, before_png)
+            if page is not None:  # after the result is printed and recorded: a bad path loses none of it
+                page.finish(args.file, task_file, problem, world, out)
+                written = page.write(args.report)
+                if not args.json:
+                    print(f"report: {written} ({page.verdict})")
             return code
         finally:
             if rrd is not None:
@@ -405,60 +405,6 @@ def _report(args: argparse.Namespace, out: dict[str, Any], status: str, ticks: i
             print(f"recorded episode {recorder.episode_id} in {Path(recorder.memory.path)}"
                   if recorder.episode_id is not None else f"not recorded: {out['recording']}")
     return 0 if status == "SUCCESS" else 1
-
-
-def _write_report(args: argparse.Namespace, task_file: Any, problem: Any, world: Any, out: dict[str, Any],
-                  capture: Any, before_png: bytes | None) -> None:
-    """``--report FILE.html``: the run's page, with the task's goal checked on the simulator's true state. Written
-    after the run's result is printed and recorded; a path that cannot be written is exit 2 naming it."""
-    from bt_meta.judge.success import SuccessError, success_check, success_check_file
-    from bt_meta.runs.capture import top_view_png
-    from bt_meta.runs.report import run_pictures, write_run_report
-
-    objects = [o.name for o in world.scene.objects]
-    try:
-        family = _shipped_family_file(Path(args.file), problem.name)
-        judge = (success_check(task_file, problem, world.grounding, scene_objects=objects) if family is None
-                 else success_check_file(family, task_file, problem, world.grounding, scene_objects=objects))
-        achieved, truth = judge.evaluate(world)
-    except SuccessError as error:  # a goal predicate no geometric check covers: the verdict is unknown, not failed
-        achieved, truth = None, f"not checked: {error}"
-    status = "success" if out["status"] == "SUCCESS" else "failed"
-    def steps(key: str) -> list[list[str]]:  # plans are kept as "name arg ..." lines
-        return [line.split() for line in out.get(key) or []]
-
-    report = {key: out.get(key) for key in ("attempts", "failures", "reported", "stop_reason", "ticks", "segments")}
-    report["segments"] = report["segments"] or len(capture.segments)
-    report.update({"status": status, "achieved": achieved, "truth": truth, "executed": capture.steps,
-                   "initial_plan": steps("initial_plan"), "plan": steps("plan"),
-                   "simulated_seconds": round(world.sim.steps * world.sim.time_step, 3)})
-    run = {key: out.get(key) for key in ("file", "problem", "scene", "robot", "variant", "seed")}
-    run.update({"status": status, "kinds": sorted({str(f.get("kind")) for f in out.get("failures") or []}),
-                "seconds": out.get("run_seconds"), "report": report})
-    pictures = run_pictures(capture, before_png, top_view_png(world))
-    title = f"bt-meta run {Path(args.file).name} {problem.name} ({world.variant})"
-    try:
-        path = write_run_report(run, args.report, title=title, pictures=pictures)
-    except OSError as error:
-        raise UserInputError(f"cannot write the report: {error.strerror or error} (the run's result above stands)",
-                             args.report) from None
-    if not args.json:
-        print(f"report: {path} (task done in the simulator: {achieved}; {truth})")
-
-
-def _shipped_family_file(task: Path, problem: str) -> Path | None:
-    """The shipped campaign family file of ``task``'s ``problem`` (its ``success:`` maps goal predicates such as
-    ``gripper_open``), so a run is judged as its campaigns and the demo judge it; ``None``: the goal alone."""
-    import yaml
-
-    from bt_meta.resources import trees_dir
-
-    for path in sorted((trees_dir() / "families").glob("*.yaml")):
-        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
-        if (isinstance(data, dict) and data.get("problem") == problem and data.get("task")
-                and (path.parent / str(data["task"])).resolve() == task.resolve()):
-            return path
-    return None
 
 
 __all__ = ["register", "run"]

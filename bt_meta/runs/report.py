@@ -8,6 +8,8 @@ Offers:
 
 * :func:`render_run_report` / :func:`write_run_report` -- a run's page: facts, the ground truth, failures with
   their kind and evidence, repair attempts, what was tried and why it failed, executed steps, plans, pictures
+* :class:`RunPage` -- watches a command's run (``bt-meta run`` / ``record --report``) and writes its page, the
+  task's goal checked on the simulator's true state
 * :func:`run_pictures` -- what a watched run shows: top views before and after, trees as ticked, grid-maps
 * :func:`tree_pictures`, :func:`gridmap_pictures` -- the trees and grid-map mismatches of a
   :class:`~bt_meta.runs.capture.RunCapture`
@@ -340,3 +342,88 @@ def gridmap_pictures(capture: Any, after_view: Any) -> list[dict[str, Any]]:
                             "kind": failure.get("kind"), "segment": failure.get("segment"),
                             "expected": entry.get("expected"), "observed": entry.get("observed"), "after": after})
     return out
+
+
+class RunPage:
+    """A command's run watched for its page: register :attr:`capture` as a plugin before the run, :meth:`start`
+    once the world is built, :meth:`finish` while it is still open, :meth:`write` after the result is shown (so an
+    unwritable path loses nothing of the run)."""
+
+    def __init__(self, command: str) -> None:
+        from bt_meta.runs.capture import Progress, RunCapture
+
+        self.command = command
+        self.capture = RunCapture(Progress(quiet=True), echo=False)
+        self.before_png: bytes | None = None
+        self.run: dict[str, Any] = {}
+        self.pictures: dict[str, Any] = {}
+        self.title = command
+
+    def start(self, world: Any) -> None:
+        from bt_meta.runs.capture import top_view_png
+
+        self.capture.world = world
+        self.before_png, _ = top_view_png(world)
+
+    def finish(self, task_path: str | Path, task_file: Any, problem: Any, world: Any, out: dict[str, Any]) -> None:
+        """Judge the world and keep the page's data: ``out`` is the command's outcome (``status`` SUCCESS or
+        FAILURE, ``failures``, ``plan`` and ``initial_plan`` as "name arg ..." lines, ``attempts``, ...)."""
+        from bt_meta.runs.capture import top_view_png
+
+        achieved, truth = judge_world(Path(task_path), task_file, problem, world)
+        status = "success" if out.get("status") == "SUCCESS" else "failed"
+        report = {key: out.get(key) for key in ("attempts", "failures", "reported", "stop_reason", "ticks")}
+        report.update({"status": status, "achieved": achieved, "truth": truth, "executed": self.capture.steps,
+                       "segments": out.get("segments") or len(self.capture.segments),
+                       "initial_plan": [line.split() for line in out.get("initial_plan") or []],
+                       "plan": [line.split() for line in out.get("plan") or []],
+                       "simulated_seconds": round(world.sim.steps * world.sim.time_step, 3)})
+        self.run = {key: out.get(key) for key in ("file", "problem", "scene", "robot", "variant", "seed")}
+        self.run.update({"status": status, "kinds": sorted({str(f.get("kind")) for f in out.get("failures") or []}),
+                         "seconds": out.get("run_seconds"), "report": report})
+        self.pictures = run_pictures(self.capture, self.before_png, top_view_png(world))
+        self.title = f"{self.command} {Path(task_path).name} {problem.name} ({world.variant})"
+
+    @property
+    def verdict(self) -> str:
+        report = self.run.get("report") or {}
+        return f"task done in the simulator: {report.get('achieved')}; {report.get('truth')}"
+
+    def write(self, path: str | Path) -> Path:
+        """The page at ``path``; a path that cannot be written is a :class:`~bt_meta.errors.UserInputError`."""
+        from bt_meta.errors import UserInputError
+
+        try:
+            return write_run_report(self.run, path, title=self.title, pictures=self.pictures)
+        except OSError as error:
+            raise UserInputError(f"cannot write the report: {error.strerror or error} (the result above stands)",
+                                 str(path)) from None
+
+
+def judge_world(task_path: Path, task_file: Any, problem: Any, world: Any) -> tuple[bool | None, str]:
+    """The task's goal on ``world``'s true state (a shipped task through its family file's ``success:``, as its
+    campaigns and the demo judge it); ``None`` with the reason when a goal predicate has no check."""
+    from bt_meta.judge.success import SuccessError, success_check, success_check_file
+
+    objects = [o.name for o in world.scene.objects]
+    try:
+        family = shipped_family_file(task_path, problem.name)
+        judge = (success_check(task_file, problem, world.grounding, scene_objects=objects) if family is None
+                 else success_check_file(family, task_file, problem, world.grounding, scene_objects=objects))
+        return judge.evaluate(world)
+    except SuccessError as error:  # a goal predicate no geometric check covers: unknown, not failed
+        return None, f"not checked: {error}"
+
+
+def shipped_family_file(task: Path, problem: str) -> Path | None:
+    """The shipped campaign family file (``trees/families/*.yaml``) of ``task``'s ``problem``, or ``None``."""
+    import yaml
+
+    from bt_meta.resources import trees_dir
+
+    for path in sorted((trees_dir() / "families").glob("*.yaml")):
+        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+        if (isinstance(data, dict) and data.get("problem") == problem and data.get("task")
+                and (path.parent / str(data["task"])).resolve() == task.resolve()):
+            return path
+    return None

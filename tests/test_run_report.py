@@ -109,3 +109,32 @@ def test_a_shipped_task_is_judged_through_its_family_files_success_mapping(tmp_p
     assert code == 0
     verdict = facts(page.read_text(encoding="utf-8"))["task done (simulator)"]
     assert verdict.startswith("yes") and "in board's hole" in verdict and "holds nothing" in verdict
+
+
+@pytest.mark.slow
+def test_record_report_pages_a_stored_and_a_refused_demonstration(tmp_path, capsys):
+    task, memory = str(trees_dir() / "housing_insertion.yaml"), str(tmp_path / "m.sqlite")
+    stored, refused = tmp_path / "stored.html", tmp_path / "refused.html"
+    assert main(["record", task, "--problem", "nominal", "--memory", memory, "--report", str(stored)]) == 0
+    assert "recorded episode" in capsys.readouterr().out
+    table = facts(stored.read_text(encoding="utf-8"))
+    assert table["status"] == "success" and table["task done (simulator)"].startswith("yes")
+    code = main(["record", task, "--problem", "nominal", "--variant", "housing_upside_down", "--memory", memory,
+                 "--report", str(refused)])
+    err = capsys.readouterr().err
+    assert code == 1 and "nothing stored" in err and f"report: {refused}" in err
+    table = facts(refused.read_text(encoding="utf-8"))
+    assert table["status"] == "failed" and table["failure kinds"] == "unexpected_configuration"
+    assert table["task done (simulator)"].startswith("no")
+
+
+@pytest.mark.slow
+def test_record_report_to_an_unwritable_path_keeps_the_stored_episode(tmp_path, capsys):
+    blocker = tmp_path / "not_a_folder"
+    blocker.write_text("a file where the report's folder should be", encoding="utf-8")
+    memory = str(tmp_path / "m.sqlite")
+    code = main(["record", str(trees_dir() / "housing_insertion.yaml"), "--problem", "nominal", "--memory", memory,
+                 "--report", str(blocker / "page.html")])
+    captured = capsys.readouterr()
+    assert code == 2 and "cannot write the report" in captured.err and "recorded episode" in captured.out
+    assert main(["memory", "ls", "--memory", memory]) == 0 and "nominal" in capsys.readouterr().out

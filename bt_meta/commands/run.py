@@ -134,7 +134,11 @@ def run(args: argparse.Namespace) -> int:
                              **options)
         built = time.perf_counter()
         if page is not None:
-            page.start(world)
+            try:
+                page.start(world)
+            except BaseException:
+                world.close()
+                raise
         rrd = None
         if args.record_rrd:
             from bt_meta.world.simulation.rerun_log import RerunRecorder

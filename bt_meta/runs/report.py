@@ -10,6 +10,8 @@ Offers:
   their kind and evidence, repair attempts, what was tried and why it failed, executed steps, plans, pictures
 * :class:`RunPage` -- watches a command's run (``bt-meta run`` / ``record --report``) and writes its page, the
   task's goal checked on the simulator's true state
+* :func:`judge_world` -- the task's goal on the true state; :func:`shipped_family_file` -- a shipped task's family
+  file, whose ``success:`` maps goal predicates no check is named after
 * :func:`run_pictures` -- what a watched run shows: top views before and after, trees as ticked, grid-maps
 * :func:`tree_pictures`, :func:`gridmap_pictures` -- the trees and grid-map mismatches of a
   :class:`~bt_meta.runs.capture.RunCapture`

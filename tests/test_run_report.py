@@ -81,6 +81,8 @@ def test_the_tutorials_repaired_run_gets_its_page(tmp_path, monkeypatch, capsys)
     assert int(table["repair attempts"]) >= 1 and "pose_backtracking" in page_text
     assert "unexpected_configuration" in table["failure kinds"]
     assert len(re.findall(r"segment \d+ \(from step \d+\)", page_text)) >= 2  # a tree per segment the executor ran
+    # R_p / R_n of the task's pair (its first task's arguments) against the recorded demonstration's band
+    assert "Keypoint relations over the executed steps" in page_text and "R_p mean of 1 trace(s)" in page_text
 
 
 @pytest.mark.slow

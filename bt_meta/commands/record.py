@@ -173,7 +173,7 @@ def _demonstrate(file: str | Path, chosen: Any, task_file: Any, ground: Any, mem
                 "file": str(file), "problem": chosen.name, "scene": world.scene.name, "robot": world.sim.robot.name,
                 "variant": world.variant, "seed": seed, "status": status.value, "failures": failures, "ticks": ticks,
                 "plan": [" ".join((p.name, *p.args)) for p in harness.compiled.plan_result.plan],
-                "run_seconds": round(seconds, 3)})
+                "run_seconds": round(seconds, 3)}, memory)
         if recorder.error is not None:
             raise recorder.error
         if status is not Status.SUCCESS or recorder.episode_id is None:

@@ -162,7 +162,7 @@ def run(args: argparse.Namespace) -> int:
             else:
                 code = _run_plain(args, problem, world, plugins, memory, recorder, out, started, built, rrd, capture)
             if page is not None:  # after the result is printed and recorded: a bad path loses none of it
-                page.finish(args.file, task_file, problem, world, out)
+                page.finish(args.file, task_file, problem, world, out, memory)
                 written = page.write(args.report)
                 if not args.json:
                     print(f"report: {written} ({page.verdict})")

@@ -20,12 +20,11 @@ from typing import Any
 
 import yaml
 
-from bt_meta.plotting import line_plot
 from bt_meta.runs.report import CSS as _CSS
 from bt_meta.runs.report import dropped as _dropped
 from bt_meta.runs.report import esc as _e
 from bt_meta.runs.report import evidence_list as _evidence
-from bt_meta.runs.report import grid_svg, gridmaps_html, render_run_report, trees_html
+from bt_meta.runs.report import grid_svg, gridmaps_html, keypoints_html, render_run_report, trees_html
 from bt_meta.runs.report import img as _img
 from bt_meta.runs.report import plain as _plain
 from bt_meta.runs.report import short as _short
@@ -113,38 +112,7 @@ def _repair_log(outcome: Any) -> str:
 
 
 def _keypoints(outcome: Any) -> str:
-    data = outcome.keypoints
-    if not data:
-        return ""
-    observed = data["observed"]
-    expected = data["expected"]
-    markers = []
-    for index, entry in enumerate(observed):
-        if entry["status"] != "SUCCESS":
-            markers.append((float(index), f"{entry['status'].lower()} step {entry['step']}"))
-    plots = []
-    for key, unit, name in (("r_p_mm", "mm", "R_p"), ("r_n_deg", "deg", "R_n")):
-        series = {f"{name} this run": [(float(i), e[key]) for i, e in enumerate(observed)]}
-        band: list[tuple[float, float, float]] = []
-        mean: list[tuple[float, float | None]] = []
-        for i, entry in enumerate(observed):
-            remembered = expected.get(str(entry["step"])) if entry.get("segment") == 1 else None
-            if remembered is None and entry.get("step") is not None:
-                remembered = expected.get(str(entry["step"]))
-            if remembered is None:
-                mean.append((float(i), None))
-                continue
-            mean.append((float(i), remembered[key]["mean"]))
-            band.append((float(i), remembered[key]["min"], remembered[key]["max"]))
-        label = f"{name} mean of {data['traces']} trace(s)"
-        series[label] = mean
-        plots.append(line_plot(series, title=f"{name} ({data['active']} vs {data['reference']})",
-                               x_label="executed step (in order, repairs included)", y_label=f"{name} ({unit})",
-                               bands={label: band}, markers=markers))
-    calls = ", ".join(f"{i}: {e['call']}" for i, e in enumerate(observed))
-    return ("<h4>Keypoint relations over the executed steps</h4><div class='row'>" + "".join(plots) +
-            f"</div><p class='small'>Executed steps: {_e(calls)}. The band is the min..max over the remembered traces "
-            "at the same plan step.</p>")
+    return keypoints_html(outcome.keypoints)
 
 
 def _run_section(outcome: Any) -> str:

@@ -25,7 +25,6 @@ Offers:
 from __future__ import annotations
 
 import json
-import math
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -42,7 +41,7 @@ from bt_meta.runs.demonstrations import (
     record_demonstration,
     sim_world,
 )
-from bt_meta.runs.report import gridmap_pictures, tree_pictures
+from bt_meta.runs.report import gridmap_pictures, keypoint_series, tree_pictures
 
 __all__ = ["DemoResult", "RecordOutcome", "VariantOutcome", "memory_environment", "record_demonstration",
            "run_demo", "run_variant"]
@@ -221,7 +220,7 @@ def run_variant(
             outcome.trees = tree_pictures(capture)
             pair = FAMILIES[run.family].keypoint_pair
             if pair is not None:
-                outcome.keypoints = _keypoint_series(capture, memory, problem, pair, report.to_dict())
+                outcome.keypoints = keypoint_series(capture, memory, problem, pair, report.to_dict())
     except BtMetaError as error:
         outcome.error = f"{type(error).__name__}: {error}"
     except Exception as error:  # a crash of one run is reported in the summary, the demo goes on
@@ -230,49 +229,6 @@ def run_variant(
         world.close()
         outcome.seconds = time.perf_counter() - started
     return outcome
-
-
-def _keypoint_series(capture: RunCapture, memory: Any, problem: Any, pair: tuple[str, str],
-                     report: dict[str, Any]) -> dict[str, Any] | None:
-    """R_p (mm) and R_n (deg) of ``pair`` after each executed step of this run, and their means (with min/max) over
-    the remembered nominal traces at the same plan step."""
-
-    from bt_meta.memory.recorder import root_task_name
-    from bt_meta.perception.keypoints import KeypointError, relation
-
-    active, reference = pair
-    observed: list[dict[str, Any]] = []
-    for index, step in enumerate(capture.steps):
-        objects = step.get("objects") or {}
-        if active not in objects or reference not in objects:
-            continue
-        try:
-            rel = relation(objects[active], objects[reference])
-        except KeypointError:
-            continue
-        observed.append({"index": index, "step": step.get("step"), "segment": step.get("segment"),
-                         "call": f"{step.get('action')}({', '.join(step.get('args') or ())})",
-                         "status": step.get("status"), "r_p_mm": rel.r_p * 1000.0, "r_n_deg": math.degrees(rel.r_n)})
-    expected: dict[int, dict[str, Any]] = {}
-    try:
-        traces = memory.last_traces(root_task_name(problem), 5)
-    except BtMetaError:
-        traces = []
-    for trace in traces:
-        for step in trace.steps:
-            names = {o.name for o in step.state.objects}
-            if active not in names or reference not in names:
-                continue
-            rel = relation(step.state.object(active), step.state.object(reference))
-            entry = expected.setdefault(step.index, {"r_p_mm": [], "r_n_deg": []})
-            entry["r_p_mm"].append(rel.r_p * 1000.0)
-            entry["r_n_deg"].append(math.degrees(rel.r_n))
-    if not observed and not expected:
-        return None
-    return {"active": active, "reference": reference, "observed": observed, "traces": len(traces),
-            "expected": {str(k): {name: {"mean": sum(v) / len(v), "min": min(v), "max": max(v)}
-                                  for name, v in entry.items()} for k, entry in sorted(expected.items())},
-            "failed_steps": [f.get("step") for f in (report.get("failures") or []) if f.get("step") is not None]}
 
 
 # -- the scenario ---------------------------------------------------------------------------------------------------

@@ -13,6 +13,7 @@ Offers:
 * :func:`judge_world` -- the task's goal on the true state; :func:`shipped_family_file` -- a shipped task's family
   file, whose ``success:`` maps goal predicates no check is named after
 * :func:`run_pictures` -- what a watched run shows: top views before and after, trees as ticked, grid-maps
+* :func:`keypoint_pair`, :func:`keypoint_series`, :func:`keypoints_html` -- R_p / R_n of a pair over the run
 * :func:`tree_pictures`, :func:`gridmap_pictures` -- the trees and grid-map mismatches of a
   :class:`~bt_meta.runs.capture.RunCapture`
 * :func:`grid_svg` -- a grid-map (the ``render`` text of :mod:`bt_meta.perception.gridmap`) as coloured cells
@@ -25,9 +26,11 @@ from __future__ import annotations
 import base64
 import html
 import json
+import math
 from pathlib import Path
 from typing import Any
 
+from bt_meta.plotting import line_plot
 from bt_meta.runs.svg import TreeNode, tree_svg
 
 __all__ = [
@@ -39,6 +42,9 @@ __all__ = [
     "gridmap_pictures",
     "gridmaps_html",
     "img",
+    "keypoint_pair",
+    "keypoint_series",
+    "keypoints_html",
     "plain",
     "render_run_report",
     "run_pictures",
@@ -226,7 +232,8 @@ def render_run_report(run: dict[str, Any], *, title: str = "run report", back: s
         body.append(
             f"<h2>The scene and the trees</h2><div class='row'><div>{before}<div class='fig'>top view before the run"
             f"</div></div><div>{after}<div class='fig'>top view after the run</div></div></div>"
-            + trees_html(pictures.get("trees") or []) + gridmaps_html(pictures.get("gridmaps") or []))
+            + trees_html(pictures.get("trees") or []) + gridmaps_html(pictures.get("gridmaps") or [])
+            + keypoints_html(pictures.get("keypoints")))
     body += ["<h2>Failures classified</h2>", failures_html(list(report.get("failures") or [])),
              "<h2>Repair attempts</h2>", attempts_html(list(report.get("attempts") or [])),
              tried_html(list(report.get("reported") or []))]
@@ -367,9 +374,11 @@ class RunPage:
         self.capture.world = world
         self.before_png, _ = top_view_png(world)
 
-    def finish(self, task_path: str | Path, task_file: Any, problem: Any, world: Any, out: dict[str, Any]) -> None:
+    def finish(self, task_path: str | Path, task_file: Any, problem: Any, world: Any, out: dict[str, Any],
+               memory: Any = None) -> None:
         """Judge the world and keep the page's data: ``out`` is the command's outcome (``status`` SUCCESS or
-        FAILURE, ``failures``, ``plan`` and ``initial_plan`` as "name arg ..." lines, ``attempts``, ...)."""
+        FAILURE, ``failures``, ``plan`` and ``initial_plan`` as "name arg ..." lines, ``attempts``, ...);
+        ``memory``'s traces give the R_p / R_n plots their remembered band."""
         from bt_meta.runs.capture import top_view_png
 
         achieved, truth = judge_world(Path(task_path), task_file, problem, world)
@@ -384,6 +393,9 @@ class RunPage:
         self.run.update({"status": status, "kinds": sorted({str(f.get("kind")) for f in out.get("failures") or []}),
                          "seconds": out.get("run_seconds"), "report": report})
         self.pictures = run_pictures(self.capture, self.before_png, top_view_png(world))
+        pair = keypoint_pair(problem, world)
+        if pair is not None:
+            self.pictures["keypoints"] = keypoint_series(self.capture, memory, problem, pair, report)
         self.title = f"{self.command} {Path(task_path).name} {problem.name} ({world.variant})"
 
     @property
@@ -429,3 +441,98 @@ def shipped_family_file(task: Path, problem: str) -> Path | None:
                 and (path.parent / str(data["task"])).resolve() == task.resolve()):
             return path
     return None
+
+
+def keypoints_html(data: dict[str, Any] | None) -> str:
+    """R_p and R_n of the keypoint pair over the executed steps (:func:`keypoint_series`), against the remembered
+    traces' mean and min..max band, each plot with a line saying what it measures."""
+    if not data:
+        return ""
+    observed = data["observed"]
+    expected = data["expected"]
+    markers = []
+    for index, entry in enumerate(observed):
+        if entry["status"] != "SUCCESS":
+            markers.append((float(index), f"{entry['status'].lower()} step {entry['step']}"))
+    plots = []
+    for key, unit, name in (("r_p_mm", "mm", "R_p"), ("r_n_deg", "deg", "R_n")):
+        series = {f"{name} this run": [(float(i), e[key]) for i, e in enumerate(observed)]}
+        band: list[tuple[float, float, float]] = []
+        mean: list[tuple[float, float | None]] = []
+        for i, entry in enumerate(observed):
+            remembered = expected.get(str(entry["step"])) if entry.get("segment") == 1 else None
+            if remembered is None and entry.get("step") is not None:
+                remembered = expected.get(str(entry["step"]))
+            if remembered is None:
+                mean.append((float(i), None))
+                continue
+            mean.append((float(i), remembered[key]["mean"]))
+            band.append((float(i), remembered[key]["min"], remembered[key]["max"]))
+        label = f"{name} mean of {data['traces']} trace(s)"
+        series[label] = mean
+        plots.append(line_plot(series, title=f"{name} ({data['active']} vs {data['reference']})",
+                               x_label="executed step (in order, repairs included)", y_label=f"{name} ({unit})",
+                               bands={label: band}, markers=markers))
+    calls = ", ".join(f"{i}: {e['call']}" for i, e in enumerate(observed))
+    return ("<h4>Keypoint relations over the executed steps</h4><div class='row'>" + "".join(plots) +
+            f"</div><p class='small'>Executed steps: {esc(calls)}. The band is the min..max over the remembered traces "
+            "at the same plan step. R_p: the distance between the two parts' attachment points (0 when joined); R_n: "
+            "the angle between their attachment normals (180 deg when they face each other).</p>")
+
+
+def keypoint_series(capture: Any, memory: Any, problem: Any, pair: tuple[str, str],
+                     report: dict[str, Any]) -> dict[str, Any] | None:
+    """R_p (mm) and R_n (deg) of ``pair`` after each executed step of this run, and their means (with min/max) over
+    the remembered nominal traces at the same plan step (none without a ``memory``)."""
+    from bt_meta.errors import BtMetaError
+    from bt_meta.memory.recorder import root_task_name
+    from bt_meta.perception.keypoints import KeypointError, relation
+
+    active, reference = pair
+    observed: list[dict[str, Any]] = []
+    for index, step in enumerate(capture.steps):
+        objects = step.get("objects") or {}
+        if active not in objects or reference not in objects:
+            continue
+        try:
+            rel = relation(objects[active], objects[reference])
+        except KeypointError:
+            continue
+        observed.append({"index": index, "step": step.get("step"), "segment": step.get("segment"),
+                         "call": f"{step.get('action')}({', '.join(step.get('args') or ())})",
+                         "status": step.get("status"), "r_p_mm": rel.r_p * 1000.0, "r_n_deg": math.degrees(rel.r_n)})
+    expected: dict[int, dict[str, Any]] = {}
+    try:
+        traces = [] if memory is None else memory.last_traces(root_task_name(problem), 5)
+    except BtMetaError:
+        traces = []
+    for trace in traces:
+        for step in trace.steps:
+            names = {o.name for o in step.state.objects}
+            if active not in names or reference not in names:
+                continue
+            rel = relation(step.state.object(active), step.state.object(reference))
+            entry = expected.setdefault(step.index, {"r_p_mm": [], "r_n_deg": []})
+            entry["r_p_mm"].append(rel.r_p * 1000.0)
+            entry["r_n_deg"].append(math.degrees(rel.r_n))
+    if not observed and not expected:
+        return None
+    return {"active": active, "reference": reference, "observed": observed, "traces": len(traces),
+            "expected": {str(k): {name: {"mean": sum(v) / len(v), "min": min(v), "max": max(v)}
+                                  for name, v in entry.items()} for k, entry in sorted(expected.items())},
+            "failed_steps": [f.get("step") for f in (report.get("failures") or []) if f.get("step") is not None]}
+
+
+def keypoint_pair(problem: Any, world: Any) -> tuple[str, str] | None:
+    """The pair whose R_p / R_n a run's page plots: the first two arguments of the problem's first task, as world
+    objects (the pair the keypoint expectations watch by default); ``None`` when they are not two scene objects."""
+    tasks = list(getattr(problem, "tasks", None) or [])
+    if not tasks or len(tasks[0]) < 3:
+        return None
+    to_world = getattr(world, "object_name", lambda symbol: symbol)
+    try:
+        pair = (str(to_world(str(tasks[0][1]))), str(to_world(str(tasks[0][2]))))
+    except Exception:  # a symbol the world does not ground: no pair to plot
+        return None
+    present = {o.name for o in world.scene.objects}
+    return pair if pair[0] != pair[1] and set(pair) <= present else None

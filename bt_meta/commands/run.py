@@ -30,9 +30,9 @@ prints the attempts and repairs (JSON gains ``attempts``, ``repairs``, ``refinem
 ``refinements_used``, ``stop_reason``, ``reported``, ``initial_plan``).
 
 ``--report FILE.html`` writes the run's page (:mod:`bt_meta.runs.report`, the demo's): failures, repairs, the
-goal checked on the simulator's true state (:func:`bt_meta.judge.success.success_check`; a shipped task through its
-family file's ``success:``), top views, the trees as ticked; written after the result is printed and recorded, an
-unwritable path is exit 2 naming it.
+goal checked on the simulator's true state (:func:`bt_meta.judge.success.success_check`; a shipped task through
+its family file's ``success:``), top views, the trees as ticked, R_p / R_n of the first task's two arguments;
+written after the result is printed and recorded, an unwritable path is exit 2 naming it.
 
 Groot2: ``--groot2 [PORT]`` serves the running tree to Groot2 (with ``--repair``: each segment's tree as it
 runs), ``--hold`` keeps serving after the last tick, ``--btlog FILE`` logs it for replay (docs/groot2.md; not with

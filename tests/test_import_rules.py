@@ -1,4 +1,5 @@
-"""The layering of the judge: what decides a run's outcome and a variant's label shares no code with what is judged.
+"""The layering: what decides a run's outcome and a variant's label shares no code with what is judged, and the
+campaigns build on the shared run layer (bt_meta/runs/), never on the demo.
 
 Every module's imports (top level and inside functions) are read from its source with :mod:`ast`, so a lazy import
 counts as much as a top-level one.
@@ -18,12 +19,13 @@ ROOT = Path(bt_meta.__file__).parent
 #: package (folder under bt_meta/, or a module) -> imports it must not make
 RULES = {
     "judge": ("bt_meta.demo", "bt_meta.campaign", "bt_meta.meta", "bt_meta_plugins", "bt_meta.configurations"),
+    "campaign": ("bt_meta.demo",),
     "campaign/labeller.py": ("bt_meta.meta", "bt_meta_plugins", "bt_meta.configurations", "bt_meta.demo"),
     "campaign/families.py": ("bt_meta.meta", "bt_meta_plugins", "bt_meta.demo"),
     "campaign/generator.py": ("bt_meta.meta", "bt_meta_plugins", "bt_meta.demo"),
     "campaign/spec.py": ("bt_meta.meta", "bt_meta_plugins", "bt_meta.demo"),
-    "campaign/episode.py": ("bt_meta.demo",),
     "demo": ("bt_meta.campaign",),
+    "runs": ("bt_meta.demo", "bt_meta.campaign", "bt_meta.commands", "bt_meta.experiments"),
 }
 
 

@@ -4,7 +4,7 @@ Per expected outcome and configuration: rate of the expected outcome reached wit
 attempts and seconds (bootstrap intervals), loops; the confusion table of expected outcome against the failure
 kinds classified; false alarms on ``nominal_equivalent`` variants; second-exposure attempts; every episode that
 did not reach its expected outcome linked to its own run report: ``episodes/<episode>.html``, rendered from the
-episode's JSON by the demo's run-report code (:func:`bt_meta.demo.report.render_run_report`: the failure, its
+episode's JSON by the shared run-report code (:func:`bt_meta.runs.report.render_run_report`: the failure, its
 kinds, the attempts, what was tried and why each proposal failed), beside the JSON it came from.
 
 Offers:
@@ -51,7 +51,7 @@ def _episode_page(folder: Path, row: dict[str, Any], out: Path) -> str | None:
     """Render an episode's JSON run report as HTML beside it; its path relative to ``folder`` (None without one)."""
     import json
 
-    from bt_meta.demo.report import render_run_report
+    from bt_meta.runs.report import render_run_report
 
     if not row.get("run_report"):
         return None

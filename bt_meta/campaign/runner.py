@@ -62,10 +62,9 @@ def ensure_memory(folder: Path, manifest: dict[str, Any], *, echo: Callable[[str
     there; a demonstration that fails stops everything, naming it (:class:`DemonstrationError`)."""
     from bt_meta.campaign.families import family_of_manifest
     from bt_meta.campaign.manifest import manifest_robot
-    from bt_meta.demo.capture import Progress
-    from bt_meta.demo.runner import memory_environment, record_demonstration
-    from bt_meta.demo.scenario import Demonstration
     from bt_meta.memory import EpisodicMemory
+    from bt_meta.runs.capture import Progress
+    from bt_meta.runs.demonstrations import Demonstration, memory_environment, record_demonstration
 
     path = folder / MEMORY
     if path.is_file():

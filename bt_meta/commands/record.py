@@ -5,7 +5,7 @@ Offers:
 
 * :func:`register` -- adds ``record FILE [--problem P] [--variant V] [--seed S] [--memory PATH] [--json]
   [--max-ticks N] [--grounding FILE] [--robot R] [--scene FILE] [--check-expectations] [--plugins DIR]
-  [--no-entry-points]``
+  [--no-entry-points] [--report FILE.html]``
 * :func:`record` -- the handler
 * :func:`demonstrate` -- the same from Python: run and store one demonstration, return a :class:`Demonstration`
 * :class:`DemonstrationFailed` -- a demonstration that did not succeed (nothing stored; the CLI exits 1)
@@ -17,6 +17,8 @@ registered; at the end the trace is written in one transaction and its episode i
 demonstration teaches the expectations, so it is not checked against the memory's grid-map and keypoint
 expectations (``--check-expectations`` keeps them); preconditions and skills are checked as in any run. A
 demonstration that fails is refused: nothing is stored, the failure is printed and the exit status is 1.
+``--report FILE.html`` writes its page as ``bt-meta run --report`` does (:class:`~bt_meta.runs.report.RunPage`),
+also for a refused demonstration; an unwritable path is exit 2 once the stored episode is printed.
 ``--json`` prints ``{episode_id, memory, task, problem, variant, seed, outcome, steps: [{index, action, args,
 node_id, parent_task, parent_node, objects, grid_maps}], expectations, ticks, seconds, failures}``.
 """
@@ -24,6 +26,7 @@ node_id, parent_task, parent_node, objects, grid_maps}], expectations, ticks, se
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,6 +43,7 @@ from bt_meta.memory import add_memory_argument, resolve_memory_path
 #: Expectation plugins whose expectations come from the memory a demonstration is about to teach.
 MEMORY_EXPECTATIONS = ("gridmap_expectations", "keypoint_expectations")
 RECORDER_NAME = "bt_meta_demonstration_recorder"
+PAGE_NAME = "bt_meta_demonstration_page"
 
 
 class DemonstrationFailed(BtMetaError):
@@ -58,6 +62,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--check-expectations", action="store_true",
                         help="keep the memory's grid-map and keypoint expectations switched on while demonstrating")
     parser.add_argument("--json", action="store_true", help="print one JSON object with the stored episode")
+    parser.add_argument("--report", metavar="FILE.html",
+                        help="write the demonstration's HTML page (steps, failures, goal on the true state, trees)")
     add_world_arguments(parser)
     add_memory_argument(parser)
     add_plugin_arguments(parser)
@@ -88,11 +94,13 @@ def demonstrate(
     check_expectations: bool = False,
     robot: Any = None,
     scene: str | Path | None = None,
+    page: Any = None,
 ) -> Demonstration:
     """Run ``problem`` of task file ``file`` in the simulator as a demonstration and store it in ``memory`` (an open
     writable :class:`~bt_meta.memory.EpisodicMemory`). ``plugins``: a plugin host (default: built-ins, entry
     points and the project's plugins folder). Raises :class:`DemonstrationFailed` when the run does not succeed
-    (nothing is stored); input errors are the loaders' :class:`~bt_meta.errors.UserInputError` s."""
+    (nothing is stored); input errors are the loaders' :class:`~bt_meta.errors.UserInputError` s. ``page``: a
+    :class:`~bt_meta.runs.report.RunPage` that watches the run (its page is the caller's to write)."""
     from bt_meta.htn import load_task_file
     from bt_meta.plugins import create_plugin_host
     from bt_meta.world.simulation.sim_world import load_grounding
@@ -113,7 +121,7 @@ def demonstrate(
                 plugins.unregister(name)
     try:
         return _demonstrate(file, chosen, task_file, ground, memory, variant, seed, max_ticks, plugins,
-                            check_expectations, robot, scene)
+                            check_expectations, robot, scene, page)
     finally:  # the caller's host is as it was
         for name, plugin, source in removed:
             plugins.register(plugin, name, source=source)
@@ -121,7 +129,7 @@ def demonstrate(
 
 def _demonstrate(file: str | Path, chosen: Any, task_file: Any, ground: Any, memory: Any, variant: str | None,
                  seed: int, max_ticks: int, plugins: Any, check_expectations: bool,
-                 robot: Any = None, scene: str | Path | None = None) -> Demonstration:
+                 robot: Any = None, scene: str | Path | None = None, page: Any = None) -> Demonstration:
     from bt_meta.memory.recorder import TraceRecorder
     from bt_meta.testing import TreeHarness
     from bt_meta.world.simulation.sim_world import SimWorld, quiet_stdout
@@ -133,6 +141,9 @@ def _demonstrate(file: str | Path, chosen: Any, task_file: Any, ground: Any, mem
         recorder = TraceRecorder(memory, variant=world.variant, seed=seed,
                                  config={"demonstration": True, "scene": world.scene.name})
         plugins.register(recorder, RECORDER_NAME, source="bt-meta record")
+        if page is not None:
+            plugins.register(page.capture, PAGE_NAME, source="bt-meta record --report")
+            page.start(world)
         try:
             try:
                 harness = TreeHarness.from_file(file, chosen.name, world=world, plugins=plugins)
@@ -141,6 +152,10 @@ def _demonstrate(file: str | Path, chosen: Any, task_file: Any, ground: Any, mem
             if check_expectations:
                 harness.run.memory = memory
             recorder.tree = harness.compiled.plan_result.tree
+            if page is not None:  # one segment: the tree ticked here, with the statuses its step events report
+                from bt_meta.runs.capture import Segment
+
+                page.capture.segments.append(Segment(1, harness.root, 0))
             status = Status.RUNNING
             while status is Status.RUNNING and harness.run.tick_count < max_ticks:
                 status = harness.tick()
@@ -150,7 +165,15 @@ def _demonstrate(file: str | Path, chosen: Any, task_file: Any, ground: Any, mem
             harness.close()
         finally:
             plugins.unregister(RECORDER_NAME)
+            if page is not None:
+                plugins.unregister(PAGE_NAME)
         seconds = time.perf_counter() - started
+        if page is not None:
+            page.finish(file, task_file, chosen, world, {
+                "file": str(file), "problem": chosen.name, "scene": world.scene.name, "robot": world.sim.robot.name,
+                "variant": world.variant, "seed": seed, "status": status.value, "failures": failures, "ticks": ticks,
+                "plan": [" ".join((p.name, *p.args)) for p in harness.compiled.plan_result.plan],
+                "run_seconds": round(seconds, 3)}, memory)
         if recorder.error is not None:
             raise recorder.error
         if status is not Status.SUCCESS or recorder.episode_id is None:
@@ -174,12 +197,30 @@ def record(args: argparse.Namespace) -> int:
     load_grounding(task_file.domain.name, args.file, args.grounding).problem(problem.name)
     options = world_options(args)
     plugins = plugin_host_from_args(args, args.file)
+    page = None
+    if args.report:
+        from bt_meta.runs.report import RunPage
+
+        page = RunPage("bt-meta record")
     with EpisodicMemory.open(resolve_memory_path(args, writing=True)) as memory:
         memory.require_sound()
-        shown = demonstrate(args.file, args.problem, memory, variant=args.variant, seed=args.seed,
-                            max_ticks=args.max_ticks, grounding=args.grounding, plugins=plugins,
-                            check_expectations=args.check_expectations, **options)
-        return _report(args, memory, shown.trace, shown.ticks, shown.seconds, shown.recording_seconds)
+        try:
+            shown = demonstrate(args.file, args.problem, memory, variant=args.variant, seed=args.seed,
+                                max_ticks=args.max_ticks, grounding=args.grounding, plugins=plugins,
+                                check_expectations=args.check_expectations, page=page, **options)
+        except DemonstrationFailed:
+            if page is not None and page.run:  # the page of a refused demonstration is where to look first
+                try:
+                    print(f"report: {page.write(args.report)} ({page.verdict})", file=sys.stderr)
+                except UserInputError as error:
+                    print(f"bt-meta: {error}", file=sys.stderr)
+            raise
+        code = _report(args, memory, shown.trace, shown.ticks, shown.seconds, shown.recording_seconds)
+        if page is not None:  # after the stored episode is printed: a bad path loses none of it
+            written = page.write(args.report)
+            if not args.json:
+                print(f"report: {written} ({page.verdict})")
+        return code
 
 
 def _refusal(problem: str, variant: str, status: Status, ticks: int, failures: list[dict[str, Any]]) -> str:

@@ -5,7 +5,7 @@ Offers:
 * :func:`register` -- adds ``run FILE [--problem P] [--variant V] [--seed S] [--json] [--plugins DIR]
   [--max-ticks N] [--gui] [--grounding FILE] [--robot R] [--scene FILE] [--record-rrd FILE.rrd] [--memory PATH]
   [--record] [--record-failed] [--repair] [--max-attempts N] [--groot2 [PORT]] [--groot2-host ADDRESS] [--hold]
-  [--btlog FILE]``
+  [--btlog FILE] [--report FILE.html]``
 * :func:`run` -- the handler
 
 The problem is planned and compiled with a Monitor around every primitive, then ticked on a
@@ -28,6 +28,11 @@ the :class:`~bt_meta.meta.executor.MetaExecutor` with the plugin host, the memor
 failures are diagnosed and repaired (at most ``--max-attempts``), a successful repair is saved as a refinement; it
 prints the attempts and repairs (JSON gains ``attempts``, ``repairs``, ``refinement_saved``,
 ``refinements_used``, ``stop_reason``, ``reported``, ``initial_plan``).
+
+``--report FILE.html`` writes the run's page (:mod:`bt_meta.runs.report`, the demo's): failures, repairs, the
+goal checked on the simulator's true state (:func:`bt_meta.judge.success.success_check`; a shipped task through
+its family file's ``success:``), top views, the trees as ticked, R_p / R_n of the first task's two arguments;
+written after the result is printed and recorded, an unwritable path is exit 2 naming it.
 
 Groot2: ``--groot2 [PORT]`` serves the running tree to Groot2 (with ``--repair``: each segment's tree as it
 runs), ``--hold`` keeps serving after the last tick, ``--btlog FILE`` logs it for replay (docs/groot2.md; not with
@@ -78,6 +83,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="diagnose and repair failures with the meta-reasoner (memory, refinements, repairs)")
     parser.add_argument("--max-attempts", type=int, default=5,
                         help="with --repair: at most this many applied repairs (default 5)")
+    parser.add_argument("--report", metavar="FILE.html",
+                        help="write the run's HTML report: steps, failures, repairs, ground truth, top views, trees")
     parser.add_argument("--record-rrd", metavar="FILE.rrd",
                         help="record the episode for the Rerun viewer (needs the extra: pip install 'bt-meta[rerun]')")
     parser.add_argument("--record-mcap", metavar="FILE.mcap",
@@ -116,11 +123,24 @@ def run(args: argparse.Namespace) -> int:
             recorder = TraceRecorder(memory, record_failed=args.record_failed, seed=args.seed,
                                      config={"command": "bt-meta run" + (" --repair" if args.repair else "")})
             plugins.register(recorder, "recorder", source="bt-meta run --record")
+        page = capture = None
+        if args.report:
+            from bt_meta.runs.report import RunPage
+
+            page = RunPage("bt-meta run")
+            capture = page.capture
+            plugins.register(capture, "run_report_capture", source="bt-meta run --report")
         started = time.perf_counter()
         with quiet_stdout():
             world = make_world(task_file.domain, problem, grounding, variant=args.variant, seed=args.seed, gui=args.gui,
                              **options)
         built = time.perf_counter()
+        if page is not None:
+            try:
+                page.start(world)
+            except BaseException:
+                world.close()
+                raise
         rrd = None
         if args.record_rrd:
             from bt_meta.world.simulation.rerun_log import RerunRecorder
@@ -139,8 +159,16 @@ def run(args: argparse.Namespace) -> int:
             out["rrd"] = str(rrd.path)
         try:
             if args.repair:
-                return _run_repaired(args, task_file, problem, world, plugins, memory, recorder, out, started, built)
-            return _run_plain(args, problem, world, plugins, memory, recorder, out, started, built, rrd)
+                code = _run_repaired(args, task_file, problem, world, plugins, memory, recorder, out, started, built,
+                                     capture)
+            else:
+                code = _run_plain(args, problem, world, plugins, memory, recorder, out, started, built, rrd, capture)
+            if page is not None:  # after the result is printed and recorded: a bad path loses none of it
+                page.finish(args.file, task_file, problem, world, out, memory)
+                written = page.write(args.report)
+                if not args.json:
+                    print(f"report: {written} ({page.verdict})")
+            return code
         finally:
             if rrd is not None:
                 rrd.close()
@@ -182,7 +210,7 @@ def _memory(args: argparse.Namespace) -> Iterator[Any]:
 
 
 def _run_plain(args: argparse.Namespace, problem: Any, world: Any, plugins: Any, memory: Any, recorder: Any,
-               out: dict[str, Any], started: float, built: float, rrd: Any = None) -> int:
+               out: dict[str, Any], started: float, built: float, rrd: Any = None, capture: Any = None) -> int:
     from bt_meta.bt.failures import Failure, FailureKind
     from bt_meta.testing import TreeHarness
 
@@ -195,6 +223,10 @@ def _run_plain(args: argparse.Namespace, problem: Any, world: Any, plugins: Any,
         harness.run.memory = memory  # what the grid-map and keypoint expectation plugins read
     if recorder is not None:
         recorder.tree = harness.compiled.plan_result.tree
+    if capture is not None:  # one segment: the tree ticked here, with the statuses its step events report
+        from bt_meta.runs.capture import Segment
+
+        capture.segments.append(Segment(1, harness.root, 0))
     plan = [" ".join((p.name, *p.args)) for p in harness.compiled.plan_result.plan]
     if not args.json:
         print(f"{problem.name} in scene {world.scene.name} ({world.variant}), seed {args.seed}: "
@@ -231,14 +263,18 @@ def _run_plain(args: argparse.Namespace, problem: Any, world: Any, plugins: Any,
 
 
 def _run_repaired(args: argparse.Namespace, task_file: Any, problem: Any, world: Any, plugins: Any, memory: Any,
-                  recorder: Any, out: dict[str, Any], started: float, built: float) -> int:
+                  recorder: Any, out: dict[str, Any], started: float, built: float, capture: Any = None) -> int:
     from bt_meta.meta.executor import MetaExecutor
     from bt_meta.meta.reasoner import Limits
     from bt_meta.meta.refinements import RefinementStore
+    from bt_meta.runs.capture import CapturingExecutor
 
     groot2 = follow_groot2(args)
+    # --report: the executor that also snapshots each segment's tree and the reasoner's decisions
+    base: type[MetaExecutor] = MetaExecutor if capture is None else CapturingExecutor
+    extra: dict[str, Any] = {} if capture is None else {"capture": capture}
 
-    class Executor(MetaExecutor):
+    class Executor(base):  # type: ignore[valid-type,misc]
         """Hands the recorder every segment's decomposition tree (the parent tasks of repaired steps), and Groot2
         every segment's behaviour tree."""
 
@@ -255,8 +291,10 @@ def _run_repaired(args: argparse.Namespace, task_file: Any, problem: Any, world:
     with RefinementStore.open(memory.path) as refinements:
         report = Executor(task_file.domain, problem, world, plugins, task_file=task_file, variant=world.variant,
                           memory=memory, refinements=refinements, limits=Limits(max_attempts=args.max_attempts,
-                                                                 max_ticks=args.max_ticks)).run()
+                                                                 max_ticks=args.max_ticks), **extra).run()
     status = "SUCCESS" if report.ok else "FAILURE"
+    if capture is not None:
+        out["segments"] = report.to_dict().get("segments")
     out.update({
         "attempts": [a.to_dict() for a in report.attempts],
         "repairs": report.repairs,

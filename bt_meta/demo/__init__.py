@@ -11,18 +11,19 @@ Offers (each in its own module):
   (``scenario``)
 * :data:`CONFIGURATIONS`, :func:`plugin_host` -- which plugins a run has: dual, symbolic, low-level, retry
   (:mod:`bt_meta.configurations`)
-* :class:`Progress`, :class:`RunCapture`, :class:`CapturingExecutor` -- what the demo watches (``capture``)
-* :func:`tree_svg` -- the behaviour tree as an inline SVG picture (``svg``; plots: :mod:`bt_meta.plotting`)
+* :class:`Progress`, :class:`RunCapture`, :class:`CapturingExecutor` -- what the demo watches, and
+  :func:`tree_svg` -- the behaviour tree as an inline SVG picture: from :mod:`bt_meta.runs` (shared with the
+  campaigns and ``bt-meta run --report``; ``bt_meta.demo.capture`` and ``bt_meta.demo.svg`` still name them)
 """
 
 from __future__ import annotations
 
 from bt_meta.configurations import CONFIGURATIONS, plugin_host
-from bt_meta.demo.capture import CapturingExecutor, Progress, RunCapture
 from bt_meta.demo.report import write_report
 from bt_meta.demo.runner import DemoResult, record_demonstration, run_demo, run_variant
 from bt_meta.demo.scenario import Demonstration, VariantRun, demonstrations, variants
-from bt_meta.demo.svg import tree_svg
+from bt_meta.runs.capture import CapturingExecutor, Progress, RunCapture
+from bt_meta.runs.svg import tree_svg
 
 __all__ = [
     "CONFIGURATIONS",

@@ -9,90 +9,29 @@ Offers:
 
 * :func:`write_report` -- ``report.html`` of a :class:`~bt_meta.demo.runner.DemoResult`
 * :func:`render_report` -- the same as a string
-* :func:`render_run_report` -- one run's report page from its JSON (an executor report and what the caller knows
-  of the run: a campaign episode's variant, configuration, seed, expected outcome): the failures with their kinds
-  and evidence, each repair attempt, what was tried for what was not repaired and why each proposal failed
-* :func:`grid_svg` -- a grid-map (the ``render`` text of :mod:`bt_meta.perception.gridmap`) as coloured cells
+* :func:`render_run_report`, :func:`grid_svg` -- one run's page and a grid-map picture, from
+  :mod:`bt_meta.runs.report` (shared with the campaigns and ``bt-meta run --report``)
 """
 
 from __future__ import annotations
 
-import base64
-import html
-import json
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from bt_meta.demo.svg import TreeNode, tree_svg
-from bt_meta.plotting import line_plot
+from bt_meta.runs.report import CSS as _CSS
+from bt_meta.runs.report import dropped as _dropped
+from bt_meta.runs.report import esc as _e
+from bt_meta.runs.report import evidence_list as _evidence
+from bt_meta.runs.report import grid_svg, gridmaps_html, keypoints_html, render_run_report, trees_html
+from bt_meta.runs.report import img as _img
+from bt_meta.runs.report import plain as _plain
+from bt_meta.runs.report import short as _short
+from bt_meta.runs.report import status_pill as _status_pill
+from bt_meta.runs.report import truth_cell as _truth
 
 __all__ = ["grid_svg", "render_report", "render_run_report", "write_report"]
-
-_CELL_COLOURS = {".": "#ffffff", "b": "#1e63d6", "r": "#d62f2f", "g": "#2e9d44", "y": "#e8c619", "#": "#777777"}
-
-_CSS = """
-body{font-family:system-ui,sans-serif;margin:24px;max-width:1250px;color:#263238}
-h1{font-size:24px}h2{font-size:19px;border-bottom:2px solid #cfd8dc;padding-bottom:4px;margin-top:36px}
-h3{font-size:16px;margin:18px 0 6px}h4{font-size:14px;margin:12px 0 4px}
-table{border-collapse:collapse;font-size:13px;margin:6px 0;max-width:100%}td,th{border:1px solid #cfd8dc;
-padding:3px 7px;vertical-align:top;text-align:left}th{background:#eceff1}td{overflow-wrap:anywhere}
-table.fit{width:100%;table-layout:fixed}
-.success{background:#e8f5e9}.failed,.crashed,.no_plan{background:#ffebee}.reused{background:#f3e5f5}
-.pill{display:inline-block;border-radius:9px;padding:0 7px;font-size:12px;color:#fff;white-space:nowrap}
-.ok{background:#43a047}.bad{background:#e53935}.neutral{background:#78909c}
-.row{display:flex;flex-wrap:wrap;gap:18px;align-items:flex-start}.fig{font-size:12px;color:#546e7a}
-pre{background:#f5f5f5;padding:8px;font-size:12px;overflow-x:auto;max-height:420px}
-details{margin:6px 0}summary{cursor:pointer;font-weight:600}.small{font-size:12px;color:#607d8b}
-"""
-
-
-def _e(value: Any) -> str:
-    return html.escape(str(value), quote=True)
-
-
-def _img(png: bytes | None, alt: str, width: int = 320) -> str:
-    if not png:
-        return f'<div class="small">({_e(alt)}: no image)</div>'
-    data = base64.b64encode(png).decode("ascii")
-    return f'<img alt="{_e(alt)}" width="{width}" src="data:image/png;base64,{data}">'
-
-
-def grid_svg(grid: str | None, *, cell: int = 14, title: str = "") -> str:
-    """A grid-map drawn from its text rendering (``.`` empty, a colour's first letter otherwise)."""
-    if not grid:
-        return '<div class="small">(no map)</div>'
-    rows = grid.splitlines()
-    cols = max(len(r) for r in rows)
-    width = max(cols * cell + 2, int(len(title) * 6.2) + 4)
-    height = len(rows) * cell + 2 + (14 if title else 0)
-    top = 14 if title else 0
-    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" font-size="11" '
-           f'font-family="sans-serif">']
-    if title:
-        out.append(f'<text x="1" y="11">{_e(title)}</text>')
-    for r, row in enumerate(rows):
-        for c, char in enumerate(row):
-            colour = _CELL_COLOURS.get(char, "#777777")
-            out.append(f'<rect x="{1 + c * cell}" y="{top + 1 + r * cell}" width="{cell}" height="{cell}" '
-                       f'fill="{colour}" stroke="#b0bec5" stroke-width="0.5"/>')
-    out.append("</svg>")
-    return "".join(out)
-
-
-def _status_pill(status: str) -> str:
-    css = "ok" if status in ("success", "recorded", "reused") else "bad" if status in (
-        "failed", "crashed", "no_plan") else "neutral"
-    return f'<span class="pill {css}">{_e(status)}</span>'
-
-
-def _truth(run: dict[str, Any]) -> str:
-    if run.get("achieved") is None:
-        return f"<span class=small>{_e(run.get('truth') or 'unknown')}</span>"
-    pill = '<span class="pill ok">yes</span>' if run["achieved"] else '<span class="pill bad">no</span>'
-    return f"{pill} <span class=small>{_e(run.get('truth'))}</span>"
-
 
 # (header, width in % of the page): a fixed layout with these widths keeps the 13 columns inside the page; long
 # refinement names and stop reasons wrap inside their cells instead of pushing the table past the right edge.
@@ -128,30 +67,6 @@ def _demonstrations(summary: dict[str, Any]) -> str:
         f'<td>{d["seconds"]}</td><td>{_e(d["message"])}</td></tr>' for d in summary["demonstrations"])
     return ("<table><tr><th>task file</th><th>problem</th><th>seed</th><th>status</th><th>episode</th><th>steps</th>"
             f"<th>ticks</th><th>time (s)</th><th>note</th></tr>{rows}</table>")
-
-
-def _short(value: Any, limit: int = 600) -> str:
-    text = json.dumps(value, default=str) if not isinstance(value, str) else value
-    return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-def _evidence(evidence: dict[str, Any]) -> str:
-    items = []
-    for key, value in evidence.items():
-        if key == "mismatches":
-            for mismatch in value or []:
-                if isinstance(mismatch, dict):
-                    items.append(f"<li><b>mismatch</b> {_e(mismatch.get('kind') or mismatch.get('expectation', ''))}"
-                                 f": {_e(_short(mismatch.get('message', '')))}</li>")
-            continue
-        items.append(f"<li><b>{_e(key)}</b>: {_e(_short(value, 300))}</li>")
-    return f"<ul class='small'>{''.join(items)}</ul>" if items else ""
-
-
-def _dropped(items: str) -> str:
-    if not items:
-        return ""
-    return f"<details><summary class=small>dropped</summary><ul class=small>{items}</ul></details>"
 
 
 def _repair_log(outcome: Any) -> str:
@@ -196,80 +111,8 @@ def _repair_log(outcome: Any) -> str:
             f"{outcome.seconds:.2f} s.</p>")
 
 
-def _what(title: str, grid: dict[str, Any]) -> str:
-    return f"{title} ({grid.get('colour') or 'nothing'} {grid.get('shape') or ''})".replace(" )", ")")
-
-
-def _gridmaps(outcome: Any) -> str:
-    if not outcome.gridmaps:
-        return ""
-    cells = []
-    for entry in outcome.gridmaps:
-        expected, observed = entry.get("expected") or {}, entry.get("observed") or {}
-        cells.append(
-            f"<div><div class='fig'>step {_e(entry['step'])}, {_e(entry['object'])}: {entry['cells']} cells differ "
-            f"({_e(entry['kind'])})</div><div class='row'>"
-            f"{grid_svg(expected.get('grid'), title=_what('remembered', expected))}"
-            f"{grid_svg(observed.get('grid'), title=_what('at the failure', observed))}"
-            f"{grid_svg(entry.get('after'), title='end of the run')}</div></div>")
-    return "<h4>Grid-maps: remembered, observed at the failure, at the end of the run</h4><div class='row'>" + \
-        "".join(cells) + "</div>"
-
-
 def _keypoints(outcome: Any) -> str:
-    data = outcome.keypoints
-    if not data:
-        return ""
-    observed = data["observed"]
-    expected = data["expected"]
-    markers = []
-    for index, entry in enumerate(observed):
-        if entry["status"] != "SUCCESS":
-            markers.append((float(index), f"{entry['status'].lower()} step {entry['step']}"))
-    plots = []
-    for key, unit, name in (("r_p_mm", "mm", "R_p"), ("r_n_deg", "deg", "R_n")):
-        series = {f"{name} this run": [(float(i), e[key]) for i, e in enumerate(observed)]}
-        band: list[tuple[float, float, float]] = []
-        mean: list[tuple[float, float | None]] = []
-        for i, entry in enumerate(observed):
-            remembered = expected.get(str(entry["step"])) if entry.get("segment") == 1 else None
-            if remembered is None and entry.get("step") is not None:
-                remembered = expected.get(str(entry["step"]))
-            if remembered is None:
-                mean.append((float(i), None))
-                continue
-            mean.append((float(i), remembered[key]["mean"]))
-            band.append((float(i), remembered[key]["min"], remembered[key]["max"]))
-        label = f"{name} mean of {data['traces']} trace(s)"
-        series[label] = mean
-        plots.append(line_plot(series, title=f"{name} ({data['active']} vs {data['reference']})",
-                               x_label="executed step (in order, repairs included)", y_label=f"{name} ({unit})",
-                               bands={label: band}, markers=markers))
-    calls = ", ".join(f"{i}: {e['call']}" for i, e in enumerate(observed))
-    return ("<h4>Keypoint relations over the executed steps</h4><div class='row'>" + "".join(plots) +
-            f"</div><p class='small'>Executed steps: {_e(calls)}. The band is the min..max over the remembered traces "
-            "at the same plan step.</p>")
-
-
-def _trees(outcome: Any) -> str:
-    if not outcome.trees:
-        return ""
-    parts = []
-    for entry in outcome.trees:
-        if entry.get("tree") is None:
-            parts.append(f"<p class='small'>segment {entry['segment']}: no tree ({_e(entry.get('error'))})</p>")
-            continue
-        tree = TreeNode.from_dict(entry["tree"])
-        title = f"segment {entry['segment']} (from step {entry['cursor']})"
-        parts.append(f"<div>{tree_svg(tree, title=title)}</div>")
-    open_attr = " open" if len(parts) <= 2 else ""
-    return (f"<details{open_attr}><summary>Behaviour tree{'s' if len(parts) > 1 else ''} as ticked "
-            f"({len(parts)} segment(s))</summary><div class='row'>{''.join(parts)}</div></details>")
-
-
-def _plain(evidence: dict[str, Any]) -> dict[str, Any]:
-    """Evidence without the executor's bookkeeping (the whole plan, the repair history, the localisation)."""
-    return {k: v for k, v in evidence.items() if k not in ("plan", "repair_history", "localisation")}
+    return keypoints_html(outcome.keypoints)
 
 
 def _run_section(outcome: Any) -> str:
@@ -302,7 +145,8 @@ def _run_section(outcome: Any) -> str:
                         f"{_e(_short(r.get('message', ''), 300))}{_evidence(_plain(r.get('evidence') or {}))}</li>"
                         for r in outcome.report["reported"])
         reported = f"<h4>Reported (not repaired)</h4><ul>{items}</ul>"
-    return (head + images + _trees(outcome) + _gridmaps(outcome) + _keypoints(outcome) + "<h4>Repair log</h4>" +
+    return (head + images + trees_html(outcome.trees) + gridmaps_html(outcome.gridmaps) + _keypoints(outcome) +
+            "<h4>Repair log</h4>" +
             _repair_log(outcome) + reported + plans)
 
 
@@ -346,101 +190,6 @@ def render_report(result: Any) -> str:
             "<h2>Second pass: the same variants again</h2>", *(_run_section(o) for o in second),
             "<h2>Learned refinements</h2>", _refinements(summary)]
     return ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>bt-meta demo report</title>"
-            f"<style>{_CSS}</style></head><body>{''.join(body)}</body></html>\n")
-
-
-def _step(entry: dict[str, Any]) -> str:
-    args = ", ".join(str(a) for a in entry.get("args") or [])
-    return f"{entry.get('step')} {entry.get('action') or ''}({args})"
-
-
-def _failures(failures: list[dict[str, Any]]) -> str:
-    if not failures:
-        return "<p class='small'>No failure was classified.</p>"
-    rows = "".join(
-        f"<tr><td>{number}</td><td>{_e(_step(f))}</td><td><b>{_e(f.get('kind'))}</b><br><span class=small>by "
-        f"{_e((f.get('evidence') or {}).get('classified_by') or 'monitor')}</span></td>"
-        f"<td>{_e(_short(f.get('message', ''), 400))}{_evidence(_plain(f.get('evidence') or {}))}</td></tr>"
-        for number, f in enumerate(failures, 1))
-    return f"<table class='fit'><tr><th style='width:3%'>#</th><th style='width:17%'>step</th><th style='width:14%'>" \
-           f"kind</th><th>message and evidence</th></tr>{rows}</table>"
-
-
-def _attempts(attempts: list[dict[str, Any]]) -> str:
-    if not attempts:
-        return "<p class='small'>No repair was attempted.</p>"
-    rows = []
-    for attempt in attempts:
-        proposal = attempt.get("proposal") or {}
-        failure = attempt.get("failure") or {}
-        rows.append(
-            f"<tr><td>{_e(attempt.get('number'))}</td><td><b>{_e(attempt.get('kind'))}</b> at "
-            f"{_e(_step(failure))}</td><td><b>{_e(proposal.get('action'))}</b> "
-            f"{float(proposal.get('score') or 0.0):.2f} by {_e(proposal.get('plugin'))}: "
-            f"{_e(_short(proposal.get('description', ''), 200))}</td><td>{_e(attempt.get('change'))}</td>"
-            f"<td>{_status_pill(str(attempt.get('outcome')))}</td></tr>")
-    return ("<table><tr><th>#</th><th>failure</th><th>proposal applied</th><th>change</th><th>outcome</th></tr>"
-            + "".join(rows) + "</table>")
-
-
-def _tried(reported: list[dict[str, Any]]) -> str:
-    if not reported:
-        return ""
-    parts = ["<h2>Not repaired: what was tried</h2>"]
-    for entry in reported:
-        rows = "".join(
-            f"<tr><td>{_e(t.get('attempt') if t.get('attempt') is not None else '-')}</td><td><b>"
-            f"{_e(t.get('action'))}</b> by {_e(t.get('plugin'))}: {_e(_short(t.get('description', ''), 200))}</td>"
-            f"<td>{_status_pill(str(t.get('outcome')))}</td><td>{_e(_short(t.get('why', ''), 500))}</td></tr>"
-            for t in entry.get("tried") or [])
-        parts.append(f"<h3><b>{_e(entry.get('kind'))}</b> at step {_e(_step(entry))}</h3><p>"
-                     f"{_e(_short(entry.get('message', ''), 400))}</p>{_evidence(_plain(entry.get('evidence') or {}))}"
-                     + (f"<table class='fit'><tr><th style='width:5%'>attempt</th><th style='width:35%'>proposal</th>"
-                        f"<th style='width:10%'>outcome</th><th>why it failed</th></tr>{rows}</table>" if rows else
-                        "<p class='small'>Nothing was proposed.</p>"))
-    return "".join(parts)
-
-
-def render_run_report(run: dict[str, Any], *, title: str = "run report", back: str | None = None) -> str:
-    """A run's report page: ``run`` holds ``report`` (an executor report's dict) and what the caller knows of the
-    run (``variant``, ``configuration``, ``seed``, ``expected``, ``status``, ``kinds``, ``error``, ...)."""
-    report = run.get("report") or {}
-    known = [(key, run[key]) for key in ("family", "variant", "configuration", "seed", "sensing", "expected")
-             if run.get(key) is not None]
-    status = str(run.get("status") or report.get("status"))
-    facts = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in known)
-    facts += (f"<tr><th>status</th><td>{_status_pill(status)}</td></tr>"
-              f"<tr><th>failure kinds</th><td>{_e(', '.join(run.get('kinds') or []) or '-')}</td></tr>"
-              f"<tr><th>repair attempts</th><td>{len(report.get('attempts') or [])}</td></tr>"
-              f"<tr><th>stop reason</th><td>{_e(report.get('stop_reason') or run.get('stop_reason') or '-')}</td></tr>"
-              f"<tr><th>task done (simulator)</th><td>{_truth(report if 'achieved' in report else run)}</td></tr>"
-              f"<tr><th>time</th><td>{_e(run.get('seconds', report.get('seconds')))} s wall, "
-              f"{_e(report.get('simulated_seconds', run.get('simulated_seconds')))} s simulated, "
-              f"{_e(report.get('ticks'))} ticks, {_e(report.get('segments'))} segment(s)</td></tr>")
-    body = [f"<h1>{_e(title)}</h1>"]
-    if back:
-        body.append(f"<p class='small'><a href='{_e(back)}'>back to the campaign report</a></p>")
-    body.append(f"<table>{facts}</table>")
-    if run.get("error"):
-        body.append(f"<h2>Error</h2><pre>{_e(run['error'])}</pre>")
-    body += ["<h2>Failures classified</h2>", _failures(list(report.get("failures") or [])),
-             "<h2>Repair attempts</h2>", _attempts(list(report.get("attempts") or [])),
-             _tried(list(report.get("reported") or []))]
-    executed = report.get("executed") or []
-    if executed:
-        rows = "".join(f"<tr><td>{_e(e.get('segment'))}</td><td>{_e(_step(e))}</td>"
-                       f"<td>{_status_pill('success' if e.get('status') == 'SUCCESS' else 'failed')}</td></tr>"
-                       for e in executed)
-        body.append(f"<h2>Executed steps</h2><table><tr><th>segment</th><th>step</th><th>status</th></tr>{rows}"
-                    "</table>")
-    plans = "".join(f"<p class='small'>{name}: {_e(' ; '.join(' '.join(map(str, s)) for s in report[key]))}</p>"
-                    for key, name in (("initial_plan", "initial"), ("plan", "final")) if report.get(key))
-    if plans:
-        body.append(f"<details><summary>Plans</summary>{plans}</details>")
-    second = run.get("second_exposure")
-    if second:
-        body.append(f"<h2>Second exposure</h2><pre>{_e(json.dumps(second, indent=1, default=str))}</pre>")
-    return (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>{_e(title)}</title>"
             f"<style>{_CSS}</style></head><body>{''.join(body)}</body></html>\n")
 
 

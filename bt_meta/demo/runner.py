@@ -10,36 +10,38 @@ On the episodic memory ``DIR/memory.sqlite`` (created when absent, reused when p
    failures, repair proposals, applied repairs, verification; a repaired run is stored as a refinement;
 3. **run each variant again**: a learned refinement is used and the run needs zero repair attempts.
 
-Progress is printed one line per step, failure and repair (:class:`~bt_meta.demo.capture.Progress`); everything
+Progress is printed one line per step, failure and repair (:class:`~bt_meta.runs.capture.Progress`); everything
 the report needs is collected in :class:`DemoResult` (``summary()`` is ``DIR/summary.json``).
 
 Offers:
 
 * :func:`run_demo` -- the whole scenario; returns a :class:`DemoResult`
-* :func:`record_demonstration` -- one demonstration into a memory
 * :func:`run_variant` -- one monitored, repaired variant run (used by the ablation experiment too)
-* :class:`DemoResult`, :class:`RecordOutcome`, :class:`VariantOutcome`
-* :func:`memory_environment` -- ``BT_META_MEMORY`` pointed at the demo's memory while it runs
+* :class:`DemoResult`, :class:`VariantOutcome`
+* :func:`record_demonstration`, :class:`RecordOutcome`, :func:`memory_environment` -- from
+  :mod:`bt_meta.runs.demonstrations` (the campaigns record the same way), importable from here too
 """
 
 from __future__ import annotations
 
-import contextlib
 import json
-import math
-import os
 import time
 import traceback
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from bt_meta.configurations import CONFIGURATIONS, available_repairs, plugin_host
-from bt_meta.demo.capture import CapturingExecutor, Progress, RunCapture, top_view_png
-from bt_meta.demo.scenario import FAMILIES, Demonstration, VariantRun, demonstrations, variants
+from bt_meta.demo.scenario import FAMILIES, VariantRun, demonstrations, variants
 from bt_meta.errors import BtMetaError
-from bt_meta.judge.noise import jitter
+from bt_meta.runs.capture import CapturingExecutor, Progress, RunCapture, top_view_png
+from bt_meta.runs.demonstrations import (
+    RecordOutcome,
+    memory_environment,
+    record_demonstration,
+    sim_world,
+)
+from bt_meta.runs.report import gridmap_pictures, keypoint_series, tree_pictures
 
 __all__ = ["DemoResult", "RecordOutcome", "VariantOutcome", "memory_environment", "record_demonstration",
            "run_demo", "run_variant"]
@@ -48,40 +50,6 @@ MEMORY_FILE = "memory.sqlite"
 
 #: The plugin configuration the demo runs (``bt-meta experiment ablation`` compares it with the others).
 DEMO_CONFIGURATION = "dual"
-
-
-@contextlib.contextmanager
-def memory_environment(path: Path) -> Iterator[None]:
-    """Point ``BT_META_MEMORY`` at ``path`` (plugins that find the memory themselves read it), then restore it."""
-    from bt_meta.memory import ENV_VAR
-
-    saved = os.environ.get(ENV_VAR)
-    os.environ[ENV_VAR] = str(path)
-    try:
-        yield
-    finally:
-        if saved is None:
-            os.environ.pop(ENV_VAR, None)
-        else:
-            os.environ[ENV_VAR] = saved
-
-
-@dataclass
-class RecordOutcome:
-    demonstration: Demonstration
-    status: str
-    """``recorded``, ``reused`` (the memory had it) or ``failed``."""
-    episode_id: int | None = None
-    steps: int = 0
-    ticks: int = 0
-    seconds: float = 0.0
-    message: str = ""
-
-    def to_dict(self) -> dict[str, Any]:
-        d = self.demonstration
-        return {"task_file": d.task_file, "problem": d.problem, "seed": d.seed, "status": self.status,
-                "episode_id": self.episode_id, "steps": self.steps, "ticks": self.ticks,
-                "seconds": round(self.seconds, 3), "message": self.message}
 
 
 @dataclass
@@ -202,87 +170,6 @@ class DemoResult:
         }
 
 
-# -- recording ------------------------------------------------------------------------------------------------------
-
-
-def _world(task_path: Path, problem: str, variant: str | None, seed: int, robot: Any = None
-           ) -> tuple[Any, Any, Any]:
-    from bt_meta.htn import load_task_file
-    from bt_meta.world.simulation.sim_world import SimWorld, load_grounding, quiet_stdout
-
-    task_file = load_task_file(task_path)
-    chosen = task_file.problem(problem)
-    with quiet_stdout():
-        world = SimWorld(task_file.domain, chosen, load_grounding(task_file.domain.name, task_path),
-                         variant=variant, seed=seed, robot=robot)
-    try:
-        jitter(world, seed)
-    except BaseException:
-        world.close()
-        raise
-    return task_file, chosen, world
-
-
-def _already_recorded(memory: Any, demo: Demonstration, task: str) -> int | None:
-    for summary in memory.episodes(task=task, outcome="success"):
-        episode = summary.episode
-        if episode.problem == demo.problem and episode.seed == demo.seed and (episode.variant in (None, "nominal")):
-            return episode.id
-    return None
-
-
-def record_demonstration(demo: Demonstration, memory: Any, progress: Progress, *, max_ticks: int = 6000,
-                         robot: Any = None) -> RecordOutcome:
-    """Run ``demo``'s nominal problem tick by tick (monitored, no repairs) with the trace recorder; a success is
-    written to ``memory`` as one trace."""
-    from py_trees.common import Status
-
-    from bt_meta.memory.recorder import TraceRecorder, root_task_name
-    from bt_meta.plugins import create_plugin_host
-    from bt_meta.resources import trees_dir
-    from bt_meta.testing import TreeHarness
-
-    started = time.perf_counter()
-    task_path = trees_dir() / demo.task_file
-    _, problem, world = _world(task_path, demo.problem, None, demo.seed, robot)
-    try:
-        existing = _already_recorded(memory, demo, root_task_name(problem))
-        if existing is not None:
-            return RecordOutcome(demo, "reused", existing, message=f"episode {existing} is already in memory")
-        recorder = TraceRecorder(memory, seed=demo.seed, variant="nominal", task_file=str(task_path))
-        capture = RunCapture(progress, world, label=f"record {demo.label}", echo=False)
-        # The instructor's run: perception observes, the recorder writes; no expectation compares against a memory
-        # still being filled, so every demonstration stands on its own.
-        host = create_plugin_host(project_file=task_path, entry_points=False,
-                                  plugins=[*_perception_plugins(), ("trace_recorder", recorder),
-                                           ("demo_capture", capture)])
-        harness = TreeHarness.from_file(task_path, demo.problem, world=world, plugins=host)
-        status = Status.RUNNING
-        while status is Status.RUNNING and harness.run.tick_count < max_ticks:
-            status = harness.tick()
-        harness.run.finish(status)
-        harness.close()
-        progress.done()
-        if recorder.error is not None:
-            return RecordOutcome(demo, "failed", None, len(capture.steps), capture.ticks,
-                                 time.perf_counter() - started, f"not stored: {recorder.error}")
-        if status is not Status.SUCCESS or recorder.episode_id is None:
-            failures = "; ".join(f.summary() for f in harness.run.failures) or recorder.skipped or status.value
-            return RecordOutcome(demo, "failed", None, len(capture.steps), capture.ticks,
-                                 time.perf_counter() - started, f"{status.value}: {failures}")
-        return RecordOutcome(demo, "recorded", recorder.episode_id, len(capture.steps), capture.ticks,
-                             time.perf_counter() - started)
-    finally:
-        world.close()
-
-
-def _perception_plugins() -> list[tuple[str, Any]]:
-    import bt_meta_plugins.camera_perception as camera
-    import bt_meta_plugins.ground_truth_perception as truth
-
-    return [("ground_truth_perception", truth), ("camera_perception", camera)]
-
-
 # -- variant runs ---------------------------------------------------------------------------------------------------
 
 
@@ -307,7 +194,7 @@ def run_variant(
     outcome = VariantOutcome(run, pass_number)
     started = time.perf_counter()
     task_path = trees_dir() / run.task_file
-    task_file, problem, world = _world(task_path, run.problem, run.variant, run.seed, robot)
+    task_file, problem, world = sim_world(task_path, run.problem, run.variant, run.seed, robot)
     try:
         capture = RunCapture(progress, world, label=run.label, echo=not progress.quiet)
         outcome.capture = capture
@@ -329,11 +216,11 @@ def run_variant(
         outcome.achieved, outcome.truth = judge.evaluate(world)
         if pictures:
             outcome.after_png, after_view = top_view_png(world)
-            outcome.gridmaps = _gridmap_pictures(capture, after_view)
-            outcome.trees = _tree_pictures(capture)
+            outcome.gridmaps = gridmap_pictures(capture, after_view)
+            outcome.trees = tree_pictures(capture)
             pair = FAMILIES[run.family].keypoint_pair
             if pair is not None:
-                outcome.keypoints = _keypoint_series(capture, memory, problem, pair, report.to_dict())
+                outcome.keypoints = keypoint_series(capture, memory, problem, pair, report.to_dict())
     except BtMetaError as error:
         outcome.error = f"{type(error).__name__}: {error}"
     except Exception as error:  # a crash of one run is reported in the summary, the demo goes on
@@ -342,93 +229,6 @@ def run_variant(
         world.close()
         outcome.seconds = time.perf_counter() - started
     return outcome
-
-
-def _tree_pictures(capture: RunCapture) -> list[dict[str, Any]]:
-    from bt_meta.demo.svg import tree_from_behaviour
-
-    out = []
-    for segment in capture.segments:
-        if segment.tree is None or isinstance(segment.tree, Exception):
-            out.append({"segment": segment.number, "cursor": segment.cursor, "tree": None,
-                        "error": None if segment.tree is None else str(segment.tree)})
-            continue
-        tree = tree_from_behaviour(segment.tree, segment.statuses, segment.guards)
-        out.append({"segment": segment.number, "cursor": segment.cursor, "tree": tree.to_dict()})
-    return out
-
-
-def _gridmap_pictures(capture: RunCapture, after_view: Any) -> list[dict[str, Any]]:
-    """For each grid-map mismatch: the remembered map, the map observed at the failure and, at the end of the run,
-    the map at the same place (after the repair, when there was one)."""
-    from bt_meta.perception.gridmap import render
-
-    out = []
-    seen: set[tuple[Any, Any]] = set()
-    for failure in capture.failures:
-        for mismatch in (failure.get("evidence") or {}).get("mismatches") or []:
-            evidence = mismatch.get("evidence") if isinstance(mismatch, dict) else None
-            maps = (evidence or {}).get("maps") or []
-            for entry in maps:
-                key = (failure.get("step"), entry.get("object"))
-                if key in seen or not entry.get("cells"):
-                    continue
-                seen.add(key)
-                centroid = entry.get("expected", {}).get("centroid")
-                after = None
-                if after_view is not None and centroid is not None:
-                    block = after_view.block_near(centroid, 0.25 * 0.061)
-                    if block is not None and block.shape != "unknown":
-                        after = render(after_view.grid_map_at(block.centroid, z=block.top_z))
-                    else:
-                        after = render(after_view.grid_map_at(centroid))
-                out.append({"step": failure.get("step"), "object": entry.get("object"), "cells": entry.get("cells"),
-                            "kind": failure.get("kind"), "segment": failure.get("segment"),
-                            "expected": entry.get("expected"), "observed": entry.get("observed"), "after": after})
-    return out
-
-
-def _keypoint_series(capture: RunCapture, memory: Any, problem: Any, pair: tuple[str, str],
-                     report: dict[str, Any]) -> dict[str, Any] | None:
-    """R_p (mm) and R_n (deg) of ``pair`` after each executed step of this run, and their means (with min/max) over
-    the remembered nominal traces at the same plan step."""
-
-    from bt_meta.memory.recorder import root_task_name
-    from bt_meta.perception.keypoints import KeypointError, relation
-
-    active, reference = pair
-    observed: list[dict[str, Any]] = []
-    for index, step in enumerate(capture.steps):
-        objects = step.get("objects") or {}
-        if active not in objects or reference not in objects:
-            continue
-        try:
-            rel = relation(objects[active], objects[reference])
-        except KeypointError:
-            continue
-        observed.append({"index": index, "step": step.get("step"), "segment": step.get("segment"),
-                         "call": f"{step.get('action')}({', '.join(step.get('args') or ())})",
-                         "status": step.get("status"), "r_p_mm": rel.r_p * 1000.0, "r_n_deg": math.degrees(rel.r_n)})
-    expected: dict[int, dict[str, Any]] = {}
-    try:
-        traces = memory.last_traces(root_task_name(problem), 5)
-    except BtMetaError:
-        traces = []
-    for trace in traces:
-        for step in trace.steps:
-            names = {o.name for o in step.state.objects}
-            if active not in names or reference not in names:
-                continue
-            rel = relation(step.state.object(active), step.state.object(reference))
-            entry = expected.setdefault(step.index, {"r_p_mm": [], "r_n_deg": []})
-            entry["r_p_mm"].append(rel.r_p * 1000.0)
-            entry["r_n_deg"].append(math.degrees(rel.r_n))
-    if not observed and not expected:
-        return None
-    return {"active": active, "reference": reference, "observed": observed, "traces": len(traces),
-            "expected": {str(k): {name: {"mean": sum(v) / len(v), "min": min(v), "max": max(v)}
-                                  for name, v in entry.items()} for k, entry in sorted(expected.items())},
-            "failed_steps": [f.get("step") for f in (report.get("failures") or []) if f.get("step") is not None]}
 
 
 # -- the scenario ---------------------------------------------------------------------------------------------------

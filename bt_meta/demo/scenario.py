@@ -2,7 +2,7 @@
 
 Offers:
 
-* :class:`Demonstration` -- a nominal problem recorded as the instructor's trace (task file, problem, seed)
+* :class:`Demonstration` -- a nominal problem recorded as the instructor's trace (from :mod:`bt_meta.runs`)
 * :class:`VariantRun` -- a variant scene of a problem run with monitors and the meta-reasoner
 * :data:`FAMILIES` -- the variant families (letters, magnetic attach, housing) with their keypoint pair
 * :func:`demonstrations` / :func:`variants` -- the lists for a seed, full or ``quick``
@@ -12,6 +12,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Any
+
+from bt_meta.runs.demonstrations import Demonstration
 
 __all__ = ["FAMILIES", "Demonstration", "VariantRun", "demonstrations", "variants"]
 
@@ -41,18 +43,6 @@ FAMILIES = {
     "housing": Family("housing", "Housing insertion (section 2): upside-down housing", "housing_insertion.yaml",
                       "nominal", ("housing", "board"), "housing"),
 }
-
-
-@dataclass(frozen=True)
-class Demonstration:
-    family: str
-    task_file: str
-    problem: str
-    seed: int
-
-    @property
-    def label(self) -> str:
-        return f"{self.task_file.removesuffix('.yaml')} {self.problem} (seed {self.seed})"
 
 
 @dataclass(frozen=True)

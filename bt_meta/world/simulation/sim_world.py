@@ -243,6 +243,13 @@ def load_grounding(domain: str, task_file: str | Path | None = None, path: str |
             robot = str(path.parent / robot)
     for key in ("problems", "frames", "poses", "features"):
         _mapping_of_mappings(data, key, path)
+    for symbol, spec in (data.get("poses") or {}).items():
+        numbers = spec.get("pose")
+        if numbers is not None and (not isinstance(numbers, list) or len(numbers) not in (3, 6)
+                                    or not all(isinstance(v, (int, float)) for v in numbers)):
+            line, column = _position_in(path, ("poses", str(symbol), "pose"))
+            raise ConfigError(f"pose {symbol!r}: give [x, y, z] (pointing down as the robot grasps) or "
+                              f"[x, y, z, roll, pitch, yaw] (metres, degrees), not {numbers!r}", path, line, column)
     objects = {str(k): str(v) for k, v in _mapping_of_scalars(data, "objects", path).items()}
     return Grounding(path, str(data.get("domain", domain)), dict(data["problems"]), dict(data["skills"]),
                      dict(data.get("frames") or {}), dict(data.get("poses") or {}),
@@ -745,6 +752,8 @@ class SimWorld:
         Kinds of entries (``rpy`` in degrees, default pointing down with the arm's ``top_down_yaw``):
 
         * ``pose: [x, y, z, roll, pitch, yaw]`` -- absolute (an instructor's pose; metres, degrees);
+        * ``pose: [x, y, z]`` -- absolute, pointing down with the arm's ``top_down_yaw`` (where the hand's turn
+          does not matter: another robot's yaw would turn the wrist half round with the part held);
         * ``above: OBJECT, height: h`` -- top-down over the object's grasp point (its catalogue grasp frame, else
           its centroid), ``h`` above the top of it and of whatever rests on it (grasp poses: a few millimetres;
           ``touch: true`` marks a grasp pose: a friction grasp goes as deep as :meth:`grasp_height` says);
@@ -769,10 +778,15 @@ class SimWorld:
         out[:3, :3] = rpy_to_matrix(*(math.radians(float(v)) for v in down))
         height = float(spec.get("height", 0.0))
         if "pose" in spec:
-            x, y, z, roll, pitch, yaw = (float(v) for v in spec["pose"])
+            values = [float(v) for v in spec["pose"]]  # 3 or 6 numbers (load_grounding checks)
+            x, y, z = values[:3]
             if spec.get("frame") != "base":  # the grounding file's poses are in the scene frame
                 dx, dy, dz = self.sim.robot.scene_offset
                 x, y, z = x + dx, y + dy, z + dz
+            if len(values) == 3:  # the hand's turn is the robot's: no half turn of the wrist for another's yaw
+                out[:3, 3] = (x, y, z)
+                return out
+            roll, pitch, yaw = values[3:]
             return pose_to_matrix((x, y, z, math.radians(roll), math.radians(pitch), math.radians(yaw)))
         if "relative_to" in spec:
             frame = self.sim.object_transform(self.object_name(str(spec["relative_to"])))

@@ -21,6 +21,11 @@ BASE = "domain: letters\nproblems:\n  A: {scene: letters_A}\nskills:\n  place: {
     ("robot_pose: [1, 2]\n", "robot_pose is a mapping: joint -> value, or robot name -> {joint: value}"),
     ("objects: {a: {b: c}}\n", "'objects' must be a mapping of name -> value"),
     ("frames: {x: !!int nope}\n", "YAML tag error: cannot read the !!int value 'nope': ValueError"),
+    ("poses:\n  lift: {pose: [0.5, 0.1]}\n", "pose 'lift': give [x, y, z] (pointing down as the robot grasps) or "
+                                          "[x, y, z, roll, pitch, yaw] (metres, degrees), not [0.5, 0.1]"),
+    ("poses:\n  lift: {pose: [0.5, 0.1, up]}\n",
+     "pose 'lift': give [x, y, z] (pointing down as the robot grasps) or [x, y, z, roll, pitch, yaw] (metres, "
+     "degrees), not [0.5, 0.1, 'up']"),
 ])
 def test_wrong_shapes(tmp_path, extra, message):
     path = tmp_path / "g.yaml"
@@ -36,3 +41,11 @@ def test_the_shipped_shape_loads(tmp_path):
     path.write_text(BASE + "robot_pose: {left_s0: 0.8}\nobjects: {b0: block_0}\n")
     grounding = load_grounding("letters", path=path)
     assert grounding.robot_pose == {"*": {"left_s0": 0.8}} and grounding.objects == {"b0": "block_0"}
+
+
+def test_a_wrong_pose_names_its_line(tmp_path):
+    path = tmp_path / "g.yaml"
+    path.write_text(BASE + "poses:\n  home: {pose: [0.5, 0.1, 0.2]}\n  lift: {pose: [0.5, 0.1, 0.2, 180]}\n")
+    with pytest.raises(ConfigError) as caught:
+        load_grounding("letters", path=path)
+    assert (caught.value.line, caught.value.column) == (8, 16)

@@ -59,3 +59,20 @@ def test_a_moved_reference_part_is_followed(capsys, moved_scene, robot):
         # magnet over magnet (the attach rule joined them within 1 cm; lifted to staging they hang that close)
         assert np.linalg.norm(np.array(active["ap"][:2]) - np.array(reference["ap"][:2])) < 0.005
         assert math.degrees(math.acos(max(-1.0, min(1.0, float(np.dot(active["an"], reference["an"])))))) > 165
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("robot", ["baxter", "panda", "ur5"])
+def test_the_staging_pose_points_down_as_the_robot_grasps(robot):
+    """A position-only instructor pose leaves the hand's turn to the robot: an absolute yaw written for the Baxter
+    turned the Panda's wrist half round with the subassembly hanging in its fingers, which slipped out."""
+    from bt_meta.world.simulation.sim_world import SimWorld
+
+    world = SimWorld.from_task_file(MAGNETIC, "nominal", robot=robot)
+    try:
+        staging = world.ground_pose("staging")
+        assert staging[:3, :3] == pytest.approx(world.top_down_rotation(), abs=1e-9)
+        offset = np.asarray(world.sim.robot.scene_offset)
+        assert staging[:3, 3] == pytest.approx(np.array([0.58, -0.30, 0.05]) + offset, abs=1e-9)  # scene frame
+    finally:
+        world.close()

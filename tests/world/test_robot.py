@@ -254,3 +254,13 @@ def test_a_urdf_that_does_not_load_on_the_command_line_is_exit_2(tmp_path, capsy
     column = lines[start - 1].index("<joint") + 1
     assert code == 2 and f"{share / 'baxter.urdf'}:{start}:{column}: joint 'right_endpoint': its child link " \
         "'right_griper' is not in the URDF" in err
+
+
+def test_turn_about_fingers_is_a_located_flag(tmp_path):
+    old = "      opening: 0.0462                  # measured"
+    path = write_variant(tmp_path, old, "      turn_about_fingers: sometimes\n" + old)
+    with pytest.raises(ConfigError, match=r"arms\.right\.gripper\.turn_about_fingers must be true or false") as caught:
+        load_robot(path)
+    assert (caught.value.line, caught.value.column) == position_of(path, "sometimes")
+    assert load_robot("panda").arm("arm").gripper.turn_about_fingers
+    assert not load_robot("baxter").arm("right").gripper.turn_about_fingers

@@ -72,6 +72,10 @@ class GripperDescription:
     closing_axis: tuple[float, float, float] | None = None
     """Unit vector, in the end-effector frame, across the fingers (the first finger's opening direction): given for
     a gripper whose fingers do not move (no ``joints``), else read from the first finger joint's axis."""
+    turn_about_fingers: bool = False
+    """A part being re-oriented is turned about the fingers' closing axis (a part on its side grasped across the
+    axis it turns about; an upside-down one flipped about the fingers): a hand long across its fingers (the
+    Panda's) stays level instead of reaching down into the table."""
 
 
 @dataclass(frozen=True)
@@ -616,7 +620,7 @@ class _RobotFile(YamlNodeReader):
     def gripper(self, what: str, node: yaml.Node, urdf: UrdfSummary) -> GripperDescription:
         entries = self.mapping(node, what)
         self.check_keys(entries, {"joints", "open", "closed", "opening", "grasp", "force", "depth", "fingertip",
-                                  "closing_axis"}, what)
+                                  "closing_axis", "turn_about_fingers"}, what)
         joints_node = self.require(entries, "joints", node, what)
         joints = tuple(self.joint(n, f"{what}.joints", urdf) for n in self.sequence(joints_node, f"{what}.joints"))
         values = {}
@@ -650,6 +654,11 @@ class _RobotFile(YamlNodeReader):
         elif not joints:
             raise self.error(f"{what}: a gripper without finger joints needs closing_axis (in the end-effector "
                              "frame)", node)
+        if "turn_about_fingers" in entries:
+            flag = self.scalar(entries["turn_about_fingers"][1], f"{what}.turn_about_fingers")
+            if not isinstance(flag, bool):
+                raise self.error(f"{what}.turn_about_fingers must be true or false", entries["turn_about_fingers"][1])
+            options["turn_about_fingers"] = flag
         if not joints and grasp == "friction":
             raise self.error(f"{what}.grasp: a friction grasp needs finger joints", entries["grasp"][1])
         return GripperDescription(joints, values["open"], values["closed"], opening, grasp, **options)

@@ -284,11 +284,12 @@ class HandCamera(Camera):
     def __init__(
         self,
         sim: Simulation,
-        arm: str = "right",
+        arm: str | None = None,
         *,
         intrinsics: Intrinsics | None = None,
         hide_robot: bool = False,
     ) -> None:
+        arm = arm or sim.robot.default_arm
         link = sim.robot.arm(arm).camera
         if link is None:
             raise SimulationError(f"arm {arm!r} has no camera in the robot description")

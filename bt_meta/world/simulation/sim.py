@@ -570,8 +570,9 @@ class Simulation:
     def link_pose(self, link: str) -> Pose6:
         return matrix_to_pose(self.link_transform(link))
 
-    def gripper_pose(self, arm: str = "right") -> Pose6:
+    def gripper_pose(self, arm: str | None = None) -> Pose6:
         """Pose of the arm's end-effector frame (between the fingertips, z = approach)."""
+        arm = arm or self.robot.default_arm
         return self.link_pose(self.robot.arm(arm).end_effector)
 
     def step(self, n: int = 1) -> None:
@@ -840,7 +841,7 @@ class Simulation:
 
     # -- grasp -----------------------------------------------------------------------------------------------
 
-    def grasp(self, name: str, arm: str = "right", *, max_distance: float = 0.03) -> bool:
+    def grasp(self, name: str, arm: str | None = None, *, max_distance: float = 0.03) -> bool:
         """Hold ``name`` in the arm's gripper: by friction when the gripper's description says ``grasp: friction``
         and the part fits between its fingers (:meth:`fits`), else by a fixed constraint at the current relative
         pose.
@@ -855,6 +856,7 @@ class Simulation:
         when the gripper frame is farther than ``max_distance`` from the object's surface, the arm already holds
         something, or the fingers closed without holding it -- a physical failure the skill reports.
         """
+        arm = arm or self.robot.default_arm
         body = self._body(name)
         if arm in self._grasps:
             return False
@@ -876,13 +878,15 @@ class Simulation:
         self._grasps[arm] = _Grasp(arm, name, cid, relative=rel)
         return True
 
-    def grasps_by_friction(self, name: str, arm: str = "right") -> bool:
+    def grasps_by_friction(self, name: str, arm: str | None = None) -> bool:
         """Whether a grasp of ``name`` by ``arm`` would be by the fingers' friction (the gripper is described
         ``grasp: friction`` and the part, as it is turned now, fits between the open fingers)."""
+        arm = arm or self.robot.default_arm
         return arm in self._finger_links and self.fits(name, arm)
 
-    def closing_axis(self, arm: str = "right") -> np.ndarray:
+    def closing_axis(self, arm: str | None = None) -> np.ndarray:
         """Unit vector (base frame) along which the arm's first finger moves when the gripper opens."""
+        arm = arm or self.robot.default_arm
         gripper = self.robot.arm(arm).gripper
         if gripper is None:
             raise SimulationError(f"arm {arm!r} has no gripper")
@@ -896,15 +900,17 @@ class Simulation:
         world = _transform(state[4], state[5])[:3, :3] @ axis
         return world / max(float(np.linalg.norm(world)), 1e-12)
 
-    def width_across(self, name: str, arm: str = "right") -> float:
+    def width_across(self, name: str, arm: str | None = None) -> float:
         """The part's extent (m) along the arm's finger closing axis, as it is turned now."""
+        arm = arm or self.robot.default_arm
         t = self.object_transform(name)
         points = self._body(name).model.points() @ t[:3, :3].T
         along = points @ self.closing_axis(arm)
         return float(along.max() - along.min())
 
-    def fits(self, name: str, arm: str = "right") -> bool:
+    def fits(self, name: str, arm: str | None = None) -> bool:
         """Whether the part fits between the arm's open fingers."""
+        arm = arm or self.robot.default_arm
         gripper = self.robot.arm(arm).gripper
         return gripper is not None and self.width_across(name, arm) <= gripper.opening - 2.0 * _FIT_MARGIN
 
@@ -922,8 +928,9 @@ class Simulation:
         values = [c + fraction * (o - c) for o, c in zip(gripper.open, gripper.closed, strict=True)]
         self.set_joint_targets(dict(zip(gripper.joints, values, strict=True)))
 
-    def touching_fingers(self, name: str, arm: str = "right") -> int:
+    def touching_fingers(self, name: str, arm: str | None = None) -> int:
         """How many of the arm's fingers touch ``name`` (friction grippers; 0 for others)."""
+        arm = arm or self.robot.default_arm
         body = self._body(name).body_id
         return sum(
             1
@@ -978,10 +985,11 @@ class Simulation:
                 pybullet.removeConstraint(grasp.constraint_id, physicsClientId=self.client)
                 del self._grasps[arm]
 
-    def release(self, arm: str = "right") -> str | None:
+    def release(self, arm: str | None = None) -> str | None:
         """Let go of what the arm holds (its name, or ``None``). Hand-object collisions come back once they no
         longer overlap, so the object does not get kicked out of the fingers; a friction gripper opens its
         fingers a few millimetres wider than the part."""
+        arm = arm or self.robot.default_arm
         grasp = self._grasps.pop(arm, None)
         if grasp is None:
             return None
@@ -994,13 +1002,15 @@ class Simulation:
         self._restore_collisions()
         return grasp.object_name
 
-    def held(self, arm: str = "right") -> str | None:
+    def held(self, arm: str | None = None) -> str | None:
+        arm = arm or self.robot.default_arm
         grasp = self._grasps.get(arm)
         return grasp.object_name if grasp else None
 
-    def grasped_relative(self, arm: str = "right") -> np.ndarray | None:
+    def grasped_relative(self, arm: str | None = None) -> np.ndarray | None:
         """4x4 pose of the held object in the end-effector's URDF frame that the grasp holds it to (where it
         was grasped; contact can press it out of that for a while); ``None`` if nothing is held."""
+        arm = arm or self.robot.default_arm
         grasp = self._grasps.get(arm)
         if grasp is None or grasp.relative is None:
             return None
@@ -1009,14 +1019,16 @@ class Simulation:
                                       physicsClientId=self.client)
         return np.linalg.inv(self.link_transform(link)) @ _transform(state[0], state[1]) @ grasp.relative
 
-    def holds_by_friction(self, arm: str = "right") -> bool:
+    def holds_by_friction(self, arm: str | None = None) -> bool:
         """Whether the arm holds something by its fingers' friction (it may turn or slide in them)."""
+        arm = arm or self.robot.default_arm
         grasp = self._grasps.get(arm)
         return grasp is not None and grasp.friction
 
-    def grasp_transform(self, arm: str = "right") -> np.ndarray | None:
+    def grasp_transform(self, arm: str | None = None) -> np.ndarray | None:
         """4x4 pose of the held object in the end-effector frame (``None`` if nothing is held): the kinematic
         relation that turns a wanted object pose into a gripper pose (object = gripper @ this)."""
+        arm = arm or self.robot.default_arm
         grasp = self._grasps.get(arm)
         if grasp is None:
             return None

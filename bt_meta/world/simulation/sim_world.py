@@ -234,6 +234,13 @@ def load_grounding(domain: str, task_file: str | Path | None = None, path: str |
             robot = str(path.parent / robot)
     for key in ("problems", "frames", "poses", "features"):
         _mapping_of_mappings(data, key, path)
+    for symbol, spec in (data.get("poses") or {}).items():
+        numbers = spec.get("pose")
+        if numbers is not None and (not isinstance(numbers, list) or len(numbers) not in (3, 6)
+                                    or not all(isinstance(v, (int, float)) for v in numbers)):
+            line, column = _position_in(path, ("poses", str(symbol), "pose"))
+            raise ConfigError(f"pose {symbol!r}: give [x, y, z] (pointing down as the robot grasps) or "
+                              f"[x, y, z, roll, pitch, yaw] (metres, degrees), not {numbers!r}", path, line, column)
     objects = {str(k): str(v) for k, v in _mapping_of_scalars(data, "objects", path).items()}
     return Grounding(path, str(data.get("domain", domain)), dict(data["problems"]), dict(data["skills"]),
                      dict(data.get("frames") or {}), dict(data.get("poses") or {}),
@@ -587,12 +594,32 @@ class SimWorld:
             return math.atan2(math.sin(turn), math.cos(turn))
         t = self.sim.object_transform(name)
         if abs(float(t[2, 2])) < math.cos(math.radians(30.0)):
-            return 0.0
+            return self._across_turn_axis(t, arm)
         period = yaw_period(self.sim.object_model(name))
         yaw = math.atan2(float(t[1, 0]), float(t[0, 0]))
         heading = yaw - period * round(yaw / period)
         # within a degree the part is as demonstrated: the grasp the traces and refinements were made with
         return 0.0 if abs(heading) < UNTURNED else heading
+
+    def fingers_axis(self, rotation: np.ndarray, arm: str) -> np.ndarray:
+        """The fingers' closing axis (base frame) of the arm's gripper held at ``rotation``."""
+        now = self.sim.link_transform(self.end_effector(arm))[:3, :3]
+        return rotation @ (now.T @ self.sim.closing_axis(arm))
+
+    def _across_turn_axis(self, t: np.ndarray, arm: str) -> float:
+        """For a part on its side: 0, or for a gripper that turns parts about its fingers (``turn_about_fingers``)
+        the turn about the vertical (nearest zero) that closes them along the horizontal axis the part's
+        re-orientation turns it about."""
+        gripper = self.sim.robot.arm(arm).gripper
+        if gripper is None or not gripper.turn_about_fingers:
+            return 0.0
+        axis = np.cross(t[:3, 2], [0.0, 0.0, 1.0])
+        fingers = self.fingers_axis(self.top_down_rotation(arm), arm)
+        if float(np.linalg.norm(axis[:2])) < 1e-6 or float(np.linalg.norm(fingers[:2])) < 1e-6:
+            return 0.0
+        turn = math.atan2(axis[1], axis[0]) - math.atan2(fingers[1], fingers[0])
+        turn = (turn + math.pi / 2.0) % math.pi - math.pi / 2.0  # either way along the axis: the fingers are alike
+        return 0.0 if abs(turn) < UNTURNED else turn
 
     def grasp_height(self, name: str, arm: str, clearance: float) -> float:
         """Where the end-effector frame goes for a grasp of ``name``, above the top of it (negative: below).
@@ -736,6 +763,8 @@ class SimWorld:
         Kinds of entries (``rpy`` in degrees, default pointing down with the arm's ``top_down_yaw``):
 
         * ``pose: [x, y, z, roll, pitch, yaw]`` -- absolute (an instructor's pose; metres, degrees);
+        * ``pose: [x, y, z]`` -- absolute, pointing down with the arm's ``top_down_yaw`` (where the hand's turn
+          does not matter: another robot's yaw would turn the wrist half round with the part held);
         * ``above: OBJECT, height: h`` -- top-down over the object's grasp point (its catalogue grasp frame, else
           its centroid), ``h`` above the top of it and of whatever rests on it (grasp poses: a few millimetres;
           ``touch: true`` marks a grasp pose: a friction grasp goes as deep as :meth:`grasp_height` says);
@@ -760,10 +789,15 @@ class SimWorld:
         out[:3, :3] = rpy_to_matrix(*(math.radians(float(v)) for v in down))
         height = float(spec.get("height", 0.0))
         if "pose" in spec:
-            x, y, z, roll, pitch, yaw = (float(v) for v in spec["pose"])
+            values = [float(v) for v in spec["pose"]]  # 3 or 6 numbers (load_grounding checks)
+            x, y, z = values[:3]
             if spec.get("frame") != "base":  # the grounding file's poses are in the scene frame
                 dx, dy, dz = self.sim.robot.scene_offset
                 x, y, z = x + dx, y + dy, z + dz
+            if len(values) == 3:  # the hand's turn is the robot's: no half turn of the wrist for another's yaw
+                out[:3, 3] = (x, y, z)
+                return out
+            roll, pitch, yaw = values[3:]
             return pose_to_matrix((x, y, z, math.radians(roll), math.radians(pitch), math.radians(yaw)))
         if "relative_to" in spec:
             frame = self.sim.object_transform(self.object_name(str(spec["relative_to"])))
@@ -803,6 +837,9 @@ class SimWorld:
                     out[:3, :3] = self._turned_at[key]  # let go here after the turn: leave as it was held
                 else:
                     flip = [float(v) for v in spec.get("flip_axis", (1.0, 0.0, 0.0))]
+                    gripper = self.sim.robot.arm(arm).gripper
+                    if gripper is not None and gripper.turn_about_fingers:  # flipped about the fingers, level
+                        flip = list(self.fingers_axis(out[:3, :3], arm))
                     out[:3, :3] = self.turn_up(str(spec["turn_up"]), math.radians(float(spec.get("turn", 90.0))),
                                                out[:3, :3], arm, np.asarray(flip)) @ out[:3, :3]
                     if self.sim.held(arm) == part:
@@ -926,6 +963,8 @@ class SimWorld:
             up = grip @ self.held_relative(arm)[:3, 2]
         else:
             up = self.sim.object_transform(name)[:3, 2]
+            if self.sim.robot.arm(arm).gripper is not None and self.sim.robot.arm(arm).gripper.turn_about_fingers:
+                up = rpy_to_matrix(0.0, 0.0, -self.own_heading(name, arm)) @ up  # grasped turned by its heading
         vertical = np.array([0.0, 0.0, 1.0])
         angle = math.acos(max(-1.0, min(1.0, float(up @ vertical))))
         axis = np.cross(up, vertical)

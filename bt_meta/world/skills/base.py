@@ -135,9 +135,9 @@ class SimSkill:
     spec: dict[str, Any] = {}
     """The grounding file's entry for the primitive this skill runs (options such as ``frame`` or ``mode``)."""
 
-    def __init__(self, world: SkillWorld, arm: str = "right") -> None:
+    def __init__(self, world: SkillWorld, arm: str | None = None) -> None:
         self.world = world
-        self.arm = arm
+        self.arm = arm or str(world.sim.robot.default_arm)  # none named: the robot's first arm (its YAML)
         self.failure: SkillFailure | None = None
         self.ticks = 0
         self.outcome: str | None = None

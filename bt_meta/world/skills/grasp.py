@@ -39,7 +39,7 @@ class Grasp(SimSkill):
 
     name = "grasp"
 
-    def __init__(self, world: Any, arm: str = "right", *, settle_ticks: int = 2, reach: float = 0.03) -> None:
+    def __init__(self, world: Any, arm: str | None = None, *, settle_ticks: int = 2, reach: float = 0.03) -> None:
         super().__init__(world, arm)
         self.settle_ticks = settle_ticks
         self.reach = reach

@@ -37,7 +37,7 @@ class Insert(PhasedSkill):
     """Put ``part``'s insertable end into ``target``'s hole feature."""
 
     name = "insert"
-    def __init__(self, world: Any, arm: str = "right", *, approach_height: float = 0.10, tolerance: float = 0.005,
+    def __init__(self, world: Any, arm: str | None = None, *, approach_height: float = 0.10, tolerance: float = 0.005,
                  angle_tolerance: float = math.radians(15.0)) -> None:
         super().__init__(world, arm)
         self.approach_height = approach_height

@@ -45,7 +45,7 @@ class MoveTo(SimSkill):
 
     name = "move_to"
 
-    def __init__(self, world: Any, arm: str = "right", *, position_tolerance: float = 0.003,
+    def __init__(self, world: Any, arm: str | None = None, *, position_tolerance: float = 0.003,
                  orientation_tolerance: float = 0.05, settle_ticks: int = 12, require_arrival: bool = True,
                  check_path: bool = True, check_held: bool = True, carried_clearance: float = 0.0,
                  speed: float = 1.0, straight: bool = False) -> None:

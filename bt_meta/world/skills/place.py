@@ -173,7 +173,7 @@ class Place(PhasedSkill):
     """Pick ``block`` and put it down at a point of the grounding frame."""
 
     name = "place"
-    def __init__(self, world: Any, arm: str = "right", *, approach_height: float = 0.08, clearance: float = 0.002,
+    def __init__(self, world: Any, arm: str | None = None, *, approach_height: float = 0.08, clearance: float = 0.002,
                  tolerance: float = 0.01) -> None:
         super().__init__(world, arm)
         self.approach_height = approach_height

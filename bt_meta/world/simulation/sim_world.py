@@ -383,6 +383,8 @@ class SimWorld:
         self.domain = domain
         self.problem = problem
         self.grounding = grounding
+        self.stand_ins: dict[str, str] = {}
+        """Simulator objects stood in for since a rebinding: the demonstrated part's name -> its stand-in's."""
         self.seed = seed
         self.steps_per_tick = steps_per_tick
         self.joint_speed = joint_speed
@@ -728,6 +730,10 @@ class SimWorld:
         for a missing part): poses defined over the symbol follow. This world's grounding only; the file is kept."""
         if name not in self.sim.object_names():
             raise BtMetaError(f"cannot rebind {symbol!r}: there is no object {name!r} in the world")
+        old = self.grounding.objects.get(symbol, symbol)  # a symbol the grounding does not map names its object
+        if old != name:  # a second rebinding keeps the demonstrated name as the key
+            original = next((o for o, stand_in in self.stand_ins.items() if stand_in == old), old)
+            self.stand_ins[original] = name
         self.grounding = dataclasses.replace(self.grounding, objects={**self.grounding.objects, symbol: name})
 
     def register_pose(self, symbol: str) -> bool:

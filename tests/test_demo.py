@@ -16,8 +16,8 @@ import pytest
 from bt_meta.cli import main
 from bt_meta.demo.report import grid_svg
 from bt_meta.demo.scenario import demonstrations, variants
-from bt_meta.demo.svg import TreeNode, tree_from_behaviour, tree_svg
 from bt_meta.plotting import line_plot
+from bt_meta.runs.svg import TreeNode, tree_from_behaviour, tree_svg
 
 
 def test_tree_svg_colours_nodes_by_status():

@@ -47,8 +47,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from bt_meta.demo.capture import Progress
     from bt_meta.demo.runner import run_demo
+    from bt_meta.runs.capture import Progress
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():

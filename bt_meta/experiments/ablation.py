@@ -177,10 +177,10 @@ def run(*, seeds: int = 3, seed: int = 0, families: Sequence[str] = ("letters", 
     """Record the demonstrations, run every variant (or the ``only`` ones) under every configuration for ``seeds``
     seeds, on ``robot`` (a description; default each grounding's); the table."""
     from bt_meta.configurations import CONFIGURATIONS, available_repairs
-    from bt_meta.demo.capture import Progress
     from bt_meta.demo.runner import memory_environment, record_demonstration, run_variant
     from bt_meta.demo.scenario import FAMILIES, VariantRun, demonstrations, variants
     from bt_meta.memory import EpisodicMemory
+    from bt_meta.runs.capture import Progress
     from bt_meta.world.simulation.sim_world import quiet_stdout
 
     with quiet_stdout():

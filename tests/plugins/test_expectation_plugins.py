@@ -578,10 +578,10 @@ def test_camera_perception_needs_a_camera():
 def test_a_shifted_nominal_equivalent_scene_raises_nothing_with_keypoint_monitors(tmp_path, family, task_file,
                                                                                   variant):
     """Recorded nominal, then the parts (and board) moved a few cm: monitors at every task end, no mismatch."""
-    from bt_meta.demo.capture import Progress
     from bt_meta.demo.runner import memory_environment, record_demonstration, run_variant
     from bt_meta.demo.scenario import Demonstration, VariantRun
     from bt_meta.meta import RefinementStore
+    from bt_meta.runs.capture import Progress
 
     path = tmp_path / "memory.sqlite"
     progress = Progress(quiet=True)

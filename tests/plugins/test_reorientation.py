@@ -191,10 +191,10 @@ def test_turned_facts_held_are_the_part_facts_a_reorient_method_needs_false():
 
 @pytest.mark.slow
 def test_upside_down_parts_are_repaired_by_reorientation_and_replayed_with_zero_attempts(tmp_path):
-    from bt_meta.demo.capture import Progress
     from bt_meta.demo.runner import memory_environment, record_demonstration, run_variant
     from bt_meta.demo.scenario import Demonstration, VariantRun
     from bt_meta.meta import RefinementStore
+    from bt_meta.runs.capture import Progress
 
     path = tmp_path / "memory.sqlite"
     progress = Progress(quiet=True)

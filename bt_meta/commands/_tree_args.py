@@ -46,8 +46,9 @@ def stubs_from_args(args: argparse.Namespace) -> Any:
     return StubPolicy.from_specs(args.stub)
 
 
-def ros2_leaves_from_args(args: argparse.Namespace) -> list[Any]:
-    """The node types of every ``--ros2-leaves`` file, also registered for every registry built from now on."""
+def ros2_leaves_from_args(args: argparse.Namespace, *, register: bool = False) -> list[Any]:
+    """The node types of every ``--ros2-leaves`` file; ``register``: also for every registry built from now on
+    (what ``tick`` needs, its registry is built with the plugins')."""
     files = getattr(args, "ros2_leaves", None) or []
     if not files:
         return []
@@ -55,6 +56,6 @@ def ros2_leaves_from_args(args: argparse.Namespace) -> list[Any]:
     from bt_meta.ros2.leaves import load_leaves_file
 
     types = [node_type for path in files for node_type in load_leaves_file(path)]
-    for node_type in types:
+    for node_type in types if register else ():
         register_node_type(node_type)
     return types

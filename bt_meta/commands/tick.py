@@ -100,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserInputError("--tick-period must be at least 0")
     if args.ros2_leaves and not is_xml(args.file):
         raise UserInputError("--ros2-leaves registers leaves of a tree XML", args.file)
-    ros2_leaves_from_args(args)
+    ros2_leaves_from_args(args, register=True)
     plugins = plugin_host_from_args(args, args.file)
     if args.repair:
         if args.groot2 is not None or args.btlog is not None:

@@ -74,6 +74,7 @@ EVERY_KIND = """\
       <ScriptCondition code="pos &gt; 0.019 &amp;&amp; pos &lt; 0.021"/>
       <Fallback><CloseGripper position="-1"/><AlwaysSuccess/></Fallback>
       <Repeat num_cycles="20"><Sequence><Sleep msec="50"/><SendBeacon text="hello"/></Sequence></Repeat>
+      <ForceSuccess><Timeout msec="1500"><CloseGripper position="0.03" max_effort="6000"/></Timeout></ForceSuccess>
     </Sequence>
   </BehaviorTree>
 </root>
@@ -156,9 +157,17 @@ def _failures(done: subprocess.CompletedProcess) -> list[dict]:
 # [ros2] extra or the right to make a network namespace
 
 
-@pytest.mark.slow
-def test_every_kind_ticks_against_a_real_peer(peer, loopback_only):
+@pytest.fixture(scope="module")
+def every_kind(peer):
+    """One run of EVERY_KIND (``bt-meta tick --json``), shared by the tests that read it."""
+    started = time.monotonic()
     done = peer.tick(EVERY_KIND)
+    return done, time.monotonic() - started
+
+
+@pytest.mark.slow
+def test_every_kind_ticks_against_a_real_peer(peer, every_kind, loopback_only):
+    done, _elapsed = every_kind
     assert done.returncode == 0, done.stderr[-3000:]
     result = json.loads(done.stdout)
     assert result["status"] == "SUCCESS"
@@ -173,25 +182,10 @@ def test_every_kind_ticks_against_a_real_peer(peer, loopback_only):
     assert {"ActivateCamera", "IsDoorOpen", "CloseGripper", "SendBeacon"} <= shown
 
 
-HALTED = """\
-<root BTCPP_format="4" main_tree_to_execute="Main">
-  <BehaviorTree ID="Main">
-    <Sequence>
-      <CloseGripper position="0.01"/>
-      <Timeout msec="1500"><CloseGripper position="0.03" max_effort="6000"/></Timeout>
-    </Sequence>
-  </BehaviorTree>
-</root>
-"""
-
-
 @pytest.mark.slow
-def test_a_halted_action_cancels_its_goal(peer, loopback_only):
-    started = time.monotonic()
-    done = peer.tick(HALTED)  # the second goal would run 60 s; the Timeout halts it after 1.5 s
-    assert done.returncode == 1, done.stderr[-3000:]
-    assert json.loads(done.stdout)["status"] == "FAILURE"
-    assert time.monotonic() - started < 40
+def test_a_halted_action_cancels_its_goal(peer, every_kind, loopback_only):
+    done, elapsed = every_kind  # its last goal would run 60 s: the Timeout halts it after 1.5 s
+    assert done.returncode == 0 and elapsed < 40, done.stderr[-3000:]
     assert peer.wait_for("goal 0.03 6000.0") and peer.wait_for("canceled"), peer.log.read_text()[-2000:]
     # Ctrl-C while a goal runs: the goal is cancelled as the process ends (exit 130)
     run = peer.start(STILL_RUNNING)
@@ -315,6 +309,20 @@ def test_a_bad_registration_is_an_error_at_path_line_column(tmp_path, body, wher
         leaves_from_text(f"ros2_leaves:\n  - ID: Leaf\n    {body}", path)
     assert caught.value.location_message().startswith(f"{path}:{where}: "), caught.value.location_message()
     assert message in str(caught.value)
+
+
+def test_an_id_of_a_built_in_node_or_a_stray_key_is_refused(tmp_path):
+    pytest.importorskip("std_msgs.msg", reason="needs the [ros2] extra: pip install 'bt-meta[ros2]'")
+    from bt_meta.errors import ConfigError
+    from bt_meta.ros2.leaves.registration import leaves_from_text
+
+    path = tmp_path / "leaves.yaml"
+    with pytest.raises(ConfigError, match=r"ID 'Sequence' is a BehaviorTree\.CPP built-in node") as caught:
+        leaves_from_text("ros2_leaves:\n  - ID: Sequence\n    kind: topic_sub\n    type: std_msgs/msg/Bool\n",
+                         path)
+    assert caught.value.location_message().startswith(f"{path}:2:9: ")
+    with pytest.raises(ConfigError, match="unknown key 'ros2_leafs'"):
+        leaves_from_text("ros2_leafs: []\n", path)
 
 
 def test_a_bad_registration_exits_2_naming_the_line(tmp_path, capsys):

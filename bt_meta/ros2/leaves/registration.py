@@ -122,6 +122,10 @@ def _build(values: dict[str, Any], at: dict[str, Any]) -> LeafSpec:
     leaf_id = values.get("ID")
     if not isinstance(leaf_id, str) or not _ID.match(leaf_id):
         raise _Problem(f"ID: {leaf_id!r} is not a node ID (letters, digits, _)", at.get("ID"))
+    from bt_meta.bt.nodes import builtin_node_types
+
+    if leaf_id in {builtin.id for builtin in builtin_node_types()}:
+        raise _Problem(f"ID {leaf_id!r} is a BehaviorTree.CPP built-in node; choose another", at.get("ID"))
     kind = values.get("kind")
     if kind not in KINDS:
         raise _Problem(f"{leaf_id}: kind {kind!r} is not one of {', '.join(KINDS)}", at.get("kind"))
@@ -268,7 +272,7 @@ class _File(YamlNodeReader):
         root = compose_yaml(text, str(self.path), ConfigError)
         if root is None:
             raise ConfigError("empty ROS leaves file: expected ros2_leaves: [...]", self.path)
-        top = self.mapping(root, "the ROS leaves file", None)
+        top = self.mapping(root, "the ROS leaves file", {"ros2_leaves"})
         if "ros2_leaves" not in top:
             raise self.error("missing key 'ros2_leaves' (a list of leaves)", root)
         types: list[NodeType] = []

@@ -30,6 +30,7 @@ class _Shared:
     def __init__(self) -> None:
         self.listeners: list[RosSubscriberLeaf] = []
         self.lock = threading.Lock()
+        self.subscription: Any = None
 
     def received(self, message: Any) -> None:
         with self.lock:

@@ -340,6 +340,24 @@ def test_a_bad_registration_exits_2_naming_the_line(tmp_path, capsys):
             capsys.readouterr().err
 
 
+def test_a_name_that_is_no_ros_name_in_the_xml_is_located_before_ticking(tmp_path, capsys):
+    pytest.importorskip("std_msgs.msg", reason="needs the [ros2] extra: pip install 'bt-meta[ros2]'")
+    from bt_meta.bt import python_nodes
+    from bt_meta.cli import main
+
+    leaves = tmp_path / "leaves.yaml"
+    leaves.write_text("ros2_leaves:\n  - ID: IsDoorOpen\n    kind: topic_sub\n    type: std_msgs/msg/Bool\n")
+    tree = tmp_path / "tree.xml"
+    tree.write_text('<root BTCPP_format="4">\n<BehaviorTree ID="M">\n  <IsDoorOpen topic_name="door open"/>\n'
+                    '</BehaviorTree></root>')
+    try:
+        assert main(["tick", str(tree), "--ros2-leaves", str(leaves)]) == 2
+    finally:
+        python_nodes._REGISTERED.pop("IsDoorOpen", None)
+    assert f"{tree}:3:3: cannot build node 'IsDoorOpen': topic_name 'door open' is not a valid ROS 2 name" in \
+        capsys.readouterr().err
+
+
 def test_python_registration_declares_the_same_leaf(monkeypatch):
     pytest.importorskip("std_msgs.msg", reason="needs the [ros2] extra: pip install 'bt-meta[ros2]'")
     from bt_meta.bt import python_nodes

@@ -24,6 +24,7 @@ from py_trees.common import Status
 from bt_meta.bt.failures import Failure, FailureKind
 from bt_meta.bt.nodes.base import PortValue
 from bt_meta.bt.script import DictEnvironment, ScriptRuntimeError
+from bt_meta.ros2.leaves.fields import ROS_NAME
 from bt_meta.ros2.leaves.runtime import LeafRuntime, runtime
 
 __all__ = ["RosLeaf"]
@@ -49,8 +50,10 @@ class RosLeaf(py_trees.behaviour.Behaviour):
             # constructor makes it, so discovery runs while the rest of the tree loads
             try:
                 name = self.ros_name()
-            except ValueError:
-                return  # reported when ticked
+            except ValueError as error:
+                if "is not a valid ROS 2 name" in str(error):
+                    raise  # the reader locates it: path:line:column, before anything ticks
+                return  # an empty name: reported when ticked
             self.connect(name)
 
     # -- ports ----------------------------------------------------------------------------------------------------
@@ -65,6 +68,8 @@ class RosLeaf(py_trees.behaviour.Behaviour):
             name = self.spec.default_name
         if not name:
             raise ValueError(f"{self.spec.name_port} is empty and {self.spec.id} registers no default")
+        if not ROS_NAME.match(str(name)):
+            raise ValueError(f"{self.spec.name_port} {name!r} is not a valid ROS 2 name")
         return str(name)
 
     def shared(self) -> LeafRuntime:

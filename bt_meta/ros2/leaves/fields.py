@@ -9,7 +9,7 @@ is refused, naming its fields.
 
 Offers:
 
-* :data:`KINDS` -- leaf kind -> the interface kind it needs (``action``, ``srv``, ``msg``)
+* :data:`KINDS` -- leaf kind -> the interface kind it needs (``action``, ``srv``, ``msg``); :data:`ROS_NAME`
 * :func:`import_interface` -- ``pkg/kind/Name`` -> the Python class (raises ``LookupError`` saying why)
 * :class:`Field` -- a resolved field path: its port type name, :meth:`Field.assign` into a message,
   :meth:`Field.read` out of one
@@ -23,9 +23,11 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["KINDS", "Field", "import_interface", "resolve_field"]
+__all__ = ["KINDS", "ROS_NAME", "Field", "import_interface", "resolve_field"]
 
 KINDS = {"action": "action", "service": "srv", "topic_sub": "msg", "topic_pub": "msg"}
+ROS_NAME = re.compile(r"^/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*$")
+"""A topic, service or action name (absolute or relative, no substitutions)."""
 _TYPE = re.compile(r"^([A-Za-z][A-Za-z0-9_]*)/(msg|srv|action)/([A-Z][A-Za-z0-9]*)$")
 _SIGNED = {"int8", "int16", "int32", "int64", "char"}
 _UNSIGNED = {"uint8", "uint16", "uint32", "uint64", "byte", "octet"}

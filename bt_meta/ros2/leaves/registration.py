@@ -44,7 +44,7 @@ from bt_meta.bt.script import CompiledScript, ScriptSyntaxError, compile_script
 from bt_meta.bt.script.ast import Name
 from bt_meta.bt.script.parser import walk
 from bt_meta.errors import ConfigError
-from bt_meta.ros2.leaves.fields import KINDS, Field, import_interface, resolve_field
+from bt_meta.ros2.leaves.fields import KINDS, ROS_NAME, Field, import_interface, resolve_field
 from bt_meta.world._yaml_nodes import YamlNodeReader
 
 __all__ = ["CATEGORY", "NAME_PORT", "InputField", "LeafSpec", "leaves_from_text", "load_leaves_file", "node_type",
@@ -59,7 +59,6 @@ SERVER_TIMEOUT_MS = 1000
 WAIT_FOR_SERVER_TIMEOUT_MS = 500
 _TIMED = ("action", "service")
 _ID = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
-_ROS_NAME = re.compile(r"^/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*$")
 _KEYS = {"ID", "kind", "type", "action_name", "service_name", "topic_name", "server_timeout",
          "wait_for_server_timeout", "inputs", "outputs", "success_if", "latch", "description"}
 
@@ -144,7 +143,7 @@ def _build(values: dict[str, Any], at: dict[str, Any]) -> LeafSpec:
         if other in values:
             raise _Problem(f"{leaf_id}: a {kind} leaf is named by {name_port}, not {other}", at.get(other))
     default_name = values.get(name_port)
-    if default_name is not None and (not isinstance(default_name, str) or not _ROS_NAME.match(default_name)):
+    if default_name is not None and (not isinstance(default_name, str) or not ROS_NAME.match(default_name)):
         raise _Problem(f"{leaf_id}: {name_port} {default_name!r} is not a valid ROS 2 name", at.get(name_port))
     timeouts = {}
     for key, default in (("server_timeout", SERVER_TIMEOUT_MS), ("wait_for_server_timeout",

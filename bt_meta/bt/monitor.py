@@ -301,7 +301,10 @@ class Monitor(py_trees.decorators.Decorator):
 
     def _after_failure(self, run: RunContext) -> Status:
         context = self._step_context(run)
-        reported = None if self.action is None else self.action.failure
+        # a primitive's failure record, or one any other leaf keeps in ``failure`` (a ROS leaf: why it failed)
+        reported = self.action.failure if self.action is not None else getattr(self.decorated, "failure", None)
+        if not isinstance(reported, Failure):
+            reported = None
         if reported is None:
             failure = self._failure(context, FailureKind.INTERNAL,
                                     f"{self.decorated.name} failed without a failure record")

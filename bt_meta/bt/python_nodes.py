@@ -22,6 +22,7 @@ Offers:
 
 * :func:`action`, :func:`condition` -- the decorators
 * :func:`registered_node_types` -- the node types decorated so far in this process
+* :func:`register_node_type` -- add a ready-made node type to them (ROS leaves declared in Python use it)
 * :class:`PythonNode` -- the behaviour that calls the function or object
 """
 
@@ -146,6 +147,12 @@ def condition(
     if target is not None:
         return _register(target, "Condition", name, inputs, None, defaults, description)
     return lambda found: _register(found, "Condition", name, inputs, None, defaults, description)
+
+
+def register_node_type(node_type: NodeType) -> NodeType:
+    """Make ``node_type`` known to every registry built from now on, as a decorated function would be."""
+    _REGISTERED[node_type.id] = node_type
+    return node_type
 
 
 def registered_node_types() -> list[NodeType]:

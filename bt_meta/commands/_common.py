@@ -79,8 +79,10 @@ def register_modules(package: ModuleType, subparsers: argparse._SubParsersAction
 
 
 def shown_in_trace(behaviour: Any) -> bool:
-    """Whether ``run`` and ``tick`` print a node's status changes: the plan's primitives and their guards."""
+    """Whether ``run`` and ``tick`` print a node's status changes: the plan's primitives and their guards, and
+    leaves that ask to be shown (``shown_in_trace = True``, e.g. ROS leaves)."""
     from bt_meta.bt.actions import PrimitiveAction
     from bt_meta.bt.guards import CheckCondition
 
-    return isinstance(behaviour, (PrimitiveAction, CheckCondition))
+    return isinstance(behaviour, (PrimitiveAction, CheckCondition)) or getattr(behaviour, "shown_in_trace", False) \
+        is True

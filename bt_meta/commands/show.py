@@ -1,4 +1,5 @@
-"""``bt-meta show tree.xml [--tree ID] [--include-path DIR] [--subtrees PATH] [--stub-unknown] [--plugins DIR]``:
+"""``bt-meta show tree.xml [--tree ID] [--include-path DIR] [--subtrees PATH] [--stub-unknown] [--plugins DIR]
+[--ros2-leaves FILE.yaml]``:
 print a BehaviorTree.CPP v4 XML tree as a unicode tree with its ports.
 
 SubTrees are expanded under their ``SubTree`` line, whichever file defines them. Custom nodes only need a
@@ -15,7 +16,12 @@ from bt_meta.bt.registry import default_registry
 from bt_meta.bt.xml.document import parse_file
 from bt_meta.bt.xml.reader import ResolvedNode, resolve_document, select_tree
 from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
-from bt_meta.commands._tree_args import add_tree_arguments, stubs_from_args, tree_sources_from_args
+from bt_meta.commands._tree_args import (
+    add_tree_arguments,
+    ros2_leaves_from_args,
+    stubs_from_args,
+    tree_sources_from_args,
+)
 
 
 def _label(node: ResolvedNode) -> str:
@@ -51,6 +57,8 @@ def run(args: argparse.Namespace) -> int:
     registry = default_registry()
     if args.plugins:
         registry = domain_registry(None, plugin_host_from_args(args, args.file))
+    for node_type in ros2_leaves_from_args(args):
+        registry.register(node_type, replace=True)
     root = resolve_document(document, registry, tree_id=tree_id, allow_models=True, stubs=stubs_from_args(args))
     print(f"{tree_id} ({args.file})")
     for line in render(root):

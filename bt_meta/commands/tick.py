@@ -5,11 +5,13 @@ Offers:
 * :func:`register` -- adds ``tick FILE [--problem P] [--task-file T] [--policy] [--world fake] [--ticks N]
   [--ticks-per-skill K] [--fault SPEC ...] [--seed N] [--world-option K=V ...] [--keep-ticking] [--plugins DIR]
   [--repair [--max-attempts N] [--memory PATH]] [--json] [--groot2 [PORT]] [--groot2-host ADDRESS] [--hold]
-  [--btlog FILE]`` and, for tree XML, ``[--tree ID] [--include-path DIR] [--subtrees PATH] [--stub-unknown]
-  [--stub ...]``
+  [--btlog FILE] [--tick-period MS]`` and, for tree XML, ``[--tree ID] [--include-path DIR] [--subtrees PATH]
+  [--stub-unknown] [--stub ...] [--ros2-leaves FILE.yaml]``
 
 FILE is a YAML task file (planned, then compiled) or a tree XML (its primitives come from ``--task-file``, by default
-the ``.yaml`` next to it). Ticking stops when the root finishes unless ``--keep-ticking``. Each tick prints the root
+the ``.yaml`` next to it). Ticking stops when the root finishes unless ``--keep-ticking``. ``--tick-period MS``
+waits that long between ticks while the root is RUNNING (BT.CPP's ``tickWhileRunning``); by default 10 ms when the
+tree has leaves whose result comes from another process (ROS leaves), else none. Each tick prints the root
 status and the status of every primitive and guard ticked; failures are printed with kind, node and evidence.
 Exit status 0 when the root succeeded or is still running, 1 when it failed, 2 on bad input.
 
@@ -27,6 +29,7 @@ none and saves none.
 from __future__ import annotations
 
 import argparse
+import time
 from typing import Any
 
 from py_trees.common import Status
@@ -34,7 +37,12 @@ from py_trees.common import Status
 from bt_meta.commands._common import print_json, shown_in_trace
 from bt_meta.commands._groot2_args import add_groot2_arguments, check_groot2_arguments, start_groot2
 from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
-from bt_meta.commands._tree_args import add_tree_arguments, stubs_from_args, tree_sources_from_args
+from bt_meta.commands._tree_args import (
+    add_tree_arguments,
+    ros2_leaves_from_args,
+    stubs_from_args,
+    tree_sources_from_args,
+)
 from bt_meta.errors import UserInputError
 
 
@@ -53,6 +61,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--world-option", action="append", default=[], metavar="KEY=VALUE",
                         help="extra option for the world plugin, e.g. variant=rotated (repeatable)")
     parser.add_argument("--keep-ticking", action="store_true", help="keep ticking after the root finished")
+    parser.add_argument("--tick-period", type=float, default=None, metavar="MS",
+                        help="wait this long between ticks while the root is RUNNING (default: 10 when the tree "
+                             "has ROS leaves, else 0)")
     parser.add_argument("--json", action="store_true", help="print one JSON object with every tick")
     parser.add_argument("--repair", action="store_true",
                         help="task files: diagnose and repair failures with the meta-reasoner while ticking")
@@ -85,6 +96,11 @@ def run(args: argparse.Namespace) -> int:
 
     if not is_xml(args.file) and (args.tree or args.include_path or args.subtrees or args.stub_unknown):
         raise UserInputError("--tree, --include-path, --subtrees and --stub-unknown apply to tree XML", args.file)
+    if args.tick_period is not None and args.tick_period < 0:
+        raise UserInputError("--tick-period must be at least 0")
+    if args.ros2_leaves and not is_xml(args.file):
+        raise UserInputError("--ros2-leaves registers leaves of a tree XML", args.file)
+    ros2_leaves_from_args(args, register=True)
     plugins = plugin_host_from_args(args, args.file)
     if args.repair:
         if args.groot2 is not None or args.btlog is not None:
@@ -96,6 +112,9 @@ def run(args: argparse.Namespace) -> int:
                                     world_options=world_options, plugins=plugins, tree_id=args.tree,
                                     xml_sources=tree_sources_from_args(args), stubs=stubs_from_args(args))
     shown = {b.name for b in harness.root.iterate() if shown_in_trace(b)}
+    period = args.tick_period
+    if period is None:  # BT.CPP's tickWhileRunning sleeps 10 ms; a tree of local leaves needs no wait
+        period = 10.0 if any(getattr(b, "waits_on_outside", False) for b in harness.root.iterate()) else 0.0
     groot2 = start_groot2(args, harness)
     ticks: list[dict[str, Any]] = []
     status = Status.INVALID
@@ -117,6 +136,8 @@ def run(args: argparse.Namespace) -> int:
                 print(f"          failure {failure.summary()}")
         if status is not Status.RUNNING and not args.keep_ticking:
             break
+        if period > 0:
+            time.sleep(period / 1000.0)
     harness.run.finish(status)
     final_state = sorted(" ".join(a) for a in harness.state)
     if args.json:

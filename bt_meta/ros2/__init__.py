@@ -18,4 +18,6 @@ Offers (one concept per module):
 * :mod:`~bt_meta.ros2.robot_state` -- the latest joint states and object poses, waited for by stamp
 * :mod:`~bt_meta.ros2.world` -- :class:`~bt_meta.ros2.world.RosWorld`, the World acting through ROS 2
 * :mod:`~bt_meta.ros2.mcap_recording` -- the run's ROS 2 messages as MCAP (``--record-mcap``)
+* :mod:`~bt_meta.ros2.leaves` -- BehaviorTree.ROS2's action, service and topic leaves in tree XML
+  (``--ros2-leaves``), one module per kind
 """

@@ -166,6 +166,17 @@ _CLOSE_STEPS = 120
 """Physics steps (0.5 s) a friction grasp lets the fingers close before judging whether they hold the part."""
 _LOST_AFTER = 2
 """A friction grasp is lost after this many consecutive step() calls without both fingers touching the part."""
+_COUPLING_ERP = 0.8
+"""How hard the coupling of two fingers pulls them back to mirror images each physics step (pybullet's gear keeps
+their velocities equal only loosely; at 0.1 the pair crept sideways on a part it squeezed -- 7 mm apart on the
+letters' blocks, the part 2 mm off their middle -- and a finger stopped by an off-centre part let the other run on
+to its closed limit)."""
+_COUPLING_FORCE = 10.0
+"""The coupling's strength: this many times one finger's force."""
+_HOLD_SQUEEZE = 0.0005
+"""m per finger: once a friction grasp holds the part, the fingers are held this far inside where they closed on
+it; driven on to their closed limit they sank into Bullet's soft contacts under the sustained squeeze, unevenly,
+and the pair crept sideways with the part (the squeeze itself is the grasp constraint's strength)."""
 
 
 def _tuple3(v: Iterable[float]) -> tuple[float, float, float]:
@@ -399,8 +410,8 @@ class Simulation:
                 gear = pybullet.createConstraint(self.robot_id, first, self.robot_id, second, pybullet.JOINT_GEAR,
                                                  [1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0],
                                                  physicsClientId=self.client)
-                pybullet.changeConstraint(gear, gearRatio=ratio, erp=0.1, maxForce=10.0 * gripper.force,
-                                          physicsClientId=self.client)
+                pybullet.changeConstraint(gear, gearRatio=ratio, erp=_COUPLING_ERP,
+                                          maxForce=_COUPLING_FORCE * gripper.force, physicsClientId=self.client)
 
     def _hand_root(self, arm: str) -> str:
         """The wrist-side link of the hand (URDF name): everything below it may touch a held object."""
@@ -850,9 +861,9 @@ class Simulation:
         constraint, with collisions between the hand and the object off. A friction grasp closes the fingers
         (physics steps, up to 0.5 s) and holds the part only if both fingers then touch it, by a constraint no
         stronger than their friction (pads x part friction x the fingers' squeeze); afterwards the part stays
-        held only while both fingers touch it and it has not slid 5 mm in them (checked at every
-        :meth:`step`): a part too heavy or too slippery for the fingers slips out, and :meth:`held` says so.
-        Returns False (and holds nothing)
+        held while both fingers touch it (checked at every :meth:`step`; a part that slid 5 mm in them, pressed
+        onto a support, is held where it slid to): a part too heavy or too slippery for the fingers slips out, and
+        :meth:`held` says so. Returns False (and holds nothing)
         when the gripper frame is farther than ``max_distance`` from the object's surface, the arm already holds
         something, or the fingers closed without holding it -- a physical failure the skill reports.
         """
@@ -964,6 +975,11 @@ class Simulation:
                                            physicsClientId=self.client)
         relative = np.linalg.inv(_transform(link_state[0], link_state[1])) @ self.object_transform(name)
         cid = _fix(self.robot_id, end, self._body(name).body_id, relative, self.client)
+        # the fingers stop where they closed on it (a little inside): the grasp constraint is the squeeze
+        closed_on = pybullet.getJointStates(self.robot_id, list(self._finger_links[arm]), physicsClientId=self.client)
+        self.set_joint_targets({joint: state[0] + _HOLD_SQUEEZE * (1.0 if shut > opened else -1.0)
+                                for joint, state, shut, opened in zip(gripper.joints, closed_on, gripper.closed,
+                                                                      gripper.open, strict=True)})
         capacity = _FINGER_FRICTION * self._body(name).model.lateral_friction * fingers * gripper.force
         pybullet.changeConstraint(cid, maxForce=capacity, physicsClientId=self.client)
         self._grasps[arm] = _Grasp(arm, name, cid, friction=True, relative=relative)
@@ -981,9 +997,22 @@ class Simulation:
             slid = float(np.linalg.norm(now[:3, 3] - grasp.relative[:3, 3])) > slide
             touching = self.touching_fingers(grasp.object_name, arm) == len(self._finger_links[arm])
             grasp.lost = 0 if touching else grasp.lost + 1
-            if slid or grasp.lost >= _LOST_AFTER:  # slipped out: the fingers hold nothing
+            if (slid and not touching) or grasp.lost >= _LOST_AFTER:  # slipped out: the fingers hold nothing
                 pybullet.removeConstraint(grasp.constraint_id, physicsClientId=self.client)
                 del self._grasps[arm]
+            elif slid:  # pushed along the pads (pressed onto a support), still squeezed: held where it is now
+                self._reseat(grasp, now)
+
+    def _reseat(self, grasp: _Grasp, relative: np.ndarray) -> None:
+        """Hold a friction-grasped part at ``relative`` (its pose in the end-effector link's frame now), with the
+        same strength: a part pressed up into the fingers or dragged along them while both still squeeze it has
+        slid, not dropped -- friction holds it wherever the pads now grip it."""
+        capacity = pybullet.getConstraintInfo(grasp.constraint_id, physicsClientId=self.client)[10]
+        pybullet.removeConstraint(grasp.constraint_id, physicsClientId=self.client)
+        end = self.link_index(self.robot.arm(grasp.arm).end_effector)
+        grasp.constraint_id = _fix(self.robot_id, end, self._body(grasp.object_name).body_id, relative, self.client)
+        pybullet.changeConstraint(grasp.constraint_id, maxForce=capacity, physicsClientId=self.client)
+        grasp.relative = relative
 
     def release(self, arm: str | None = None) -> str | None:
         """Let go of what the arm holds (its name, or ``None``). Hand-object collisions come back once they no

@@ -381,7 +381,8 @@ class MetaExecutor:
             add, delete = refinement.fact_atoms()
             method = methods.get(refinement.method)
             symbols = refinement.rebind_symbols()
-            if not (add or delete or symbols) or method is None:
+            goal = refinement.goal_atoms()
+            if not (add or delete or symbols or goal is not None) or method is None:
                 continue
             try:
                 holds = method.precondition.holds(problem.state, {}, self.plugins.external_predicate)
@@ -394,19 +395,20 @@ class MetaExecutor:
                 log.info("meta: refinement %s applies; it rebinds %s", refinement.method, symbols)
                 _rebind(self.world, {}, symbols)
                 rebound.update(symbols)
-            if not (add or delete):
-                continue
-            log.info("meta: refinement %s applies; its perceived facts join the state: +%s -%s", refinement.method,
-                     ", ".join(atom_text(a) for a in add), ", ".join(atom_text(a) for a in delete))
-            if apply is not None:
-                apply(add=add, delete=delete)
-            state = problem.state.apply(add=add, delete=delete)
-            init = [a for a in problem.init if tuple(a) not in set(delete)]
-            problem = dataclasses.replace(problem, init=[*init, *(a for a in add if a not in problem.state)],
-                                          state=state)
-            _note_changes(anchored, set(), set(add))
-            _note_changes(anchored, set(delete), set())
-            goal = refinement.goal_atoms()
+            if add or delete:
+                log.info("meta: refinement %s applies; its perceived facts join the state: +%s -%s",
+                         refinement.method, ", ".join(atom_text(a) for a in add),
+                         ", ".join(atom_text(a) for a in delete))
+                if apply is not None:
+                    apply(add=add, delete=delete)
+                state = problem.state.apply(add=add, delete=delete)
+                init = [a for a in problem.init if tuple(a) not in set(delete)]
+                problem = dataclasses.replace(problem, init=[*init, *(a for a in add if a not in problem.state)],
+                                              state=state)
+                _note_changes(anchored, set(), set(add))
+                _note_changes(anchored, set(delete), set())
+            # a refinement that restates the goal (a part moved elsewhere, nothing perceived about it) is planned
+            # towards that goal too: the planner would else refuse its plan for the problem's goal
             if goal is not None and not goal_set:  # the planner checks the goal: the one this refinement achieves
                 problem = dataclasses.replace(problem, goal=goal)
                 goal_set = True
@@ -593,11 +595,20 @@ class MetaExecutor:
         goal = refinement.goal_atoms()
         problem_goal = list(getattr(self.problem, "goal", None) or [])
         add, delete = refinement.fact_atoms()
+        base = self._base_plan()
         if goal is not None:
-            weak = weakened_goal(problem_goal, goal, touched_entities([*add, *delete], [refinement.rebind_symbols()]))
+            # the entities the learning run's guard let the goal be restated for: those whose facts it perceived,
+            # those it rebound, and the perceived objects its plan moves otherwise than the hand-written plan (a
+            # re-tiling's blocks) -- the same rule as when the repair applied, so a refinement that was saved
+            # is also planned with
+            moved = set() if base is None else _rearranged_calls(
+                [tuple(str(a) for a in n.task) for n in base.steps()],
+                [_call_of(s) for s in refinement.subtasks], self._perceived())
+            weak = weakened_goal(problem_goal, goal, touched_entities([*add, *delete],
+                                                                      [refinement.rebind_symbols(),
+                                                                       {e: e for e in moved}]))
             if weak:
                 return "its goal is weaker than the problem's: " + ", ".join(atom_text(g) for g in weak) + " dropped"
-        base = self._base_plan()
         if base is None:
             return None
         needed = [atom_text(c) for c in verification_calls(self.world, base)]
@@ -605,6 +616,12 @@ class MetaExecutor:
         if missing:
             return "its plan leaves out the verification step(s) " + ", ".join(m[0] for m in missing)
         return None
+
+    def _perceived(self) -> set[str]:
+        """The objects the world reports now, and the task-file symbols grounded as them."""
+        objects = _objects(self.world)
+        names = _world_names(self.world, self.problem)
+        return set(objects) | {symbol for symbol, name in names.items() if name in objects}
 
     def _base_plan(self, problem: Any = None) -> PlanState | None:
         """The hand-written methods' plan of the problem from its initial state (``problem``: another start)."""
@@ -805,12 +822,25 @@ def _expected_by(failures: list[Failure], plan_state: PlanState, expected: list[
 
 def _rearranged(before: PlanState, after: PlanState, perceived: set[str]) -> set[str]:
     """The perceived objects named by steps ``after`` runs differently from ``before`` (from where either resumes)."""
-    def calls(state: PlanState) -> Counter[tuple[str, ...]]:
-        return Counter(tuple(str(a) for a in n.task) for n in state.steps()[state.cursor:])
+    def calls(state: PlanState) -> list[tuple[str, ...]]:
+        return [tuple(str(a) for a in n.task) for n in state.steps()[state.cursor:]]
 
-    old, new = calls(before), calls(after)
+    return _rearranged_calls(calls(before), calls(after), perceived)
+
+
+def _rearranged_calls(before: Iterable[tuple[str, ...]], after: Iterable[tuple[str, ...]],
+                      perceived: set[str]) -> set[str]:
+    """The perceived objects named by calls that ``after`` has and ``before`` has not, or the other way round."""
+    old, new = Counter(before), Counter(after)
     changed = (old - new) + (new - old)
     return {str(a) for call in changed for a in call[1:] if str(a) in perceived}
+
+
+def _call_of(text: str) -> tuple[str, ...]:
+    """``place(b1, 0, 0)`` -> ``("place", "b1", "0", "0")`` (a refinement's subtask, as :func:`atom_text` wrote it)."""
+    name, _, rest = text.strip().partition("(")
+    args = rest.rstrip().removesuffix(")")
+    return (name.strip(), *(a.strip() for a in args.split(",") if a.strip()))
 
 
 def _mapping_of(proposal: dict[str, Any]) -> dict[str, Any]:

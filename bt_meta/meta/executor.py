@@ -207,9 +207,13 @@ class MetaExecutor:
         # Perceived entity facts of the refinements that apply here: known to the world and the planner (below).
         anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]] = (set(), set())
         assumed = planned.state  # what the problem assumed, before any perceived facts
+        declared = planned  # the problem as the hand-written methods plan it (a fallback starts from it)
         planned = self._perceive(domain, [stored[n] for n in added if n in stored], planned, run, anchored,
                                  report.rebound)
         start_state = planned.state
+        # the refinements' perceived facts (added, deleted): a fallback to the hand-written plan takes them back
+        learned_facts = ({tuple(a) for a in planned.state} - {tuple(a) for a in declared.state},
+                         {tuple(a) for a in declared.state} - {tuple(a) for a in planned.state})
         start_objects = _objects(self.world)
         run.start_objects = start_objects  # what repair plugins compare the start with (a part's first orientation)
         run.emit("run_start", task_file=getattr(self.task_file, "path", None), problem=name,
@@ -283,7 +287,8 @@ class MetaExecutor:
             if report.refinements_used and not report.attempts and report.fallback is None:
                 # the learned plan failed on replay: demote it, go back to the plan it refined (the hand-written
                 # methods' plan) and repair that, so a learned repair never turns a success into a failure
-                fallback = self._fall_back(report, plan_state, failures, planned, run, external, plan_budget)
+                fallback = self._fall_back(report, plan_state, failures, declared, run, external, plan_budget,
+                                           learned_facts, anchored)
                 if fallback is not None:
                     plan_state, origin_plan = fallback, [[a, *args] for a, args in fallback.full_plan()]
                     domain = self.base_domain
@@ -643,11 +648,17 @@ class MetaExecutor:
         return found
 
     def _fall_back(self, report: RunReport, plan_state: PlanState, failures: list[Failure], planned: Any,
-                   run: RunContext, external: Any, budget: float) -> PlanState | None:
+                   run: RunContext, external: Any, budget: float,
+                   learned_facts: tuple[set[tuple[str, ...]], set[tuple[str, ...]]] = (set(), set()),
+                   anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]] | None = None) -> PlanState | None:
         """After the first failure of a plan from learned refinements: demote them, and the plan state to go on
         with -- the hand-written plan at the failed step when the learned plan ran as it does up to there, else
         the hand-written methods planned from the state the world is in now (``None`` when they plan nothing:
-        the learned plan is then repaired as it stands)."""
+        the learned plan is then repaired as it stands). The hand-written plan is the one of ``planned``, the
+        problem as declared, and going on with it from the failed step takes the demoted refinements' perceived
+        facts (``learned_facts``: added, deleted) back out of the world's state: with them (a 1x2 bar believed a
+        1x1) the hand-written methods do not apply, and the first exposure's own repair is never reached again;
+        the repair perceives them again when it needs them."""
         from bt_meta.htn import plan
 
         failure = failures[-1]
@@ -667,6 +678,18 @@ class MetaExecutor:
             if failed <= same:  # nothing the refinement changed has run: the hand-written plan from here
                 fallback = dataclasses.replace(base, cursor=min(failed, len(hand)), rebound=dict(plan_state.rebound))
                 how = f"the hand-written plan from step {fallback.cursor}"
+                added, deleted = learned_facts
+                apply = getattr(self.world, "apply_symbolic", None)
+                if (added or deleted) and apply is not None:
+                    apply(add=sorted(deleted), delete=sorted(added))
+                    symbolic = getattr(self.world, "symbolic_state", None)
+                    if symbolic is not None:
+                        run.state = symbolic()
+                    if anchored is not None:
+                        anchored[0].difference_update(added)
+                        anchored[1].difference_update(deleted)
+                    run.problem = dataclasses.replace(planned, goal=list(getattr(run.problem, "goal", None) or []))
+                    how += " (the refinements' perceived facts taken back)"
         if fallback is None:
             state = run.state
             fresh = dataclasses.replace(self.problem, state=state, init=sorted(state))

@@ -623,10 +623,13 @@ class MetaExecutor:
         return None
 
     def _perceived(self) -> set[str]:
-        """The objects the world reports now, and the task-file symbols grounded as them."""
-        objects = _objects(self.world)
-        names = _world_names(self.world, self.problem)
-        return set(objects) | {symbol for symbol, name in names.items() if name in objects}
+        """The objects the world reports at the start, and the task-file symbols grounded as them (observed once
+        for all the stored refinements)."""
+        if getattr(self, "_perceived_at_start", None) is None:
+            objects = _objects(self.world)
+            names = _world_names(self.world, self.problem)
+            self._perceived_at_start = set(objects) | {symbol for symbol, name in names.items() if name in objects}
+        return self._perceived_at_start
 
     def _base_plan(self, problem: Any = None) -> PlanState | None:
         """The hand-written methods' plan of the problem from its initial state (``problem``: another start)."""

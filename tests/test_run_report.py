@@ -38,6 +38,8 @@ def test_a_shipped_variant_that_is_not_repaired_gets_its_page(tmp_path, capsys):
     page_text = page.read_text(encoding="utf-8")
     table = facts(page_text)
     assert table["variant"] == "active_on_side" and table["status"] == "failed"
+    assert table["description"].endswith("variant active_on_side: The active part lies on its side (magnet facing "
+                                         "-y); the nominal grasp and move misalign the magnets")
     assert table["failure kinds"] == "verification"
     assert table["task done (simulator)"].startswith("no")  # the goal checked on the true state, not bookkeeping
     assert "reference" in table["task done (simulator)"]
@@ -140,3 +142,23 @@ def test_record_report_to_an_unwritable_path_keeps_the_stored_episode(tmp_path, 
     captured = capsys.readouterr()
     assert code == 2 and "cannot write the report" in captured.err and "recorded episode" in captured.out
     assert main(["memory", "ls", "--memory", memory]) == 0 and "nominal" in capsys.readouterr().out
+
+
+def test_the_page_says_what_the_variant_is():
+    """The scene's and the variant's ``description:`` (a generated variant's names its perturbations) head the page;
+    the nominal run shows the scene's alone, and a scene without descriptions shows none."""
+    from types import SimpleNamespace
+
+    from bt_meta.runs.report import render_run_report, variant_description
+
+    perturbed = SimpleNamespace(description="replace_shape (objects b4 b0, into b4)")
+    scene = SimpleNamespace(description="letters_A perturbed (1 change(s))", variants={"perturbed": perturbed})
+    world = SimpleNamespace(scene=scene, variant="perturbed")
+    text = variant_description(world)
+    assert text == "letters_A perturbed (1 change(s)); variant perturbed: replace_shape (objects b4 b0, into b4)"
+    assert facts(render_run_report({"variant": "perturbed", "description": text, "report": {}}))["description"] == text
+    assert variant_description(SimpleNamespace(scene=scene, variant="nominal")) == "letters_A perturbed (1 change(s))"
+    bare = SimpleNamespace(description="", variants={"v": SimpleNamespace(description="b0 turned over")})
+    assert variant_description(SimpleNamespace(scene=bare, variant="v")) == "variant v: b0 turned over"
+    assert variant_description(SimpleNamespace(scene=SimpleNamespace(description="", variants={}), variant="x")) is None
+    assert "description" not in facts(render_run_report({"variant": "x", "description": None, "report": {}}))

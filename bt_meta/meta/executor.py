@@ -207,9 +207,13 @@ class MetaExecutor:
         # Perceived entity facts of the refinements that apply here: known to the world and the planner (below).
         anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]] = (set(), set())
         assumed = planned.state  # what the problem assumed, before any perceived facts
+        declared = planned  # the problem as the hand-written methods plan it (a fallback starts from it)
         planned = self._perceive(domain, [stored[n] for n in added if n in stored], planned, run, anchored,
                                  report.rebound)
         start_state = planned.state
+        # the refinements' perceived facts (added, deleted): a fallback to the hand-written plan takes them back
+        learned_facts = ({tuple(a) for a in planned.state} - {tuple(a) for a in declared.state},
+                         {tuple(a) for a in declared.state} - {tuple(a) for a in planned.state})
         start_objects = _objects(self.world)
         run.start_objects = start_objects  # what repair plugins compare the start with (a part's first orientation)
         run.emit("run_start", task_file=getattr(self.task_file, "path", None), problem=name,
@@ -283,7 +287,8 @@ class MetaExecutor:
             if report.refinements_used and not report.attempts and report.fallback is None:
                 # the learned plan failed on replay: demote it, go back to the plan it refined (the hand-written
                 # methods' plan) and repair that, so a learned repair never turns a success into a failure
-                fallback = self._fall_back(report, plan_state, failures, planned, run, external, plan_budget)
+                fallback = self._fall_back(report, plan_state, failures, declared, run, external, plan_budget,
+                                           learned_facts, anchored)
                 if fallback is not None:
                     plan_state, origin_plan = fallback, [[a, *args] for a, args in fallback.full_plan()]
                     domain = self.base_domain
@@ -381,7 +386,8 @@ class MetaExecutor:
             add, delete = refinement.fact_atoms()
             method = methods.get(refinement.method)
             symbols = refinement.rebind_symbols()
-            if not (add or delete or symbols) or method is None:
+            goal = refinement.goal_atoms()
+            if not (add or delete or symbols or goal is not None) or method is None:
                 continue
             try:
                 holds = method.precondition.holds(problem.state, {}, self.plugins.external_predicate)
@@ -394,19 +400,20 @@ class MetaExecutor:
                 log.info("meta: refinement %s applies; it rebinds %s", refinement.method, symbols)
                 _rebind(self.world, {}, symbols)
                 rebound.update(symbols)
-            if not (add or delete):
-                continue
-            log.info("meta: refinement %s applies; its perceived facts join the state: +%s -%s", refinement.method,
-                     ", ".join(atom_text(a) for a in add), ", ".join(atom_text(a) for a in delete))
-            if apply is not None:
-                apply(add=add, delete=delete)
-            state = problem.state.apply(add=add, delete=delete)
-            init = [a for a in problem.init if tuple(a) not in set(delete)]
-            problem = dataclasses.replace(problem, init=[*init, *(a for a in add if a not in problem.state)],
-                                          state=state)
-            _note_changes(anchored, set(), set(add))
-            _note_changes(anchored, set(delete), set())
-            goal = refinement.goal_atoms()
+            if add or delete:
+                log.info("meta: refinement %s applies; its perceived facts join the state: +%s -%s",
+                         refinement.method, ", ".join(atom_text(a) for a in add),
+                         ", ".join(atom_text(a) for a in delete))
+                if apply is not None:
+                    apply(add=add, delete=delete)
+                state = problem.state.apply(add=add, delete=delete)
+                init = [a for a in problem.init if tuple(a) not in set(delete)]
+                problem = dataclasses.replace(problem, init=[*init, *(a for a in add if a not in problem.state)],
+                                              state=state)
+                _note_changes(anchored, set(), set(add))
+                _note_changes(anchored, set(delete), set())
+            # a refinement that restates the goal (a part moved elsewhere, nothing perceived about it) is planned
+            # towards that goal too: the planner would else refuse its plan for the problem's goal
             if goal is not None and not goal_set:  # the planner checks the goal: the one this refinement achieves
                 problem = dataclasses.replace(problem, goal=goal)
                 goal_set = True
@@ -593,11 +600,20 @@ class MetaExecutor:
         goal = refinement.goal_atoms()
         problem_goal = list(getattr(self.problem, "goal", None) or [])
         add, delete = refinement.fact_atoms()
+        base = self._base_plan()
         if goal is not None:
-            weak = weakened_goal(problem_goal, goal, touched_entities([*add, *delete], [refinement.rebind_symbols()]))
+            # the entities the learning run's guard let the goal be restated for: those whose facts it perceived,
+            # those it rebound, and the perceived objects its plan moves otherwise than the hand-written plan (a
+            # re-tiling's blocks) -- the same rule as when the repair applied, so a refinement that was saved
+            # is also planned with
+            moved = set() if base is None else _rearranged_calls(
+                [tuple(str(a) for a in n.task) for n in base.steps()],
+                [_call_of(s) for s in refinement.subtasks], self._perceived())
+            weak = weakened_goal(problem_goal, goal, touched_entities([*add, *delete],
+                                                                      [refinement.rebind_symbols(),
+                                                                       {e: e for e in moved}]))
             if weak:
                 return "its goal is weaker than the problem's: " + ", ".join(atom_text(g) for g in weak) + " dropped"
-        base = self._base_plan()
         if base is None:
             return None
         needed = [atom_text(c) for c in verification_calls(self.world, base)]
@@ -605,6 +621,15 @@ class MetaExecutor:
         if missing:
             return "its plan leaves out the verification step(s) " + ", ".join(m[0] for m in missing)
         return None
+
+    def _perceived(self) -> set[str]:
+        """The objects the world reports at the start, and the task-file symbols grounded as them (observed once
+        for all the stored refinements)."""
+        if getattr(self, "_perceived_at_start", None) is None:
+            objects = _objects(self.world)
+            names = _world_names(self.world, self.problem)
+            self._perceived_at_start = set(objects) | {symbol for symbol, name in names.items() if name in objects}
+        return self._perceived_at_start
 
     def _base_plan(self, problem: Any = None) -> PlanState | None:
         """The hand-written methods' plan of the problem from its initial state (``problem``: another start)."""
@@ -626,11 +651,17 @@ class MetaExecutor:
         return found
 
     def _fall_back(self, report: RunReport, plan_state: PlanState, failures: list[Failure], planned: Any,
-                   run: RunContext, external: Any, budget: float) -> PlanState | None:
+                   run: RunContext, external: Any, budget: float,
+                   learned_facts: tuple[set[tuple[str, ...]], set[tuple[str, ...]]] = (set(), set()),
+                   anchored: tuple[set[tuple[str, ...]], set[tuple[str, ...]]] | None = None) -> PlanState | None:
         """After the first failure of a plan from learned refinements: demote them, and the plan state to go on
         with -- the hand-written plan at the failed step when the learned plan ran as it does up to there, else
         the hand-written methods planned from the state the world is in now (``None`` when they plan nothing:
-        the learned plan is then repaired as it stands)."""
+        the learned plan is then repaired as it stands). The hand-written plan is the one of ``planned``, the
+        problem as declared, and going on with it from the failed step takes the demoted refinements' perceived
+        facts (``learned_facts``: added, deleted) back out of the world's state: with them (a 1x2 bar believed a
+        1x1) the hand-written methods do not apply, and the first exposure's own repair is never reached again;
+        the repair perceives them again when it needs them."""
         from bt_meta.htn import plan
 
         failure = failures[-1]
@@ -650,6 +681,18 @@ class MetaExecutor:
             if failed <= same:  # nothing the refinement changed has run: the hand-written plan from here
                 fallback = dataclasses.replace(base, cursor=min(failed, len(hand)), rebound=dict(plan_state.rebound))
                 how = f"the hand-written plan from step {fallback.cursor}"
+                added, deleted = learned_facts
+                apply = getattr(self.world, "apply_symbolic", None)
+                if (added or deleted) and apply is not None:
+                    apply(add=sorted(deleted), delete=sorted(added))
+                    symbolic = getattr(self.world, "symbolic_state", None)
+                    if symbolic is not None:
+                        run.state = symbolic()
+                    if anchored is not None:
+                        anchored[0].difference_update(added)
+                        anchored[1].difference_update(deleted)
+                    run.problem = dataclasses.replace(planned, goal=list(getattr(run.problem, "goal", None) or []))
+                    how += " (the refinements' perceived facts taken back)"
         if fallback is None:
             state = run.state
             fresh = dataclasses.replace(self.problem, state=state, init=sorted(state))
@@ -805,12 +848,25 @@ def _expected_by(failures: list[Failure], plan_state: PlanState, expected: list[
 
 def _rearranged(before: PlanState, after: PlanState, perceived: set[str]) -> set[str]:
     """The perceived objects named by steps ``after`` runs differently from ``before`` (from where either resumes)."""
-    def calls(state: PlanState) -> Counter[tuple[str, ...]]:
-        return Counter(tuple(str(a) for a in n.task) for n in state.steps()[state.cursor:])
+    def calls(state: PlanState) -> list[tuple[str, ...]]:
+        return [tuple(str(a) for a in n.task) for n in state.steps()[state.cursor:]]
 
-    old, new = calls(before), calls(after)
+    return _rearranged_calls(calls(before), calls(after), perceived)
+
+
+def _rearranged_calls(before: Iterable[tuple[str, ...]], after: Iterable[tuple[str, ...]],
+                      perceived: set[str]) -> set[str]:
+    """The perceived objects named by calls that ``after`` has and ``before`` has not, or the other way round."""
+    old, new = Counter(before), Counter(after)
     changed = (old - new) + (new - old)
     return {str(a) for call in changed for a in call[1:] if str(a) in perceived}
+
+
+def _call_of(text: str) -> tuple[str, ...]:
+    """``place(b1, 0, 0)`` -> ``("place", "b1", "0", "0")`` (a refinement's subtask, as :func:`atom_text` wrote it)."""
+    name, _, rest = text.strip().partition("(")
+    args = rest.rstrip().removesuffix(")")
+    return (name.strip(), *(a.strip() for a in args.split(",") if a.strip()))
 
 
 def _mapping_of(proposal: dict[str, Any]) -> dict[str, Any]:

@@ -208,8 +208,9 @@ def render_run_report(run: dict[str, Any], *, title: str = "run report", back: s
     run (``variant``, ``configuration``, ``seed``, ``expected``, ``status``, ``kinds``, ``error``, ...);
     ``pictures`` (from :func:`run_pictures`) adds the top views, the ticked trees and the grid-maps."""
     report = run.get("report") or {}
-    known = [(key, run[key]) for key in ("file", "problem", "scene", "robot", "family", "variant", "configuration",
-                                         "seed", "sensing", "expected") if run.get(key) is not None]
+    known = [(key, run[key]) for key in ("file", "problem", "scene", "robot", "family", "variant", "description",
+                                         "configuration", "seed", "sensing", "expected")
+             if run.get(key) is not None]
     status = str(run.get("status") or report.get("status"))
     facts = "".join(f"<tr><th>{esc(k)}</th><td>{esc(v)}</td></tr>" for k, v in known)
     facts += (f"<tr><th>status</th><td>{status_pill(status)}</td></tr>"
@@ -390,6 +391,7 @@ class RunPage:
                        "plan": [line.split() for line in out.get("plan") or []],
                        "simulated_seconds": round(world.sim.steps * world.sim.time_step, 3)})
         self.run = {key: out.get(key) for key in ("file", "problem", "scene", "robot", "variant", "seed")}
+        self.run["description"] = variant_description(world)
         self.run.update({"status": status, "kinds": sorted({str(f.get("kind")) for f in out.get("failures") or []}),
                          "seconds": out.get("run_seconds"), "report": report})
         self.pictures = run_pictures(self.capture, self.before_png, top_view_png(world))
@@ -412,6 +414,24 @@ class RunPage:
         except OSError as error:
             raise UserInputError(f"cannot write the report: {error.strerror or error} (the result above stands)",
                                  str(path)) from None
+
+
+def variant_description(world: Any) -> str | None:
+    """What the run's scene and variant are, as their file describes them (``description:`` of the scene and of
+    the variant; a generated variant's says which perturbations made it), or ``None`` when neither has one: the
+    page's reader sees what was changed without opening the scene file."""
+    scene = getattr(world, "scene", None)
+    if scene is None:
+        return None
+    variant = getattr(world, "variant", None)
+    chosen = (getattr(scene, "variants", None) or {}).get(variant) if variant not in (None, "nominal") else None
+    parts = [str(text).strip() for text in (getattr(scene, "description", ""), getattr(chosen, "description", ""))
+             if text and str(text).strip()]
+    if not parts:
+        return None
+    if len(parts) == 2:
+        return f"{parts[0]}; variant {variant}: {parts[1]}"
+    return parts[0] if chosen is None or not getattr(chosen, "description", "") else f"variant {variant}: {parts[0]}"
 
 
 def judge_world(task_path: Path, task_file: Any, problem: Any, world: Any) -> tuple[bool | None, str]:

@@ -9,9 +9,16 @@ import json
 import sqlite3
 from typing import Any
 
+from bt_meta.bt.failures import RepairProposal
+from bt_meta.htn import load_task_file
+from bt_meta.htn.state import atom_text
 from bt_meta.memory import EpisodicMemory
 from bt_meta.memory.schema import SCHEMA_VERSION
 from bt_meta.meta import MetaExecutor, RefinementStore
+from bt_meta.meta.refinements import Refinement
+from bt_meta.plugins import hookimpl
+from bt_meta.resources import trees_dir
+from bt_meta.world.fake import Fault
 
 from .conftest import VARIANT_POSE, PosedWorld, make_host
 from .test_refinements import GraspFromTheOtherSide
@@ -135,3 +142,56 @@ def test_a_v3_memory_migrates_with_its_refinements(attach, tmp_path):
         assert (stored.method, stored.robot, stored.status, stored.replays) == (method, None, "active", 0)
         replay, _ = _run(attach, store, robot="arm_b")  # unknown robot: replayed as before v4
         assert replay.refinements_used == [method] and replay.attempts == []
+
+
+class MoveTheBar:
+    """A re-tiling stand-in: the bar b5, refused where A's plan puts it, goes down on other cells instead."""
+
+    @hookimpl
+    def bt_meta_propose_repairs(self, failure: Any, context: Any) -> list[RepairProposal] | None:
+        if failure.step is None:
+            return None
+        return [RepairProposal("splice", 0.9, "the bar elsewhere",
+                               changes={"start": failure.step, "end": failure.step + 1,
+                                        "actions": [["place", "b5", "0.5", "1"]]})]
+
+
+def _letters_run(letters: Any, store: Any) -> Any:
+    from .test_perceived_refinements import NOMINAL_SCENE, SceneWorld
+
+    problem = letters.problem("A")
+    world = SceneWorld(letters.domain, problem, NOMINAL_SCENE)
+    world.faults.append(Fault.parse("place(b5, 1.5, 1)=fail:physical"))
+    host = make_host(("move_the_bar", MoveTheBar()))
+    return MetaExecutor(letters.domain, problem, world, host, refinements=store).run()
+
+
+def test_a_refinement_that_moves_a_seen_part_is_planned_with_again(tmp_path):
+    """The goal fact about a perceived part the repair put elsewhere is restated at save (the run's guard lets it);
+    the check before planning applies the same rule, so the refinement saved is also replayed (letters_A 0007,
+    0020, 0023 repaired again on every exposure)."""
+    letters = load_task_file(trees_dir() / "letters.yaml")
+    with RefinementStore.open(tmp_path / "memory.sqlite") as store:
+        learned = _letters_run(letters, store)
+        assert learned.ok and len(learned.attempts) == 1, learned.stop_reason
+        saved = learned.refinement_saved
+        assert ["at", "b5", "0.5", "1"] in saved["goal"] and ["at", "b5", "1.5", "1"] not in saved["goal"]
+        assert not saved.get("facts")  # nothing perceived about b5 accounts for the restated fact
+        again = _letters_run(letters, store)
+        assert again.refinements_skipped == []
+        assert again.ok and again.attempts == [] and again.refinements_used == [saved["method"]]
+
+
+def test_a_stored_goal_that_drops_a_fact_of_a_part_its_plan_does_not_move_is_refused(tmp_path):
+    """The bar's goal fact restated although the plan puts the bar where A's plan does: refused before planning."""
+    letters = load_task_file(trees_dir() / "letters.yaml")
+    with RefinementStore.open(tmp_path / "memory.sqlite") as store:
+        learned = _letters_run(letters, store)
+        store.note_replay(learned.refinement_saved["method"], succeeded=False, reason="set aside for the test")
+        store.add(Refinement(domain="letters", task="draw_A()", method="refined_bar_unmoved",
+                             precondition="true", subtasks=[atom_text(s) for s in learned.initial_plan],
+                             goal=[["at", "b5", "0.5", "1"]]))
+        again = _letters_run(letters, store)
+    reasons = {r["method"]: r["reason"] for r in again.refinements_skipped}
+    assert reasons["refined_bar_unmoved"] == "its goal is weaker than the problem's: at(b5, 1.5, 1) dropped"
+    assert again.refinements_used == [] and again.ok and len(again.attempts) == 1

@@ -17,7 +17,7 @@ from bt_meta.memory import EpisodicMemory
 from bt_meta.meta import MetaExecutor, RefinementStore
 from bt_meta.meta.refinements import domain_with_pose_predicate, rewrite_goal, seen_holds
 from bt_meta.resources import trees_dir
-from bt_meta.world.fake import FakeWorld
+from bt_meta.world.fake import FakeWorld, Fault
 
 from .conftest import make_host
 from .test_object_substitution import A_STEPS, H_STEPS, letter_trace
@@ -158,3 +158,27 @@ def test_a_domain_already_using_seen_cannot_take_refinements(letters):
         external=set(domain.context.external), axioms=domain.context.axioms))
     with pytest.raises(RefinementError, match="domain letters already uses 'seen' for something else"):
         domain_with_pose_predicate(clash)
+
+
+def test_a_failed_replay_falls_back_to_the_hand_written_plan_without_the_refinement_s_facts(letters, memory_file):
+    """The learned plan's first substituted placement fails on replay (on the Panda, the grasp of b5 beside the spare
+    collides from where b5 starts; the learning run grasped it where the failed placement had left it). The run
+    goes back to the hand-written plan at that step with the refinement's perceived facts taken out of the world's
+    state -- with them, b5 believed a 1x1, the hand-written methods plan nothing and the first exposure's own repair
+    is never reached -- and repairs it as the first exposure did (letters_A Panda s11 0008)."""
+    first, _ = run_a(letters, memory_file, TWO_RED)
+    method = first.refinement_saved["method"]
+    problem = letters.problem("A")
+    world = SceneWorld(letters.domain, problem, TWO_RED)
+    world.faults.append(Fault.parse("place(b5, 1, 1)#1=fail:collision"))
+    host = make_host(("object_substitution", object_substitution.ObjectSubstitution(matcher="gridmap")), retry=False)
+    with EpisodicMemory.open(memory_file) as memory, RefinementStore.open(memory_file) as store:
+        second = MetaExecutor(letters.domain, problem, world, host, refinements=store, memory=memory,
+                              variant="two red 1x1").run()
+        (stored,) = store.list()
+    assert second.refinements_used == [method] and second.refinements_demoted == [method]
+    assert second.fallback["to"] == "the hand-written plan from step 4 (the refinements' perceived facts taken back)"
+    assert second.ok, second.stop_reason
+    assert [(a.kind, a.proposal["plugin"]) for a in second.attempts] == [("unknown_entity", "object_substitution")]
+    assert second.plan == first.plan
+    assert (stored.method, stored.status, stored.failures) == (method, "demoted", 1)

@@ -68,3 +68,57 @@ def test_arm_masks_keep_only_pairs_an_arm_moves(kin):
                 for p in checker.geometry.collisionPairs]
     assert mask.tolist() == expected
     assert 0 < int(np.count_nonzero(mask)) < len(expected)
+
+
+def _fresh_like(kin, steps) -> CollisionChecker:
+    checker = CollisionChecker(kin)
+    for step in steps:
+        step(checker)
+    return checker
+
+
+def test_geometry_data_is_kept_per_pair_set_and_answers_as_a_fresh_one(kin):
+    """A grasp and its release switch between pair sets: the data made for a set serves again when it returns
+    (no rebuild), and every check, with and without the broad phase, an arm mask or a clearance, answers as a
+    checker built straight into the same state."""
+    import pinocchio as pin
+
+    q = kin.home
+    gripper = kin.end_effector_pose(q, "right")
+    below = gripper * pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.1]))
+    build = [lambda c: c.add_box("table", (1.0, 1.4, 0.1), (0.7, 0.0, -0.1)),
+             lambda c: c.add_box("held", (0.04, 0.04, 0.04), below),
+             lambda c: c.add_box("other", (0.04, 0.04, 0.04), (0.75, -0.3, -0.02))]
+    grasp = [lambda c: c.attach("held", "right_gripper", q)]
+    release = [lambda c: c.detach("held", below)]
+    checker = _fresh_like(kin, build)
+    rng = np.random.default_rng(3)
+    qs = [kin.q_from_dict({"right_s1": float(s1), "right_e1": float(e1)}, q)
+          for s1, e1 in zip(rng.uniform(-0.8, 0.6, 12), rng.uniform(0.0, 2.0, 12), strict=True)]
+
+    def answers(c: CollisionChecker) -> list:
+        out = []
+        for x in qs:
+            for options in ({}, {"arm": "right"}, {"scene": False}, {"carried_clearance": 0.01}):
+                contact = c.check(x, **options)
+                out.append(None if contact is None else contact.pair)
+        return out
+
+    first = checker.geometry_data
+    before = answers(checker)
+    for step in grasp:
+        step(checker)
+    carried = checker.geometry_data
+    assert carried is not first
+    assert answers(checker) == answers(_fresh_like(kin, build + grasp))
+    for step in release:
+        step(checker)
+    assert checker.geometry_data is first  # the released pair set is the first one again
+    assert answers(checker) == before == answers(_fresh_like(kin, build + grasp + release))
+    for step in grasp:
+        step(checker)
+    assert checker.geometry_data is carried
+    assert answers(checker) == answers(_fresh_like(kin, build + grasp))
+    checker.remove("other")  # a changed model keeps nothing made for the old one
+    assert checker.geometry_data is not carried
+    assert answers(checker) == answers(_fresh_like(kin, [build[0], build[1], *grasp]))

@@ -131,6 +131,12 @@ class CollisionChecker:
         """Geometry objects were added or removed: the model's pairs and the geometry data are made anew."""
         self._applied: np.ndarray | None = None
         """The pair activations the geometry data has now."""
+        self._touched: np.ndarray | None = None
+        """Pairs whose narrow phase may have run since the data was last as made (active at some check)."""
+        self._measured: set[int] = set()
+        """Pairs whose distance was computed since then."""
+        self._stale_guesses = False
+        """The pairs changed since the last check: the warm starts are put back before the next one."""
         self._rebuild_pairs()
 
     # -- pairs -------------------------------------------------------------------------------------------------
@@ -201,7 +207,7 @@ class CollisionChecker:
             self._applied = None
             self._model_stale = False
         elif self._geometry_data is not None:
-            self._as_made()
+            self._stale_guesses = True
         self._checked = active[self._pairs[:, 0], self._pairs[:, 1]]
         self._masks = {}
         self._carried: dict[bool, list[int]] | None = None
@@ -214,10 +220,21 @@ class CollisionChecker:
         then to the last digit (a penetration depth, which pair the broad phase reaches first)."""
         data = self._geometry_data
         guess, hint = np.array([1.0, 0.0, 0.0]), np.zeros(2, dtype=np.int32)
-        for request in (*data.collisionRequests, *data.distanceRequests):
+        requests = data.collisionRequests
+        for k in np.flatnonzero(self._touched).tolist():
+            request = requests[k]
             request.cached_gjk_guess = guess
             request.cached_support_func_guess = hint
+        requests = data.distanceRequests
+        for k in self._measured:
+            request = requests[k]
+            request.cached_gjk_guess = guess
+            request.cached_support_func_guess = hint
+        self._touched = np.zeros(len(self._pairs), dtype=bool)
+        self._measured = set()
+        self._active_key = None  # the next check marks the pairs it activates as touched
         self._broadphase = None
+        self._stale_guesses = False
 
     @property
     def geometry_data(self) -> pin.GeometryData:
@@ -227,8 +244,13 @@ class CollisionChecker:
             for request in self._geometry_data.collisionRequests:
                 request.enable_contact = True
             self._applied = np.ones(len(self._pairs), dtype=bool)  # createData activates every pair
+            self._touched = np.zeros(len(self._pairs), dtype=bool)
+            self._measured = set()
             self._active_key = None
             self._broadphase = None
+            self._stale_guesses = False
+        elif self._stale_guesses:
+            self._as_made()
         if self._broadphase is None:
             self._broadphase = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(
                 self._model, self.geometry, self._geometry_data
@@ -504,6 +526,7 @@ class CollisionChecker:
                 else:
                     data.deactivateCollisionPair(k)
             self._applied = mask.copy()
+            self._touched |= mask
             self._active_key = key
         return data, mask
 
@@ -520,6 +543,7 @@ class CollisionChecker:
         for k, pair in enumerate(self.geometry.collisionPairs):
             if pair.second != index or not self._checked[k]:
                 continue
+            self._measured.add(k)
             result = pin.computeDistance(self.geometry, data, k)
             if result.min_distance < best:
                 best, link = float(result.min_distance), self._link_of[pair.first]

@@ -14,6 +14,7 @@ Offers:
 
 * :func:`cached` -- the value for a key, computed by a function on a miss (or every time when caching is off)
 * :func:`file_signature` -- the part of a key that changes when a file does
+* :func:`signature_or_none` -- the same for what may name a file or not
 * :func:`enabled` -- whether caching is on
 * :func:`clear_entry` / :func:`clear` -- forget one entry / every entry (tests)
 """
@@ -25,7 +26,7 @@ from collections.abc import Callable, Hashable
 from pathlib import Path
 from typing import Any, TypeVar
 
-__all__ = ["cached", "clear", "clear_entry", "enabled", "file_signature"]
+__all__ = ["cached", "clear", "clear_entry", "enabled", "file_signature", "signature_or_none"]
 
 T = TypeVar("T")
 
@@ -44,6 +45,17 @@ def file_signature(path: str | Path | None) -> tuple[str, int, int] | None:
     resolved = Path(path).resolve()
     stat = resolved.stat()
     return (str(resolved), stat.st_size, stat.st_mtime_ns)
+
+
+def signature_or_none(path: Any) -> tuple[str, int, int] | None:
+    """:func:`file_signature` of ``path`` when it names a file, else ``None`` (a scene's name, a missing file: the
+    computation keyed by it then reads or fails as it would uncached; a failure is not remembered)."""
+    if not path:
+        return None
+    try:
+        return file_signature(path) if Path(path).is_file() else None
+    except (OSError, ValueError):
+        return None
 
 
 def cached(key: Hashable, compute: Callable[[], T]) -> T:

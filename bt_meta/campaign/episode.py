@@ -56,14 +56,30 @@ def seed_label(task: dict[str, Any]) -> Any:
     elsewhere, which can carry one across a threshold of the labeller's (a distractor's reach into a letter cell).
     The family's scene stands in for a base scene path that another install of bt-meta wrote (the same file name);
     another missing one is an error naming it."""
-    from bt_meta.campaign.families import family_of_manifest
-    from bt_meta.campaign.generator import VARIANT_NAME
-    from bt_meta.campaign.labeller import START_SEED, Labeller
-    from bt_meta.errors import ConfigError
-    from bt_meta.world.simulation.scenes import load_scene
+    from bt_meta.campaign.families import shipped_dir
+    from bt_meta.campaign.labeller import START_SEED
+    from bt_meta.model_cache import cached, signature_or_none
 
     if int(task["seed"]) == START_SEED:
         return None
+    # Every configuration of a campaign runs each variant and seed: the label is theirs alike, found once per
+    # process (~0.3 s; keyed by the files the task names, so an edited scene or task file is labelled again).
+    key = ("seed_label", *(repr(task.get(k, ...)) for k in ("family", "shipped", "family_file", "task_file", "problem",
+                                                       "family_scene", "base_scene", "scene", "scene_variant",
+                                                       "robot", "seed")),
+           *(signature_or_none(task.get(k)) for k in ("family_file", "task_file", "family_scene", "base_scene",
+                                                       "scene", "robot")),
+           signature_or_none(shipped_dir() / f"{task.get('family')}.yaml"))
+    return cached(key, lambda: _label_for_seed(task))
+
+
+def _label_for_seed(task: dict[str, Any]) -> Any:
+    from bt_meta.campaign.families import family_of_manifest
+    from bt_meta.campaign.generator import VARIANT_NAME
+    from bt_meta.campaign.labeller import Labeller
+    from bt_meta.errors import ConfigError
+    from bt_meta.world.simulation.scenes import load_scene
+
     chosen = family_of_manifest(task)
     base = task.get("base_scene") or chosen.scene
     if not Path(base).exists() and Path(base).suffix:

@@ -300,7 +300,19 @@ def family_spec(chosen: CampaignFamily, scene: Any = None, roles: Mapping[str, S
 
 def family_of_manifest(manifest: Mapping[str, Any]) -> CampaignFamily:
     """The family a campaign was generated from: a shipped one by name (this install's file), else its family file
-    or task file as the manifest records them."""
+    or task file as the manifest records them. Read once per process for the same files (an episode asks for it
+    to label its seed and for each of its runs: ~50 ms a time; an edited file is read again)."""
+    from bt_meta.model_cache import cached, signature_or_none
+
+    key = ("family_of_manifest", *(str(manifest.get(k)) for k in ("shipped", "family", "family_file", "task_file",
+                                                                      "problem", "family_scene")),
+           *(signature_or_none(p) for p in (manifest.get("family_file"), manifest.get("task_file"),
+                                            manifest.get("family_scene"),
+                                            shipped_dir() / f"{manifest.get('family')}.yaml")))
+    return cached(key, lambda: _family_of_manifest(manifest))
+
+
+def _family_of_manifest(manifest: Mapping[str, Any]) -> CampaignFamily:
     shipped = manifest.get("shipped")
     if shipped is None:  # a bare {family: NAME} (bt-meta bench episode): the shipped family of that name
         shipped = not manifest.get("family_file") and str(manifest.get("family")) in shipped_families()

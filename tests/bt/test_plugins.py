@@ -41,6 +41,40 @@ def test_entry_points_load_the_shipped_plugins():
     assert "entry point bt_meta_plugins.reporting" in {p["source"] for p in host.describe()}
 
 
+def test_installed_entry_points_are_read_once_while_the_path_stays(tmp_path, monkeypatch):
+    """A worker makes a plugin host per episode: the distributions' metadata is read once, again when sys.path
+    or one of its folders changes (a distribution installed), and every time with the model cache off."""
+    import importlib.metadata
+    import os
+    import sys
+
+    reads = []
+    real = importlib.metadata.entry_points
+
+    def counting(**options):
+        reads.append(options)
+        return real(**options)
+
+    monkeypatch.setattr(importlib.metadata, "entry_points", counting)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    first = create_plugin_host()
+    assert len(reads) == 1 and create_plugin_host().plugin_names() == first.plugin_names() and len(reads) == 1
+    from bt_meta.plugins import installed_entry_points
+
+    assert installed_entry_points() == installed_entry_points() and len(reads) == 1
+    stat = os.stat(tmp_path)
+    os.utime(tmp_path, ns=(stat.st_atime_ns, stat.st_mtime_ns + 1_000_000_000))
+    installed_entry_points()
+    assert len(reads) == 2
+    monkeypatch.setattr(sys, "path", [*sys.path, str(tmp_path / "elsewhere")])
+    installed_entry_points()
+    assert len(reads) == 3
+    monkeypatch.setenv("BT_META_MODEL_CACHE", "0")
+    installed_entry_points()
+    installed_entry_points()
+    assert len(reads) == 5
+
+
 def test_folder_plugin_is_loaded_and_called(tmp_path):
     (tmp_path / "colours.py").write_text(textwrap.dedent("""
         from bt_meta.plugins import hookimpl

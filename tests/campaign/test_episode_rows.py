@@ -45,3 +45,42 @@ def test_a_run_without_attempts_or_that_failed_has_no_second_exposure(tmp_path, 
         row = episode.run_episode({"variant": "v", "configuration": "dual", "seed": 0, "expected": "repairable",
                                    "family": "magnetic", "memory": str(memory), "perfect_sensing": True})
         assert row["second_exposure"] is None
+
+
+def test_a_seeds_label_is_found_once_per_process_for_its_configurations(tmp_path, monkeypatch):
+    """The configurations of one variant and seed share its label: labelled once, again when the scene file is
+    edited, and every time with the model cache off; seed 0's is the manifest's (none labelled)."""
+    from bt_meta.campaign import labeller
+
+    made = []
+
+    class Counting:
+        def __init__(self, family, scene, start_seed, robot=None):
+            made.append(start_seed)
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return None
+
+        def label(self, scene_path, variant):
+            return labeller.Label("repairable", f"{scene_path} {variant} {made[-1]}")
+
+    monkeypatch.setattr(labeller, "Labeller", Counting)
+    scene = tmp_path / "variant.yaml"
+    scene.write_text("objects: []\n", encoding="utf-8")
+    task = {"family": "letters_A", "scene": str(scene), "seed": 1, "scene_variant": "v1"}
+    first = episode.seed_label(task)
+    assert [episode.seed_label({**task, "configuration": c}) for c in ("dual", "bt", "none")] == [first] * 3
+    assert made == [1]
+    assert episode.seed_label({**task, "seed": 2}).reason.endswith(" 2") and made == [1, 2]
+    assert episode.seed_label({**task, "scene_variant": None}) is not first and len(made) == 3
+    assert episode.seed_label({**task, "seed": 0}) is None and len(made) == 3
+    scene.write_text("objects: []  # edited\n", encoding="utf-8")
+    episode.seed_label(task)
+    assert len(made) == 4
+    monkeypatch.setenv("BT_META_MODEL_CACHE", "0")
+    episode.seed_label(task)
+    episode.seed_label(task)
+    assert len(made) == 6

@@ -126,3 +126,20 @@ def test_shipped_family_files_are_package_data():
     text = (Path(__file__).resolve().parents[2] / "setup.py").read_text(encoding="utf-8")
     assert '"families/*.yaml"' in text
     assert shutil.which("true")  # the environment runs commands (used by the slow tests)
+
+
+def test_a_manifests_family_is_read_once_per_process_and_again_when_its_file_changes(tmp_path, monkeypatch):
+    """An episode asks for its family to label its seed and for each run: one read serves while the files stay."""
+    from bt_meta.campaign.families import family_of_manifest
+
+    path = _family_file(tmp_path, "grasped: [active]\n")
+    manifest = {"family": "fam", "family_file": str(path), "task_file": str(trees_dir() / "magnetic_attach.yaml"),
+                "problem": "nominal", "shipped": False}
+    first = family_of_manifest(manifest)
+    assert family_of_manifest(dict(manifest)) is first and first.grasped == ("active",)
+    assert family_of_manifest({"family": "letters_A"}) is family_of_manifest({"family": "letters_A"})
+    path.write_text(path.read_text(encoding="utf-8").replace("grasped: [active]", "grasped: [reference]"),
+                    encoding="utf-8")
+    assert family_of_manifest(manifest).grasped == ("reference",)
+    monkeypatch.setenv("BT_META_MODEL_CACHE", "0")
+    assert family_of_manifest(manifest) is not family_of_manifest(manifest)

@@ -147,3 +147,25 @@ def test_a_move_slower_than_nothing_or_faster_than_the_arm_is_refused(world):
     for speed in (0.0, -0.5, 1.5):
         with pytest.raises(ValueError, match="speed must be in"):
             MoveTo(world, speed=speed)
+
+
+def test_the_finger_pads_are_checked_against_each_objects_pose_read_once(world, monkeypatch):
+    """Choosing a grasp yaw tests 108 pad points per pose against every other object: each object's pose is read
+    once per yaw (not once per point), and a point is inside an object alike either way."""
+    sim = world.sim
+    skill = Place(world)
+    skill.spec = {"frame": "letter"}
+    skill.start(["b1", "0", "1"])
+    reads = []
+    real = sim.object_transform
+    monkeypatch.setattr(sim, "object_transform", lambda name: reads.append(name) or real(name))
+    counts = [skill._finger_obstruction(yaw) for yaw in (0.0, 0.5 * np.pi, 0.25 * np.pi)]
+    assert len(reads) <= 3 * (len(list(sim.object_names())) + 4), len(reads)
+    monkeypatch.setattr(sim, "object_transform", real)
+    others = skill._others()
+    b0 = real("b0")[:3, 3]
+    points = [b0 + np.array([dx, dy, dz]) for dx in (-0.09, -0.02, 0.0, 0.015, 0.09)
+              for dy in (-0.09, 0.0, 0.02) for dz in (-0.01, 0.0, 0.09)]
+    inside = [skill._inside_others(p) for p in points]
+    assert inside == [skill._inside_others(p, others=others) for p in points] and 0 < sum(inside) < len(points)
+    assert all(c >= 0 for c in counts)

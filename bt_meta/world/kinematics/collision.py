@@ -123,6 +123,20 @@ class CollisionChecker:
         self._active_key: tuple[bool, bool, str | None] | None = None
         self._self_pairs: list[tuple[int, int]] | None = None
         self._pairs = np.zeros((0, 2), dtype=int)
+        """Every pair the model holds (Pinocchio's ``collisionPairs``, in order): all that the rules could pair
+        among the geometry objects there are now."""
+        self._checked = np.zeros(0, dtype=bool)
+        """Which of :attr:`_pairs` the rules pair now (the rest stay inactive in the geometry data)."""
+        self._model_stale = True
+        """Geometry objects were added or removed: the model's pairs and the geometry data are made anew."""
+        self._applied: np.ndarray | None = None
+        """The pair activations the geometry data has now."""
+        self._touched: np.ndarray | None = None
+        """Pairs whose narrow phase may have run since the data was last as made (active at some check)."""
+        self._measured: set[int] = set()
+        """Pairs whose distance was computed since then."""
+        self._stale_guesses = False
+        """The pairs changed since the last check: the warm starts are put back before the next one."""
         self._rebuild_pairs()
 
     # -- pairs -------------------------------------------------------------------------------------------------
@@ -133,7 +147,11 @@ class CollisionChecker:
         return self.geometry.geometryObjects[geometry_index].name
 
     def _rebuild_pairs(self) -> None:
-        """Robot pairs minus the SRDF's, then every robot geometry against every scene object, minus allowed."""
+        """Robot pairs minus the SRDF's, then every robot geometry against every scene object, minus allowed.
+
+        The model holds every pair the rules could make among its geometry objects, set once per set of objects;
+        a grasp, a release or an allowed touch only switches pairs on and off in the geometry data (a new
+        ``GeometryData`` for each pair set cost 2-10 ms, about 40 times an episode)."""
         geometry = self.geometry
         objects = geometry.geometryObjects
         n_robot = self._robot_geometries
@@ -174,33 +192,83 @@ class CollisionChecker:
                 if (carried_by == 0 and other == 0) or carried_by == other or names[i] in partners:
                     continue
                 active[i, j] = True
-        geometry.setCollisionPairs(active, True)
-        self._pairs = np.argwhere(np.triu(active, 1))  # setCollisionPairs adds them in this (row-major) order
-        self._pair_kinds = ["self" if second < n_robot else "scene" for second in self._pairs[:, 1].tolist()]
+        if self._model_stale:
+            # every self pair the rules keep (they never change) and every pair with a scene object
+            possible = np.zeros_like(active)
+            if self._self_pairs:
+                possible[list(rows), list(columns)] = True
+            possible[:, n_robot:] = True
+            possible = np.triu(possible, 1)
+            geometry.setCollisionPairs(possible, True)
+            self._pairs = np.argwhere(possible)  # setCollisionPairs adds them in this (row-major) order
+            self._pair_kinds = ["self" if second < n_robot else "scene" for second in self._pairs[:, 1].tolist()]
+            self._geometry_data = None
+            self._broadphase = None
+            self._applied = None
+            self._model_stale = False
+        elif self._geometry_data is not None:
+            self._stale_guesses = True
+        self._checked = active[self._pairs[:, 0], self._pairs[:, 1]]
         self._masks = {}
         self._carried: dict[bool, list[int]] | None = None
-        self._geometry_data = None
+        self._active_key = None
+
+    def _as_made(self) -> None:
+        """Put the geometry data back as ``createData`` made it, but for its pair activations: coal warm-starts
+        each pair's narrow phase from its last result (the cached guesses in the requests), and the broad phase's
+        tree follows its updates; a fresh data per pair set reset both, and the checks must answer as they did
+        then to the last digit (a penetration depth, which pair the broad phase reaches first)."""
+        data = self._geometry_data
+        guess, hint = np.array([1.0, 0.0, 0.0]), np.zeros(2, dtype=np.int32)
+        requests = data.collisionRequests
+        for k in np.flatnonzero(self._touched).tolist():
+            request = requests[k]
+            request.cached_gjk_guess = guess
+            request.cached_support_func_guess = hint
+        requests = data.distanceRequests
+        for k in self._measured:
+            request = requests[k]
+            request.cached_gjk_guess = guess
+            request.cached_support_func_guess = hint
+        self._touched = np.zeros(len(self._pairs), dtype=bool)
+        self._measured = set()
+        self._active_key = None  # the next check marks the pairs it activates as touched
         self._broadphase = None
+        self._stale_guesses = False
 
     @property
     def geometry_data(self) -> pin.GeometryData:
+        """The geometry data of the model's pairs (activations as :meth:`_activate` last set them)."""
         if self._geometry_data is None:
             self._geometry_data = self.geometry.createData()
             for request in self._geometry_data.collisionRequests:
                 request.enable_contact = True
-            self._active_key = (True, True, None)
+            self._applied = np.ones(len(self._pairs), dtype=bool)  # createData activates every pair
+            self._touched = np.zeros(len(self._pairs), dtype=bool)
+            self._measured = set()
+            self._active_key = None
+            self._broadphase = None
+            self._stale_guesses = False
+        elif self._stale_guesses:
+            self._as_made()
+        if self._broadphase is None:
             self._broadphase = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(
                 self._model, self.geometry, self._geometry_data
             )
         return self._geometry_data
 
     @property
+    def checked_pairs(self) -> list[tuple[int, int]]:
+        """The pairs (geometry indices, first < second, in the order they are checked) the rules pair now."""
+        return [tuple(p) for p in self._pairs[self._checked].tolist()]
+
+    @property
     def n_self_pairs(self) -> int:
-        return self._pair_kinds.count("self")
+        return int(np.count_nonzero(self._checked & (np.array(self._pair_kinds, dtype=object) == "self")))
 
     @property
     def n_scene_pairs(self) -> int:
-        return self._pair_kinds.count("scene")
+        return int(np.count_nonzero(self._checked & (np.array(self._pair_kinds, dtype=object) == "scene")))
 
     @property
     def links(self) -> tuple[str, ...]:
@@ -247,6 +315,7 @@ class CollisionChecker:
         placement = as_se3(pose)
         self.geometry.addGeometryObject(pin.GeometryObject(name, 0, 0, placement, shape))
         self._objects[name] = description
+        self._model_stale = True
         self._rebuild_pairs()
 
     def _index(self, name: str) -> int:
@@ -279,6 +348,7 @@ class CollisionChecker:
         self.geometry.removeGeometryObject(name)
         del self._objects[name]
         self._allowed = {pair for pair in self._allowed if name not in pair}
+        self._model_stale = True
         self._rebuild_pairs()
 
     def clear_scene(self) -> None:
@@ -286,6 +356,7 @@ class CollisionChecker:
             self.geometry.removeGeometryObject(name)
         self._objects.clear()
         self._allowed.clear()
+        self._model_stale = True
         self._rebuild_pairs()
 
     def allow(self, name: str, others: Iterable[str]) -> None:
@@ -405,7 +476,7 @@ class CollisionChecker:
             objects = self.geometry.geometryObjects
             pairs = [(k, objects[first].name, objects[second].name)
                      for k, (first, second) in enumerate(self._pairs.tolist())
-                     if first >= n_robot and second >= n_robot]
+                     if first >= n_robot and second >= n_robot and self._checked[k]]
             self._carried = {
                 False: [k for k, a, b in pairs if TABLE not in (a, b)],
                 True: [k for k, a, b in pairs if not ({a, b} & self._fixed)]}
@@ -435,6 +506,7 @@ class CollisionChecker:
                 joints = np.array([g.parentJoint for g in self.geometry.geometryObjects], dtype=int)
                 moved_geometry = np.isin(joints, list(moved))
                 mask &= moved_geometry[self._pairs[:, 0]] | moved_geometry[self._pairs[:, 1]]
+            mask &= self._checked
             self._masks[key] = mask
         return mask
 
@@ -443,15 +515,18 @@ class CollisionChecker:
         return {j for j in range(self._model.njoints) if arm_joints & set(self._model.supports[j])}
 
     def _activate(self, key: tuple[bool, bool, str | None]) -> tuple[pin.GeometryData, np.ndarray]:
-        """Geometry data with exactly the wanted pairs active (switched only when the wish changes)."""
+        """Geometry data with exactly the wanted pairs active (switched only when the wish or the pairs change,
+        and then only the pairs that differ)."""
         data = self.geometry_data
         mask = self._mask(key)
         if self._active_key != key:
-            for k, active in enumerate(mask):
-                if active:
+            for k in np.flatnonzero(mask != self._applied).tolist():
+                if mask[k]:
                     data.activateCollisionPair(k)
                 else:
                     data.deactivateCollisionPair(k)
+            self._applied = mask.copy()
+            self._touched |= mask
             self._active_key = key
         return data, mask
 
@@ -466,8 +541,9 @@ class CollisionChecker:
         pin.updateGeometryPlacements(self._model, self._data, self.geometry, data, q)
         best, link = np.inf, ""
         for k, pair in enumerate(self.geometry.collisionPairs):
-            if pair.second != index:
+            if pair.second != index or not self._checked[k]:
                 continue
+            self._measured.add(k)
             result = pin.computeDistance(self.geometry, data, k)
             if result.min_distance < best:
                 best, link = float(result.min_distance), self._link_of[pair.first]

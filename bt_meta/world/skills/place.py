@@ -401,6 +401,7 @@ class Place(PhasedSkill):
         local_axis = ee[:3, :3].T @ sim.closing_axis(self.arm)  # in the gripper frame
         relative = yaw - object_yaw(block)
         top = world.object_top(self.block) - block[2, 3] + world.grasp_height(self.block, self.arm, 0.004)
+        others = self._others()  # 108 points per pose against every object: read each object's pose once
         count = 0
         for pose in (block, self._goal_block()):
             gripper_yaw = object_yaw(pose) + relative
@@ -416,17 +417,27 @@ class Place(PhasedSkill):
                         for z in np.linspace(tcp_z - gripper.fingertip, tcp_z + _PAD_HALF_WIDTH, 3):
                             point = pose[:3, 3] + side * a * axis + b * across
                             point[2] = z
-                            count += self._inside_others(point)
+                            count += self._inside_others(point, others=others)
         return count
 
-    def _inside_others(self, point: np.ndarray, margin: float = 0.002) -> int:
+    def _others(self) -> list[tuple[np.ndarray, np.ndarray, Any, Any]]:
+        """(transform, its position, extent low, extent high) of every object but the block, as they are now."""
         sim = self.world.sim
+        out = []
         for other in sim.object_names():
             if other == self.block:
                 continue
             t = sim.object_transform(other)
-            local = t[:3, :3].T @ (point - t[:3, 3])
             low, high = sim.object_model(other).extent()
+            out.append((t, t[:3, 3], low, high))
+        return out
+
+    def _inside_others(self, point: np.ndarray, margin: float = 0.002,
+                       others: list[tuple[np.ndarray, np.ndarray, Any, Any]] | None = None) -> int:
+        """1 when ``point`` lies within ``margin`` of another object's box (``others``: :meth:`_others`, read once
+        for many points), else 0."""
+        for t, origin, low, high in (self._others() if others is None else others):
+            local = t[:3, :3].T @ (point - origin)
             if np.all(local >= low - margin) and np.all(local <= high + margin):
                 return 1
         return 0

@@ -268,13 +268,16 @@ def _outcome(report: dict[str, Any]) -> dict[str, Any]:
 
 
 def _pose_difference(first: dict[str, Any], second: dict[str, Any]) -> tuple[float | None, str | None]:
-    """The largest distance (m) between an object's final positions both ways, or why there is none."""
+    """The largest distance (m) between an object's final positions both ways and that object, or why there is
+    none (``None`` and the reason)."""
     a, b = first.get("objects") or {}, second.get("objects") or {}
     if set(a) != set(b):
         return None, f"objects differ: {sorted(set(a) ^ set(b))}"
     if not a:
         return 0.0, None
-    return max(float(np.linalg.norm(np.subtract(a[n]["pose"][:3], b[n]["pose"][:3]))) for n in a), None
+    distances = {n: float(np.linalg.norm(np.subtract(a[n]["pose"][:3], b[n]["pose"][:3]))) for n in a}
+    worst = max(distances, key=distances.__getitem__)
+    return distances[worst], worst
 
 
 def compare(in_process: dict[str, Any], ros2: dict[str, Any]) -> dict[str, Any]:
@@ -287,16 +290,17 @@ def compare(in_process: dict[str, Any], ros2: dict[str, Any]) -> dict[str, Any]:
     for which, outcome in (("in-process", local), ("ROS 2", ros)):
         if "error" in outcome:
             reasons.append(f"{which} run failed: {outcome['error']}")
-    worst = None
+    worst = which = None
     if "error" not in local and "error" not in ros:
-        worst, missing = _pose_difference(in_process, ros2)
-        if missing:
-            reasons.append(missing)
-        elif worst is not None and worst >= POSE_TOLERANCE:
-            reasons.append(f"object poses differ by {worst * 1000:.3f} mm")
+        worst, which = _pose_difference(in_process, ros2)
+        if worst is None:
+            reasons.append(str(which))
+            which = None
+        elif worst >= POSE_TOLERANCE:
+            reasons.append(f"object poses differ by {worst * 1000:.3f} mm ({which})")
     return {"alike": not reasons, "why": "; ".join(reasons), "in_process": local, "ros2": ros,
             "same_ticks": local["ticks"] is not None and local["ticks"] == ros["ticks"],
-            "pose_difference_mm": None if worst is None else round(worst * 1000, 6)}
+            "pose_difference_mm": None if worst is None else round(worst * 1000, 6), "pose_difference_object": which}
 
 
 def _compare_record(label: str, both: dict[str, Any]) -> dict[str, Any]:

@@ -90,3 +90,30 @@ def test_tick_acts_through_ros2_too_and_exits_cleanly(serve):
     done = served.run("tick", LETTERS, "--problem", "A", "--world", "ros2", "--ticks", "2000", "--json")
     assert done.returncode == 0, done.stderr[-2000:]  # tick never closes its world: the connection closes at exit
     assert json.loads(done.stdout)["status"] == "SUCCESS"
+
+
+def _report(status="SUCCESS", kinds=("unknown_entity",), attempts=1, subtasks=("MoveTo(a)",), x=0.5):
+    return {"status": status, "failures": [{"kind": k} for k in kinds], "attempts": [{}] * attempts,
+            "refinement_saved": {"subtasks": list(subtasks)} if subtasks else None, "refinements_used": [],
+            "ticks": 100, "objects": {"bar": {"pose": [x, 0.0, 0.1, 0.0, 0.0, 0.0]},
+                                      "block": {"pose": [0.2, 0.1, 0.1, 0.0, 0.0, 0.0]}}}
+
+
+@pytest.mark.parametrize(("ros", "why"), [
+    (_report(x=0.5009), ""),
+    (_report(x=0.5011), "object poses differ by 1.100 mm (bar)"),
+    (_report(status="FAILURE"), "status: SUCCESS / FAILURE"),
+    (_report(kinds=("unknown_entity", "verification")), "failure_kinds: ['unknown_entity'] / ['unknown_entity', "
+                                                        "'verification']"),
+    (_report(attempts=2), "attempts: 1 / 2"),
+    (_report(subtasks=("MoveTo(b)",)), "learned refinements differ"),
+    ({"error": "exit 2: no server"}, "ROS 2 run failed: exit 2: no server"),
+])
+def test_compare_names_what_differs(ros, why):
+    from bt_meta.experiments.ros2_compare import compare
+
+    row = compare(_report(), ros)
+    assert row["alike"] is (why == "")
+    assert why in row["why"]
+    if why == "":
+        assert row["pose_difference_object"] == "bar" and abs(row["pose_difference_mm"] - 0.9) < 1e-6

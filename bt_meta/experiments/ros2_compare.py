@@ -14,6 +14,9 @@ A variant is **alike** when both ways end with the same status, the same failure
 repair attempts, the same learned refinement (its subtasks, or none) and the same refinements used, and every
 object's final position within :data:`POSE_TOLERANCE` of the other's. Ticks are shown and counted but are not part of
 the criterion (the issue's); a demonstration is alike when both recordings succeed with the same ticks and steps.
+Exit status 0 when every variant and demonstration is alike, 1 otherwise; a command that crashes or hangs is a row
+that is not alike (with its error), never the end of the comparison. Needs what ``bench ros2`` needs: the ``[ros2]``
+extra and the right to make a network namespace.
 
 Offers:
 

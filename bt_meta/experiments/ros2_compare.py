@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from bt_meta.commands._common import print_json
-from bt_meta.errors import UserInputError
+from bt_meta.errors import BtMetaError, UserInputError
 
 __all__ = ["POSE_TOLERANCE", "compare", "register", "run"]
 
@@ -167,7 +167,11 @@ class _Ways:
         self.count += 1
         out: dict[str, Any] = {}
         out["in_process"] = self._result([*BT_META, *command, "--memory", str(self.memory["in_process"]), "--json"])
-        served = Served(serve, self.domain, self.folder / "logs" / f"serve-{self.count:03d}.log")
+        try:
+            served = Served(serve, self.domain, self.folder / "logs" / f"serve-{self.count:03d}.log")
+        except BtMetaError as error:  # the served simulator did not start: this row fails, the others still run
+            out["ros2"] = {"error": str(error).splitlines()[0][:300]}
+            return out
         try:
             out["ros2"] = self._result(served.command(*BT_META, *command, "--memory", str(self.memory["ros2"]),
                                                       "--world", "ros2", "--json"), served.env)

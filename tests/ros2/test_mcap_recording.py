@@ -5,8 +5,6 @@ before anything is built."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from collections import Counter
 from pathlib import Path
 
@@ -15,7 +13,6 @@ import pytest
 from bt_meta.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
-BT_META = [sys.executable, "-m", "bt_meta.cli"]
 LETTERS = "trees/letters.yaml"
 MAGNETIC = "trees/magnetic_attach.yaml"
 
@@ -29,22 +26,20 @@ def test_record_mcap_needs_the_ros2_world(capsys, tmp_path):
 
 @pytest.mark.slow
 def test_a_ros_driven_run_reads_back_from_its_mcap_file(serve, tmp_path):
-    """A repaired run (the magnetic part on its side): robot messages, and the tree's statuses, failure and repair."""
+    """A repaired run (a goal the controller aborts, retried): robot messages, and the tree's statuses, failure and
+    repair."""
     pytest.importorskip("mcap_ros2", reason="needs mcap-ros2-support (the [ros2] extra)")
     from mcap_ros2.reader import read_ros2_messages
 
     from bt_meta.ros2.mcap_recording import FAILURE_TOPIC, REPAIR_TOPIC, TREE_TOPIC
 
-    memory = tmp_path / "memory.sqlite"
-    recorded = subprocess.run([*BT_META, "record", MAGNETIC, "--problem", "nominal", "--memory", str(memory)],
-                              cwd=ROOT, capture_output=True, text=True, check=False)
-    assert recorded.returncode == 0, recorded.stderr
     path = tmp_path / "run.mcap"
-    served = serve("--scene", "magnetic_attach", "--variant", "active_on_side")
-    done = served.run("run", MAGNETIC, "--problem", "nominal", "--variant", "active_on_side", "--repair", "--memory",
-                      str(memory), "--world", "ros2", "--record-mcap", str(path), "--json")
+    served = serve("--scene", "magnetic_attach", "--fault", "abort@5")
+    done = served.run("run", MAGNETIC, "--problem", "nominal", "--repair", "--memory", str(tmp_path / "memory.sqlite"),
+                      "--world", "ros2", "--record-mcap", str(path), "--json")
     assert done.returncode == 0, done.stderr[-2000:]
     report = json.loads(done.stdout)
+    assert [f["kind"] for f in report["failures"]] == ["physical"] and len(report["attempts"]) == 1
     ticks = report["ticks"]
     topics: Counter[str] = Counter()
     schemas = {}

@@ -52,26 +52,25 @@ def test_letter_a_through_ros2_ends_as_in_process(serve):
 
 @pytest.mark.slow
 @pytest.mark.skipif(REASON is not None, reason=REASON or "")
-def test_repaired_variants_through_ros2_end_as_in_process(tmp_path):
-    """The proof by difference on a subset: a letters substitution and a magnetic variant (whose join the model
-    must learn from the robot), each way on its own fresh memory recorded each way."""
+def test_a_repaired_variant_through_ros2_ends_as_in_process(tmp_path):
+    """The proof by difference on a subset: a magnetic variant, repaired, whose join the world's model must learn
+    from the robot; each way on its own fresh memory recorded that way. (One variant: the whole comparison takes
+    minutes; docs/benchmarks.md has it.)"""
     out = tmp_path / "compare"
     done = subprocess.run([*BT_META, "experiment", "ros2-compare", "--quick", "--generated", "0", "--variants",
-                           "letters/A_two_1x1_same_colour,magnetic/active_on_side", "--out", str(out), "--json"],
+                           "magnetic/active_on_side", "--out", str(out), "--json"],
                           cwd=ROOT, capture_output=True, text=True, timeout=900, check=False)
     assert done.returncode == 0, (done.stdout + done.stderr)[-3000:]
     result = json.loads(done.stdout)
     assert result == json.loads((out / "comparison.json").read_text())
     summary = result["summary"]
-    assert summary["demonstrations"] == summary["demonstrations_alike"] == 5  # A twice, H, magnetic twice
-    assert summary["variants"] == summary["alike"] == 2 and summary["same_ticks"] == 2
-    letters, magnetic = result["variants"]
-    for row in (letters, magnetic):
-        assert row["in_process"] == row["ros2"] and row["in_process"]["status"] == "SUCCESS"
-        assert row["in_process"]["attempts"] >= 1 and row["in_process"]["refinement"]  # repaired, and learned
-        assert row["pose_difference_mm"] < 1.0
-    assert letters["in_process"]["failure_kinds"] == ["unknown_entity"]
-    assert magnetic["in_process"]["failure_kinds"] == ["unexpected_configuration"]
+    assert summary["demonstrations"] == summary["demonstrations_alike"] == 1  # the magnetic nominal
+    assert summary["variants"] == summary["alike"] == summary["same_ticks"] == 1
+    [row] = result["variants"]
+    assert row["in_process"] == row["ros2"] and row["in_process"]["status"] == "SUCCESS"
+    assert row["in_process"]["failure_kinds"] == ["unexpected_configuration"] and row["in_process"]["attempts"] == 1
+    assert row["in_process"]["refinement"]  # repaired, and the repair learned
+    assert row["pose_difference_mm"] < 1.0
 
 
 @pytest.mark.parametrize(("argv", "message"), [
@@ -86,8 +85,9 @@ def test_compare_refuses_bad_arguments_before_anything_starts(capsys, argv, mess
 
 @pytest.mark.slow
 def test_tick_acts_through_ros2_too_and_exits_cleanly(serve):
-    served = serve("--scene", "letters_A", *START)
-    done = served.run("tick", LETTERS, "--problem", "A", "--world", "ros2", "--ticks", "2000", "--json")
+    served = serve("--scene", "magnetic_attach")  # the shortest task (52 ticks): the letter is drawn above
+    done = served.run("tick", "trees/magnetic_attach.yaml", "--problem", "nominal", "--world", "ros2", "--ticks",
+                      "2000", "--json")
     assert done.returncode == 0, done.stderr[-2000:]  # tick never closes its world: the connection closes at exit
     assert json.loads(done.stdout)["status"] == "SUCCESS"
 

@@ -17,6 +17,8 @@ Offers:
 * :func:`register` -- ``bench ros2 [--file F] [--problem P] [--ticks N] [--repeat N] [--json]``
 * :func:`run` -- the figures as a dict
 * :func:`tick_child` -- the timed ticks of one process (``python -m bt_meta.bench.ros2 FILE PROBLEM TICKS``)
+* :class:`Served`, :func:`check_namespaces` -- the served simulator in a loopback-only namespace (also used by
+  ``bt-meta experiment ros2-compare``)
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ from typing import Any
 from bt_meta.commands._common import print_json
 from bt_meta.errors import BtMetaError, UserInputError
 
-__all__ = ["register", "run", "tick_child"]
+__all__ = ["Served", "check_namespaces", "register", "run", "tick_child"]
 
 BT_META = [sys.executable, "-m", "bt_meta.cli"]
 _AMPLITUDE = 0.05
@@ -87,19 +89,19 @@ def _serve_arguments(file: str, problem: str) -> list[str]:
     return out
 
 
-def _check_namespaces() -> None:
+def check_namespaces(what: str = "bench ros2") -> None:
     from bt_meta.ros2.environment import import_rclpy
 
     import_rclpy()  # Ros2Unavailable names the extra
     for tool in ("unshare", "nsenter", "ip"):
         if shutil.which(tool) is None:
-            raise BtMetaError(f"bench ros2 needs {tool} (util-linux, iproute2): the served simulator runs in a "
+            raise BtMetaError(f"{what} needs {tool} (util-linux, iproute2): the served simulator runs in a "
                               "loopback-only network namespace")
     if subprocess.run(["unshare", "-n", "true"], capture_output=True, check=False).returncode != 0:
-        raise BtMetaError("bench ros2 cannot create a network namespace here (unshare -n needs root)")
+        raise BtMetaError(f"{what} cannot create a network namespace here (unshare -n needs root)")
 
 
-class _Served:
+class Served:
     """``sim serve --ros2`` in a fresh loopback-only namespace; ``command()`` runs a command inside it."""
 
     def __init__(self, serve_args: list[str], domain: int, log: Path) -> None:
@@ -143,13 +145,13 @@ def run(file: str | None, problem: str, *, ticks: int = 200, repeat: int = 1) ->
 
     file = str(file or shipped_tree("letters.yaml"))
     serve_args = _serve_arguments(file, problem)
-    _check_namespaces()
+    check_namespaces()
     domain = 100 + os.getpid() % 100
     episode = [*BT_META, "run", file, "--problem", problem, "--json"]
     tick = [sys.executable, "-m", "bt_meta.bench.ros2", file, problem, str(ticks)]
     result: dict[str, Any] = {"file": file, "problem": problem, "ticks": ticks, "repeat": repeat}
     with tempfile.TemporaryDirectory(prefix="bt-meta-bench-ros2-") as folder:
-        served = _Served(serve_args, domain, Path(folder) / "serve-tick.log")
+        served = Served(serve_args, domain, Path(folder) / "serve-tick.log")
         try:
             result["tick"] = _checked(subprocess.run(served.command(*tick), env=served.env, capture_output=True,
                                                      text=True, check=False), "the timed ticks")
@@ -158,7 +160,7 @@ def run(file: str | None, problem: str, *, ticks: int = 200, repeat: int = 1) ->
         local, ros = [], []
         for index in range(repeat):
             local.append(_timed(episode, None, result["tick"]["tick_seconds"]))
-            served = _Served(serve_args, domain, Path(folder) / f"serve-{index}.log")
+            served = Served(serve_args, domain, Path(folder) / f"serve-{index}.log")
             try:
                 ros.append(_timed([*episode, "--world", "ros2"], served, result["tick"]["tick_seconds"]))
             finally:
@@ -173,7 +175,7 @@ def run(file: str | None, problem: str, *, ticks: int = 200, repeat: int = 1) ->
     return result
 
 
-def _timed(command: list[str], served: _Served | None, tick_seconds: float) -> dict[str, Any]:
+def _timed(command: list[str], served: Served | None, tick_seconds: float) -> dict[str, Any]:
     started = time.perf_counter()
     if served is None:
         done = subprocess.run(command, capture_output=True, text=True, check=False)

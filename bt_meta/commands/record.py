@@ -4,8 +4,8 @@ store its trace in the episodic memory.
 Offers:
 
 * :func:`register` -- adds ``record FILE [--problem P] [--variant V] [--seed S] [--memory PATH] [--json]
-  [--max-ticks N] [--grounding FILE] [--robot R] [--scene FILE] [--check-expectations] [--plugins DIR]
-  [--no-entry-points] [--report FILE.html]``
+  [--max-ticks N] [--grounding FILE] [--robot R] [--scene FILE] [--world sim|ros2] [--ros2 CONFIG.yaml]
+  [--check-expectations] [--plugins DIR] [--no-entry-points] [--report FILE.html]``
 * :func:`record` -- the handler
 * :func:`demonstrate` -- the same from Python: run and store one demonstration, return a :class:`Demonstration`
 * :class:`DemonstrationFailed` -- a demonstration that did not succeed (nothing stored; the CLI exits 1)
@@ -13,7 +13,8 @@ Offers:
 
 The problem is planned and compiled with a Monitor around every primitive and ticked on a
 :class:`~bt_meta.world.simulation.sim_world.SimWorld` (headless) with a :class:`~bt_meta.memory.recorder.TraceRecorder`
-registered; at the end the trace is written in one transaction and its episode id printed with its steps. A
+registered (``--world ros2``: a :class:`~bt_meta.ros2.world.RosWorld`, the demonstration acted through ROS 2,
+docs/ros2.md); at the end the trace is written in one transaction and its episode id printed with its steps. A
 demonstration teaches the expectations, so it is not checked against the memory's grid-map and keypoint
 expectations (``--check-expectations`` keeps them); preconditions and skills are checked as in any run. A
 demonstration that fails is refused: nothing is stored, the failure is printed and the exit status is 1.
@@ -36,7 +37,7 @@ from py_trees.common import Status
 
 from bt_meta.commands._common import print_json
 from bt_meta.commands._plugin_args import add_plugin_arguments, plugin_host_from_args
-from bt_meta.commands._world_args import add_world_arguments, world_options
+from bt_meta.commands._world_args import add_ros2_arguments, add_world_arguments, world_factory, world_options
 from bt_meta.errors import BtMetaError, PlanningError, UserInputError
 from bt_meta.memory import add_memory_argument, resolve_memory_path
 
@@ -65,6 +66,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--report", metavar="FILE.html",
                         help="write the demonstration's HTML page (steps, failures, goal on the true state, trees)")
     add_world_arguments(parser)
+    add_ros2_arguments(parser)
     add_memory_argument(parser)
     add_plugin_arguments(parser)
     parser.set_defaults(func=record)
@@ -95,12 +97,14 @@ def demonstrate(
     robot: Any = None,
     scene: str | Path | None = None,
     page: Any = None,
+    make_world: Any = None,
 ) -> Demonstration:
     """Run ``problem`` of task file ``file`` in the simulator as a demonstration and store it in ``memory`` (an open
     writable :class:`~bt_meta.memory.EpisodicMemory`). ``plugins``: a plugin host (default: built-ins, entry
     points and the project's plugins folder). Raises :class:`DemonstrationFailed` when the run does not succeed
     (nothing is stored); input errors are the loaders' :class:`~bt_meta.errors.UserInputError` s. ``page``: a
-    :class:`~bt_meta.runs.report.RunPage` that watches the run (its page is the caller's to write)."""
+    :class:`~bt_meta.runs.report.RunPage` that watches the run (its page is the caller's to write). ``make_world``:
+    the world class (default :class:`~bt_meta.world.simulation.sim_world.SimWorld`; the CLI's ``world_factory``)."""
     from bt_meta.htn import load_task_file
     from bt_meta.plugins import create_plugin_host
     from bt_meta.world.simulation.sim_world import load_grounding
@@ -121,7 +125,7 @@ def demonstrate(
                 plugins.unregister(name)
     try:
         return _demonstrate(file, chosen, task_file, ground, memory, variant, seed, max_ticks, plugins,
-                            check_expectations, robot, scene, page)
+                            check_expectations, robot, scene, page, make_world)
     finally:  # the caller's host is as it was
         for name, plugin, source in removed:
             plugins.register(plugin, name, source=source)
@@ -129,14 +133,16 @@ def demonstrate(
 
 def _demonstrate(file: str | Path, chosen: Any, task_file: Any, ground: Any, memory: Any, variant: str | None,
                  seed: int, max_ticks: int, plugins: Any, check_expectations: bool,
-                 robot: Any = None, scene: str | Path | None = None, page: Any = None) -> Demonstration:
+                 robot: Any = None, scene: str | Path | None = None, page: Any = None,
+                 make_world: Any = None) -> Demonstration:
     from bt_meta.memory.recorder import TraceRecorder
     from bt_meta.testing import TreeHarness
     from bt_meta.world.simulation.sim_world import SimWorld, quiet_stdout
 
     started = time.perf_counter()
     with quiet_stdout():
-        world = SimWorld(task_file.domain, chosen, ground, variant=variant, seed=seed, robot=robot, scene=scene)
+        world = (make_world or SimWorld)(task_file.domain, chosen, ground, variant=variant, seed=seed, robot=robot,
+                                         scene=scene)
     try:
         recorder = TraceRecorder(memory, variant=world.variant, seed=seed,
                                  config={"demonstration": True, "scene": world.scene.name})
@@ -196,6 +202,7 @@ def record(args: argparse.Namespace) -> int:
     problem = task_file.problem(args.problem)
     load_grounding(task_file.domain.name, args.file, args.grounding).problem(problem.name)
     options = world_options(args)
+    make_world = world_factory(args)
     plugins = plugin_host_from_args(args, args.file)
     page = None
     if args.report:
@@ -207,7 +214,8 @@ def record(args: argparse.Namespace) -> int:
         try:
             shown = demonstrate(args.file, args.problem, memory, variant=args.variant, seed=args.seed,
                                 max_ticks=args.max_ticks, grounding=args.grounding, plugins=plugins,
-                                check_expectations=args.check_expectations, page=page, **options)
+                                check_expectations=args.check_expectations, page=page, make_world=make_world,
+                                **options)
         except DemonstrationFailed:
             if page is not None and page.run:  # the page of a refused demonstration is where to look first
                 try:

@@ -18,7 +18,9 @@ plan, or still running after ``--max-ticks``), 2 bad input (unknown problem or v
 ``--robot NAME|FILE`` runs on another robot description (default: the grounding file's ``robot:``, else the
 Baxter), ``--scene FILE`` builds another scene than the grounding file's for the problem. ``--record-rrd FILE.rrd``
 records the episode for the Rerun viewer (:mod:`~bt_meta.world.simulation.rerun_log`; the optional extra
-``rerun``): per tick without ``--repair``, per step, failure and repair with it.
+``rerun``): per tick without ``--repair``, per step, failure and repair with it. With ``--world ros2``,
+``--record-mcap FILE.mcap`` records the ROS 2 messages and the tree's node statuses per tick, failures and repairs
+(:class:`~bt_meta.ros2.mcap_recording.McapTreeLog`).
 
 Memory: the expectation plugins read the run's ``memory`` (``--memory PATH``, else ``$BT_META_MEMORY``, else
 ``./.bt-meta/memory.sqlite``; an explicit ``--memory`` file must exist unless the run writes to it). ``--record``
@@ -157,12 +159,19 @@ def run(args: argparse.Namespace) -> int:
                                "frames": world.sim.robot.frames()}  # every pose below is in the robot base frame
         if rrd is not None:
             out["rrd"] = str(rrd.path)
+        tree_log = None
+        if getattr(world, "recording", None) is not None:  # --record-mcap: what the tree did goes in too
+            from bt_meta.ros2.mcap_recording import McapTreeLog
+
+            tree_log = McapTreeLog(world.recording)
+            plugins.register(tree_log, "mcap_tree_log", source="bt-meta run --record-mcap")
         try:
             if args.repair:
                 code = _run_repaired(args, task_file, problem, world, plugins, memory, recorder, out, started, built,
-                                     capture)
+                                     capture, tree_log)
             else:
-                code = _run_plain(args, problem, world, plugins, memory, recorder, out, started, built, rrd, capture)
+                code = _run_plain(args, problem, world, plugins, memory, recorder, out, started, built, rrd, capture,
+                                  tree_log)
             if page is not None:  # after the result is printed and recorded: a bad path loses none of it
                 page.finish(args.file, task_file, problem, world, out, memory)
                 written = page.write(args.report)
@@ -210,7 +219,8 @@ def _memory(args: argparse.Namespace) -> Iterator[Any]:
 
 
 def _run_plain(args: argparse.Namespace, problem: Any, world: Any, plugins: Any, memory: Any, recorder: Any,
-               out: dict[str, Any], started: float, built: float, rrd: Any = None, capture: Any = None) -> int:
+               out: dict[str, Any], started: float, built: float, rrd: Any = None, capture: Any = None,
+               tree_log: Any = None) -> int:
     from bt_meta.bt.failures import Failure, FailureKind
     from bt_meta.testing import TreeHarness
 
@@ -223,6 +233,8 @@ def _run_plain(args: argparse.Namespace, problem: Any, world: Any, plugins: Any,
         harness.run.memory = memory  # what the grid-map and keypoint expectation plugins read
     if recorder is not None:
         recorder.tree = harness.compiled.plan_result.tree
+    if tree_log is not None:
+        tree_log.watch(harness.run)
     if capture is not None:  # one segment: the tree ticked here, with the statuses its step events report
         from bt_meta.runs.capture import Segment
 
@@ -263,7 +275,8 @@ def _run_plain(args: argparse.Namespace, problem: Any, world: Any, plugins: Any,
 
 
 def _run_repaired(args: argparse.Namespace, task_file: Any, problem: Any, world: Any, plugins: Any, memory: Any,
-                  recorder: Any, out: dict[str, Any], started: float, built: float, capture: Any = None) -> int:
+                  recorder: Any, out: dict[str, Any], started: float, built: float, capture: Any = None,
+                  tree_log: Any = None) -> int:
     from bt_meta.meta.executor import MetaExecutor
     from bt_meta.meta.reasoner import Limits
     from bt_meta.meta.refinements import RefinementStore
@@ -275,13 +288,15 @@ def _run_repaired(args: argparse.Namespace, task_file: Any, problem: Any, world:
     extra: dict[str, Any] = {} if capture is None else {"capture": capture}
 
     class Executor(base):  # type: ignore[valid-type,misc]
-        """Hands the recorder every segment's decomposition tree (the parent tasks of repaired steps), and Groot2
-        every segment's behaviour tree."""
+        """Hands the recorder every segment's decomposition tree (the parent tasks of repaired steps), Groot2
+        every segment's behaviour tree, and the MCAP tree log every segment's run."""
 
         def _segment(self, run: Any, plan_state: Any, *rest: Any) -> Any:  # type: ignore[override]
             if recorder is not None:
                 recorder.tree = plan_state.tree
             groot2.watch(run, rest[0] if rest else None)
+            if tree_log is not None:
+                tree_log.watch(run)
             return super()._segment(run, plan_state, *rest)
 
     if not args.json:

@@ -7,14 +7,21 @@ FollowJointTrajectory goal's trajectory on ``<action>/goal_trajectory`` (``traje
 actions themselves are not topics). ``log_time`` is the receiving (or sending) wall clock, ``publish_time`` the
 message's stamp where it has one.
 
+What the tree did goes in as ``std_msgs/msg/String`` messages holding one JSON object each (:class:`McapTreeLog`;
+rosbag2 and Foxglove read the type without any definition of ours, and JSON keeps the records as open as the trace
+events they come from): the node statuses of every tick on :data:`TREE_TOPIC`, every failure on
+:data:`FAILURE_TOPIC`, every repair decision on :data:`REPAIR_TOPIC`.
+
 Offers:
 
 * :class:`McapRecording` -- ``write(topic, message)``, thread-safe; ``close()`` finishes the file
+* :class:`McapTreeLog` -- a plugin writing the tree's statuses, failures and repairs into a recording
 * :func:`message_definition` -- the ``ros2msg`` schema text of a message type
 """
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import sys
@@ -24,8 +31,18 @@ from pathlib import Path
 from typing import Any
 
 from bt_meta.errors import BtMetaError, UserInputError
+from bt_meta.hookspecs import hookimpl
 
-__all__ = ["McapRecording", "message_definition"]
+__all__ = ["FAILURE_TOPIC", "REPAIR_TOPIC", "TREE_TOPIC", "McapRecording", "McapTreeLog", "message_definition"]
+
+TREE_TOPIC = "/bt_meta/tree/status"
+"""Per tick: ``{"tick", "status" (the root's), "nodes": [[name, status], ...]}``: every node the tick visited, in
+the order they finished their part of it."""
+FAILURE_TOPIC = "/bt_meta/failures"
+"""Per failure: ``{"tick", "failure"}`` -- the failure as the run reports it (``Failure.to_dict``)."""
+REPAIR_TOPIC = "/bt_meta/repairs"
+"""Per repair decision: the executor's ``repair`` trace event (``tick``, ``outcome``: applied, refused, stopped,
+...; ``attempt`` or ``proposal``, ``reason``)."""
 
 _BUILTIN = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16", "int32", "uint32",
             "int64", "uint64", "string", "wstring"}
@@ -143,3 +160,48 @@ class McapRecording:
                 self._writer.finish()
             finally:
                 self._file.close()
+
+
+class McapTreeLog:
+    """Writes what the tree does into a :class:`McapRecording`: ``watch(run)`` each run context that ticks a tree
+    (the statuses of the nodes each tick visits), and, registered as a plugin, failures and repairs from the trace
+    events."""
+
+    def __init__(self, recording: McapRecording) -> None:
+        self.recording = recording
+        self.ticks = 0
+
+    def watch(self, run: Any) -> None:
+        """Route ``run.tick`` through the log (once per run context)."""
+        if getattr(run, "_mcap_watched", False):
+            return
+        original = run.tick
+
+        def tick(root: Any, visit: Any = None) -> Any:
+            nodes: list[list[str]] = []
+
+            def seen(behaviour: Any) -> None:
+                nodes.append([behaviour.name, behaviour.status.value])
+                if visit is not None:
+                    visit(behaviour)
+
+            status = original(root, seen)
+            self.ticks += 1
+            self._write(TREE_TOPIC, {"tick": run.tick_count, "status": status.value, "nodes": nodes})
+            return status
+
+        run.tick = tick
+        run._mcap_watched = True
+
+    @hookimpl
+    def bt_meta_trace_event(self, event: dict[str, Any]) -> None:
+        kind = event.get("type")
+        if kind == "failure":
+            self._write(FAILURE_TOPIC, {"tick": event.get("tick"), "failure": event.get("failure")})
+        elif kind == "repair":
+            self._write(REPAIR_TOPIC, {k: v for k, v in event.items() if k != "type"})
+
+    def _write(self, topic: str, record: dict[str, Any]) -> None:
+        from std_msgs.msg import String
+
+        self.recording.write(topic, String(data=json.dumps(record, default=str, sort_keys=True)))

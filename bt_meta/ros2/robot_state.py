@@ -2,11 +2,13 @@
 a wait for both to be stamped at or after a time (the state after a goal, not a stale one).
 
 Joint states are merged by name (a robot may publish its arm and gripper joints apart); object poses come as a
-``visualization_msgs/MarkerArray`` with one marker per object, ``ns`` its name (:mod:`~bt_meta.ros2.state_publishers`).
+``visualization_msgs/MarkerArray`` with one marker per object, ``ns`` its name, and one LINE_LIST marker per
+magnetic join (:mod:`~bt_meta.ros2.state_publishers`): each message replaces the joins known before, so a join is
+as fresh as the poses it came with.
 
 Offers:
 
-* :class:`RobotState` -- ``wait_until(stamp_ns, timeout)``, ``joints()``, ``objects()``, ``stamp()``
+* :class:`RobotState` -- ``wait_until(stamp_ns, timeout)``, ``joints()``, ``objects()``, ``joins()``, ``stamp()``
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from bt_meta.ros2.messages import nanoseconds, pose_matrix
+from bt_meta.ros2.state_publishers import JOIN_NAMESPACE
 
 __all__ = ["RobotState"]
 
@@ -30,6 +33,7 @@ class RobotState:
         self._condition = threading.Condition()
         self._joints: dict[str, float] = {}
         self._objects: dict[str, np.ndarray] = {}
+        self._joins: set[tuple[str, str]] = set()
         self._joint_stamp = -1
         self._object_stamp = -1
         self.frame = config.base_frame
@@ -55,12 +59,19 @@ class RobotState:
             self.tap(self._topics[1], message)
         with self._condition:
             stamp = self._object_stamp
+            joins: set[tuple[str, str]] = set()
             for marker in message.markers:
+                if marker.type == marker.LINE_LIST and marker.ns == JOIN_NAMESPACE:
+                    names = marker.text.split("\n")
+                    if len(names) == 2:
+                        joins.add((min(names), max(names)))
+                    continue
                 if marker.header.frame_id != self.frame:
                     self.wrong_frames.add(marker.header.frame_id)
                     continue
                 self._objects[marker.ns] = pose_matrix(marker.pose)
                 stamp = max(stamp, nanoseconds(marker.header.stamp))
+            self._joins = joins
             self._object_stamp = stamp if message.markers else max(stamp, 0)
             self._condition.notify_all()
 
@@ -87,3 +98,8 @@ class RobotState:
     def objects(self) -> dict[str, np.ndarray]:
         with self._condition:
             return {name: pose.copy() for name, pose in self._objects.items()}
+
+    def joins(self) -> set[tuple[str, str]]:
+        """The magnetically joined pairs of the latest object-pose message, each sorted by name."""
+        with self._condition:
+            return set(self._joins)

@@ -2,20 +2,29 @@
 poses (simulation only) as ``visualization_msgs/MarkerArray``, both stamped with the simulation's clock.
 
 One marker per object: ``ns`` is the object's name, ``pose`` its pose in the base frame, ``scale`` its bounding
-box, type CUBE (RViz and Foxglove show them). A perception node on a robot publishes the same message.
+box, type CUBE (RViz and Foxglove show them). A perception node on a robot publishes the same message. Then one
+marker per magnetic join (:data:`JOIN_NAMESPACE`): a LINE_LIST from one joined object to the other, ``text`` the
+two names on two lines -- the message is the whole state, so a join that is not in it does not exist (the world's
+model of the scene learns the joins from it, :mod:`bt_meta.ros2.robot_state`).
 
 Offers:
 
 * :class:`StatePublishers` -- ``publish()`` sends both with the current simulation time
+* :data:`JOIN_NAMESPACE` -- the ``ns`` of the join markers
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from bt_meta.ros2.messages import pose_message, to_stamp
 
-__all__ = ["StatePublishers"]
+__all__ = ["JOIN_NAMESPACE", "StatePublishers"]
+
+JOIN_NAMESPACE = "bt_meta/joined"
+"""``ns`` of a join marker (a LINE_LIST: told apart from an object's CUBE marker by its type too)."""
 
 
 class StatePublishers:
@@ -33,6 +42,7 @@ class StatePublishers:
         return to_stamp(self.sim.steps * self.sim.time_step)
 
     def publish(self) -> None:
+        from geometry_msgs.msg import Point
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Header
         from visualization_msgs.msg import Marker, MarkerArray
@@ -48,5 +58,13 @@ class StatePublishers:
                             pose=pose_message(self.sim.object_transform(name)))
             marker.scale.x, marker.scale.y, marker.scale.z = (float(v) for v in (high - low))
             marker.color.r, marker.color.g, marker.color.b, marker.color.a = 0.8, 0.8, 0.8, 1.0
+            markers.append(marker)
+        for index, (first, second) in enumerate(self.sim.attachments()):
+            marker = Marker(header=header, ns=JOIN_NAMESPACE, id=index, type=Marker.LINE_LIST, action=Marker.ADD,
+                            text=f"{first}\n{second}", pose=pose_message(np.eye(4)),
+                            points=[Point(x=float(p[0]), y=float(p[1]), z=float(p[2]))
+                                    for p in (self.sim.object_transform(n)[:3, 3] for n in (first, second))])
+            marker.scale.x = 0.005  # line width
+            marker.color.r, marker.color.g, marker.color.b, marker.color.a = 1.0, 0.6, 0.0, 1.0
             markers.append(marker)
         self.objects.publish(MarkerArray(markers=markers))

@@ -4,9 +4,9 @@ The narrowest seam: skills act on a world through a few methods that move the ro
 joint targets of an arm), ``advance`` (let a tick pass), ``grasp`` and ``release`` -- and read the world through its
 model of the scene (``world.sim``: object and link poses, contacts, shapes). A RosWorld is a
 :class:`~bt_meta.world.simulation.sim_world.SimWorld` whose simulation is only that model, never stepped: the
-moving methods go through ROS 2, and after each the model is set to the state the robot reports (joint states, object
-poses). So IK (mink), collision checks (coal, against the model of the scene), path planning, perception and every
-skill, monitor and repair run in-process exactly as in the simulator.
+moving methods go through ROS 2, and after each the model is set to the state the robot reports (joint states,
+object poses, magnetic joins). So IK (mink), collision checks (coal, against the model of the scene), path
+planning, perception and every skill, monitor and repair run in-process exactly as in the simulator.
 
 * ``advance``: one ``FollowJointTrajectory`` goal per tick on the arm's controller, its point the arm's latest
   target one tick ahead (the controller holds it: the other arms keep theirs); then the world waits for joint
@@ -197,6 +197,14 @@ class RosWorld(SimWorld):
             # only a real move: re-applying a pose that differs by the messages' float noise resets the body
             if name in names and np.abs(sim.object_transform(name) - pose).max() > SYNC_TOLERANCE:
                 sim.move_object(name, matrix_to_pose(pose))
+        # the joins the robot reports (the model is never stepped, so it never joins anything itself): after the
+        # poses, so a new join holds the objects as they now stand
+        reported = {pair for pair in self.connection.state.joins() if set(pair) <= names}
+        known = set(sim.attachments())
+        for first, second in sorted(known - reported):
+            sim.detach(first, second)
+        for first, second in sorted(reported - known):
+            sim.join(first, second)
         pybullet.performCollisionDetection(physicsClientId=sim.client)
 
     def observe(self) -> dict[str, Any]:

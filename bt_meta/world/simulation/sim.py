@@ -1131,19 +1131,24 @@ class Simulation:
 
     def try_attach(self, active: str, reference: str) -> bool:
         """Join the two objects with a fixed constraint if the attach rule holds (or they are joined already)."""
-        pair = frozenset((active, reference))
-        if pair in self._joins:
+        if frozenset((active, reference)) in self._joins:
             return True
         if not self.attachment_relation(active, reference).aligned:
             return False
+        self.join(active, reference)
+        return True
+
+    def join(self, active: str, reference: str) -> None:
+        """Join two objects rigidly as they stand, without checking the attach rule: the join has happened
+        elsewhere (a model of the scene told of it by the robot, :mod:`bt_meta.ros2.world`)."""
+        pair = frozenset((active, reference))
+        if pair in self._joins:
+            return
         a, r = self._body(active), self._body(reference)
         ta, tr = self.object_transform(active), self.object_transform(reference)
         rel = np.linalg.inv(tr) @ ta
-        c = self.client
         self._object_collisions(a.body_id, r.body_id, False)
-        cid = _fix(r.body_id, -1, a.body_id, rel, c)
-        self._joins[pair] = cid
-        return True
+        self._joins[pair] = _fix(r.body_id, -1, a.body_id, rel, self.client)
 
     def detach(self, a: str, b: str) -> bool:
         """Undo a magnetic join (for resetting scenes); True if there was one."""

@@ -135,6 +135,17 @@ def object_yaw(transform: np.ndarray) -> float:
     return math.atan2(transform[1, 0], transform[0, 0])
 
 
+def lying_yaw(transform: np.ndarray) -> float:
+    """The heading of an object's faces about the vertical: its x axis's (:func:`object_yaw`), or, where the x axis
+    points (nearly) up or down -- a block on its side about its y axis -- that of its most horizontal other axis.
+    There ``object_yaw`` is the angle of two rounding errors: the Panda's fingers closed 21 degrees off the faces
+    of a 1x1 block lying so, and the block turned in them as they closed."""
+    if float(np.linalg.norm(transform[:2, 0])) >= 0.5:
+        return object_yaw(transform)
+    axis = max((transform[:3, 1], transform[:3, 2]), key=lambda a: float(np.linalg.norm(a[:2])))
+    return math.atan2(float(axis[1]), float(axis[0]))
+
+
 def turned_pose(world: Any, block: str, arm: str, gripper: np.ndarray, held: np.ndarray, drop: float = 0.03
                 ) -> tuple[np.ndarray, bool]:
     """(pose, reachable): the gripper at ``gripper`` holding ``block`` at ``held`` (its pose in the gripper frame)
@@ -369,6 +380,8 @@ class Place(PhasedSkill):
             period = _lying_period(sim.object_model(self.block), transform)
             preferred = nearest_yaw(object_yaw(transform), period, sim.robot.arm(self.arm).top_down_yaw)
             if sim.grasps_by_friction(self.block, self.arm):
+                # the fingers close on the part's faces: from the heading of its faces as it lies
+                preferred = nearest_yaw(lying_yaw(transform), period, sim.robot.arm(self.arm).top_down_yaw)
                 # the fingers close on two of the part's own faces: each quarter turn from the preferred, the
                 # narrowest across the fingers first (a pin lying down is held across, not along it); for a turn
                 # by a hand that turns parts about its fingers, those closing along the turn's axis first

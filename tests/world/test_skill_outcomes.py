@@ -100,6 +100,32 @@ def test_a_turn_that_leaves_the_pin_on_its_side_fails_at_the_turn(tmp_path: Path
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize(("robot", "rpy"), [("panda", "0, 90, 0"), ("panda", "90, 0, 30"), ("baxter", "0, 90, 0")])
+def test_a_turn_from_the_table_stands_the_block_on_its_base(tmp_path: Path, robot: str, rpy: str):
+    """turn_over(b4) of a 1x1 block lying on its side, picked from the table: it ends standing on its base. On the
+    Panda (it turns parts about its fingers) the grasp closed across the turn's axis, the fingers ended one over the
+    other, and the retreat tipped the block onto its opposite side (the second exposure of letters_A s11 0009);
+    its fingers close square to the block's faces (lying about its y axis they closed 21 degrees off them)."""
+    scene = (trees_dir() / "scenes" / "letters_A.yaml").read_text(encoding="utf-8")
+    old = "{name: b4, type: megablok_1x1, colour: blue, pose: [0.64, -0.40, table, 0, 0, 0]}"
+    assert old in scene
+    (tmp_path / "scene.yaml").write_text(scene.replace(old, old.replace("table, 0, 0, 0", f"table, {rpy}")))
+    with quiet_stdout():
+        world = SimWorld.from_task_file(trees_dir() / "letters.yaml", "A", robot=robot, scene=tmp_path / "scene.yaml")
+    try:
+        skill = _run(world, "turn_over", ["b4"])
+        assert skill.outcome == SUCCESS, skill.failure
+        assert skill.info["tilt_deg"]["before"] == pytest.approx(90.0, abs=2.0)
+        assert float(world.sim.object_transform("b4")[2, 2]) > math.cos(math.radians(10.0))  # its base down
+        if robot == "panda":  # a friction grasp: square to the faces, whose heading is the scene's yaw
+            descend = next(p for p in skill.info["phases"] if p["phase"] == "descend")
+            heading = math.radians(float(rpy.split(",")[2]))
+            assert abs(math.remainder(descend["target"][5] - heading, math.pi / 2.0)) < math.radians(2.0)
+    finally:
+        world.close()
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("robot", ["baxter", "panda"])
 def test_a_friction_grasp_closes_across_the_pin_and_a_grasp_follows_a_turned_pin(tmp_path: Path, robot: str):
     """Place's top-down grasp of the pin lying down: the Panda's fingers close across it (2.4 cm), not along it

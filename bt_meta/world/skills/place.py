@@ -135,6 +135,17 @@ def object_yaw(transform: np.ndarray) -> float:
     return math.atan2(transform[1, 0], transform[0, 0])
 
 
+def lying_yaw(transform: np.ndarray) -> float:
+    """The heading of an object's faces about the vertical: its x axis's (:func:`object_yaw`), or, where the x axis
+    points (nearly) up or down -- a block on its side about its y axis -- that of its most horizontal other axis.
+    There ``object_yaw`` is the angle of two rounding errors: the Panda's fingers closed 21 degrees off the faces
+    of a 1x1 block lying so, and the block turned in them as they closed."""
+    if float(np.linalg.norm(transform[:2, 0])) >= 0.5:
+        return object_yaw(transform)
+    axis = max((transform[:3, 1], transform[:3, 2]), key=lambda a: float(np.linalg.norm(a[:2])))
+    return math.atan2(float(axis[1]), float(axis[0]))
+
+
 def turned_pose(world: Any, block: str, arm: str, gripper: np.ndarray, held: np.ndarray, drop: float = 0.03
                 ) -> tuple[np.ndarray, bool]:
     """(pose, reachable): the gripper at ``gripper`` holding ``block`` at ``held`` (its pose in the gripper frame)
@@ -369,21 +380,46 @@ class Place(PhasedSkill):
             period = _lying_period(sim.object_model(self.block), transform)
             preferred = nearest_yaw(object_yaw(transform), period, sim.robot.arm(self.arm).top_down_yaw)
             if sim.grasps_by_friction(self.block, self.arm):
+                # the fingers close on the part's faces: from the heading of its faces as it lies
+                preferred = nearest_yaw(lying_yaw(transform), period, sim.robot.arm(self.arm).top_down_yaw)
                 # the fingers close on two of the part's own faces: each quarter turn from the preferred, the
-                # narrowest across the fingers first (a pin lying down is held across, not along it)
+                # narrowest across the fingers first (a pin lying down is held across, not along it); for a turn
+                # by a hand that turns parts about its fingers, those closing along the turn's axis first
                 turns = [preferred + k * math.pi / 2.0 for k in (0, 1, -1, 2)]
-                self._yaw = min(turns, key=lambda yaw: (self._finger_obstruction(yaw), self._width_across(yaw)))
+                self._yaw = min(turns, key=lambda yaw: (self._finger_obstruction(yaw), self._off_turn_axis(yaw),
+                                                        self._width_across(yaw)))
             else:
                 turns = [preferred + k * period for k in range(max(1, round(math.pi / period)))]
                 self._yaw = min(turns, key=self._finger_obstruction)  # ties: the first, the preferred yaw
         return self._yaw
 
+    def _closing_axis_at(self, yaw: float) -> np.ndarray:
+        """The fingers' closing axis (base frame) of a top-down gripper at ``yaw``."""
+        sim = self.world.sim
+        ee = sim.link_transform(self.world.end_effector(self.arm))
+        return top_down(0.0, 0.0, 0.0, yaw)[:3, :3] @ (ee[:3, :3].T @ sim.closing_axis(self.arm))
+
+    def _off_turn_axis(self, yaw: float) -> int:
+        """For a turn by a gripper that turns parts about its fingers (``turn_about_fingers``): 1 when the fingers
+        of a top-down grasp at ``yaw`` would not close along the horizontal axis the turn turns the block about,
+        else 0. Grasped across that axis, the turn stood the fingers one over the other: the lower one was under
+        the block when it let go, and the retreat tipped it back over (the Panda's letters_A s11 0009: b4 on its
+        side ended on its opposite side, or upside down)."""
+        gripper = self.world.sim.robot.arm(self.arm).gripper
+        if not self.turn or gripper is None or not gripper.turn_about_fingers:
+            return 0
+        up = self.world.sim.object_transform(self.block)[:3, 2]
+        axis = np.cross(up, (0.0, 0.0, 1.0))
+        if tilt(self.world.sim.object_transform(self.block)) > math.radians(135.0) \
+                or float(np.linalg.norm(axis)) < 1e-6:
+            return 0  # upside down: any horizontal axis turns it; the turn takes the fingers' (turned_pose)
+        closing = self._closing_axis_at(yaw)
+        return int(abs(float(closing @ axis)) / float(np.linalg.norm(axis)) < math.cos(math.radians(45.0)))
+
     def _width_across(self, yaw: float) -> int:
         """The part's width (in 5 mm steps) between the fingers of a top-down gripper at ``yaw``."""
         sim = self.world.sim
-        ee = sim.link_transform(self.world.end_effector(self.arm))
-        local_axis = ee[:3, :3].T @ sim.closing_axis(self.arm)
-        axis = top_down(0.0, 0.0, 0.0, yaw)[:3, :3] @ local_axis
+        axis = self._closing_axis_at(yaw)
         t = sim.object_transform(self.block)
         along = (sim.object_model(self.block).points() @ t[:3, :3].T) @ axis
         return round(float(along.max() - along.min()) / 0.005)

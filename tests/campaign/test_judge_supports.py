@@ -1,0 +1,87 @@
+"""The judge's ``at_cell`` on a frame with a ``support:`` (issue 31: trays and stacking): a cell is filled by a part
+resting on the support under it -- on the tray's floor, on top of the block it is stacked on -- not by the support
+itself nor by a part on the table beside or under it. Hand-built scenes, the parts laid by hand."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from bt_meta.judge.checks import evaluate
+from bt_meta.world.simulation.sim_world import SimWorld, quiet_stdout
+
+TASK = """\
+domain:
+  name: stacking
+  types: [block]
+  predicates: {available: [block], at: [block, object, object], hand_empty: []}
+  primitives:
+    put:
+      parameters: [?b - block, ?x, ?y]
+      precondition: available(?b) and hand_empty()
+      add: [at(?b, ?x, ?y)]
+      delete: [available(?b)]
+problems:
+  nominal:
+    objects: {block: [top]}
+    init: [hand_empty(), available(top)]
+    tasks: [put(top, 0, 0)]
+    goal: [at(top, 0, 0)]
+"""
+
+SCENE = """\
+scene: supports
+objects:
+  - {name: base_block, type: megablok_1x1, colour: blue, pose: [0.60, -0.10, table, 0, 0, 0]}
+  - {name: top, type: megablok_1x1, colour: red, pose: [0.58, -0.38, table, 0, 0, 0]}
+obstacles:
+  - {name: tray, shape: box, size: [0.20, 0.20, 0.02], pose: [0.62, 0.12, table, 0, 0, 0]}
+anchors:
+  stack_spot: [0.60, -0.10, table, 0, 0, 0]
+  slot: [0.62, 0.12, table, 0, 0, 0]
+"""
+
+
+def _world(tmp_path: Path, frame: str) -> SimWorld:
+    (tmp_path / "poses").mkdir()
+    (tmp_path / "task.yaml").write_text(TASK)
+    (tmp_path / "scene.yaml").write_text(SCENE)
+    frames = {"stack": "{anchor: stack_spot, unit: 0.061, support: base_block}",
+              "tray": "{anchor: slot, unit: 0.061, support: tray}"}
+    (tmp_path / "poses" / "stacking.yaml").write_text(
+        "domain: stacking\nproblems:\n  nominal: {scene: ../scene.yaml}\n"
+        f"skills:\n  put: {{skill: place, frame: {frame}}}\nframes:\n  {frame}: {frames[frame]}\n")
+    with quiet_stdout():
+        return SimWorld.from_task_file(tmp_path / "task.yaml", "nominal", robot="baxter")
+
+
+def _lay(world: SimWorld, name: str, z: float) -> None:
+    x, y, yaw = world.ground_cell(next(iter(world.grounding.frames)), "0", "0")
+    world.sim.move_object(name, [x, y, z, 0.0, 0.0, yaw])
+    world.sim.settle(60)
+
+
+@pytest.mark.slow
+def test_a_stacked_cell_needs_the_part_on_top_not_the_block_under_it(tmp_path: Path):
+    world = _world(tmp_path, "stack")
+    try:
+        ok, why = evaluate("at_cell", ("top", "0", "0"), {}, world)
+        assert not ok, why  # only base_block is there: nothing is stacked yet
+        _lay(world, "top", world.sim.object_pose("base_block")[2] + 0.06)
+        ok, why = evaluate("at_cell", ("top", "0", "0"), {}, world)
+        assert ok, why
+    finally:
+        world.close()
+
+
+@pytest.mark.slow
+def test_a_tray_slot_is_filled_by_a_part_on_the_tray_floor(tmp_path: Path):
+    world = _world(tmp_path, "tray")
+    try:
+        assert not evaluate("at_cell", ("top", "0", "0"), {}, world)[0]
+        _lay(world, "top", world.sim.object_pose("top")[2] + 0.022)
+        ok, why = evaluate("at_cell", ("top", "0", "0"), {}, world)
+        assert ok, why
+    finally:
+        world.close()

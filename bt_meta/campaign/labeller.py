@@ -251,7 +251,7 @@ class Labeller:
                 x, y = float(action.args[1]), float(action.args[2])
                 for dx in _cell_offsets(shape):
                     gx, gy, _ = world.ground_cell(str(frame), str(x + dx), str(y))
-                    out.append((gx, gy, world.sim.table.top_z))
+                    out.append((gx, gy, self._floor(world, str(frame), gx, gy)))
         if out:
             return out
         grasped = set(self.grasped)
@@ -266,6 +266,22 @@ class Labeller:
             out.append((float(point[0]), float(point[1]), float(point[2])))
             self.target_features.append((name, feature))
         return out
+
+    def _supports(self) -> set[str]:
+        """The objects and obstacles the grounding's frames name as ``support:``: where parts are put, so never
+        what occupies or blocks a place."""
+        return {str(spec["support"]) for spec in self.grounding.frames.values() if spec.get("support")}
+
+    @staticmethod
+    def _floor(world: Any, frame: str, x: float, y: float) -> float:
+        """The height a part put at (x, y) of ``frame`` rests on, as the place skill takes it: the top of the
+        frame's support there (a tray's floor, the block it is stacked on), else the table top."""
+        _, support = world.frame_support(frame)
+        table = float(world.sim.table.top_z)
+        if support is None:
+            return table
+        top = world.surface_under(support, np.array([[x, y]]))
+        return table if top is None else max(float(top), table)
 
     def _occupied_cell(self, world: Any, names: Sequence[str]) -> Label | None:
         """``limit:collision`` when an object reaches into a letter cell's footprint deeper than the place skill's
@@ -290,7 +306,7 @@ class Labeller:
                 pose = np.eye(4)
                 c, s_ = math.cos(yaw), math.sin(yaw)
                 pose[:2, :2] = [[c, -s_], [s_, c]]
-                pose[:3, 3] = (gx, gy, sim.table.top_z + 0.002 + PROBE_HEIGHT / 2.0)
+                pose[:3, 3] = (gx, gy, self._floor(world, str(frame), gx, gy) + 0.002 + PROBE_HEIGHT / 2.0)
                 near = {n: d for n, d in sim.box_clearances((LB, LB, PROBE_HEIGHT), pose, names, 0.0).items()
                         if d < -overlap and n != str(action.args[0])}  # a block on its own cell is picked
                 if near:
@@ -309,7 +325,7 @@ class Labeller:
         for action in self.plan:
             if action.name in self.cell_actions and frame is not None:
                 gx, gy, _ = world.ground_cell(str(frame), str(action.args[1]), str(action.args[2]))
-                out.append((str(action.args[0]), (gx, gy, world.sim.table.top_z)))
+                out.append((str(action.args[0]), (gx, gy, self._floor(world, str(frame), gx, gy))))
         if out:
             return out
         return [(name, target) for name in self.grasped
@@ -346,7 +362,8 @@ class Labeller:
         fixtures = {n for n in self.needed if not self.on_cells and n not in self.grasped}
         # only what the task does not name blocks a place: an object the plan uses is picked up by the plan, and
         # so is one it takes for a missing block
-        named = set(self.needed) | self._stand_ins(world, present)
+        # a frame's support (the tray, the block a part is stacked on) is where the part goes, not in its way
+        named = set(self.needed) | self._stand_ins(world, present) | self._supports()
         steps = self._target_steps()
         for index, (tx, ty, _) in enumerate(self.targets):
             blocking = next((name for name in present if name not in fixtures and name not in named and math.hypot(
@@ -501,7 +518,8 @@ class Labeller:
         named = [m.shape for n, m in present.items() if n in self.needed]
         if letters_feasible(len(self.cells), max_pairs(self.cells), named.count("1x1"), named.count("1x2")):
             return set()
-        unnamed = sorted(n for n, m in present.items() if n not in self.needed and m.shape in ("1x1", "1x2"))
+        unnamed = sorted(n for n, m in present.items() if n not in self.needed and n not in self._supports()
+                         and m.shape in ("1x1", "1x2"))
         occupied = {n: label.evidence["step"] for n in unnamed if (label := self._occupied_cell(world, [n]))}
         taken: set[str] = set()
         cleared: set[str] = set()

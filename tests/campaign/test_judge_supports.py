@@ -85,3 +85,18 @@ def test_a_tray_slot_is_filled_by_a_part_on_the_tray_floor(tmp_path: Path):
         assert ok, why
     finally:
         world.close()
+
+
+@pytest.mark.slow
+def test_the_labeller_does_not_take_the_support_for_what_blocks_the_place(tmp_path: Path):
+    """The block a part is stacked on lies on the place the task puts something: it is the frame's support, so the
+    nominal scene is nominal_equivalent, not ``limit:collision`` (every variant of a user's stacking task was)."""
+    from bt_meta.campaign.families import task_family
+    from bt_meta.campaign.labeller import Labeller
+    from bt_meta.world.simulation.scenes import load_scene
+
+    _world(tmp_path, "stack").close()
+    scene = load_scene(str(tmp_path / "scene.yaml"))
+    with Labeller(task_family(tmp_path / "task.yaml", "nominal"), scene, start_seed=None) as labeller:
+        label = labeller.label(scene.path, None)
+    assert label.expected == "nominal_equivalent", label.reason

@@ -187,8 +187,12 @@ class Labeller:
         finally:
             world.close()
         self.cells = letter_cells(self.plan, self.shapes, self.cell_actions)
-        self.on_cells = bool(self.cells)
-        """The task puts blocks on a frame's cells: the inventory rule decides what can be drawn."""
+        placed = [self.nominal.get(self.grounding.objects.get(str(a.args[0]), str(a.args[0])))
+                  for a in self.plan if a.name in self.cell_actions]
+        self.on_cells = bool(self.cells) and all(o is not None and o.model().shape in ("1x1", "1x2") for o in placed)
+        """The task puts Mega Bloks on a frame's cells: the inventory rule decides what can be drawn (any block of a
+        shape fills a cell). A task placing other parts (a pin into a kit's slot) needs each part or a spare of its
+        type, as every other task does."""
         self.reorientable = any(str(task).startswith(REORIENT_PREFIX) for task in self.task_file.domain.tasks)
 
     def _held_as_demonstrated(self, world: Any) -> dict[str, np.ndarray]:
@@ -425,7 +429,7 @@ class Labeller:
         cannot make the goal."""
         grasped = None if self.on_cells else self.grasped
         if self.on_cells:
-            blocks = {n: m for n, m in present.items() if m.shape in ("1x1", "1x2")}
+            blocks = {n: m for n, m in present.items() if m.shape in ("1x1", "1x2") and n not in self._supports()}
             n1 = sum(m.shape == "1x1" for m in blocks.values())
             n2 = sum(m.shape == "1x2" for m in blocks.values())
             units, pairs = len(self.cells), max_pairs(self.cells)

@@ -194,12 +194,10 @@ def _frame(world: Any, options: dict[str, Any]) -> str:
 def _model(world: Any, symbol: str) -> Any:
     """The object model whose outline a cell of ``symbol`` has: the scene's nominal object of that name (what the
     task means by the symbol, even when a variant changed or removed it), else the world's object."""
-    from bt_meta.world.simulation.objects import make_model
-
     name = world.grounding.objects.get(symbol, symbol)
     for obj in getattr(world.scene, "objects", ()):
         if obj.name == name:
-            return make_model(obj.type)
+            return obj.model()  # its type as the scene's catalogue defines it
     if name in world.sim.object_names():
         return world.sim.object_model(name)
     raise CheckFailed(f"at_cell: no object {name!r} in the scene nor in the world to take the cell's outline from")

@@ -453,12 +453,14 @@ class Labeller:
     def _turned_way(self, world: Any, name: str, feasible: dict[str, tuple[bool, str | None, str]]) -> str | None:
         """How a correct system gets the goal with ``name`` turned off its nominal up axis -- by the domain's own
         means, on the true scene -- or None when nothing does. A block on a frame's cell is turned where it lies
-        (checked with its grasp). A part the robot carries is re-oriented by a ``Reorient...`` task the domain
-        offers, or held as it lies (a top-down grasp) and turned in the hand so its primary feature meets its
-        target's (:meth:`_feature_arrival`). A target turned (a fixture) keeps its feature where it now faces: every
-        part carried onto it must meet it so. An object that is neither is followed by poses relative to it."""
-        if self.on_cells:
-            return "re-orientation or pose repair"
+        (checked with its grasp) when the domain can turn it (a ``turn``-mode place or a ``Reorient...`` task).
+        A part the robot carries is re-oriented by a ``Reorient...`` task the domain offers, or held as it lies (a
+        top-down grasp) and turned in the hand so its primary feature meets its target's (:meth:`_feature_arrival`).
+        A target turned (a fixture) keeps its feature where it now faces: every part carried onto it must meet it so.
+        An object that is neither is followed by poses relative to it."""
+        if self.on_cells:  # turned where it lies, by the domain's own means (letters: turn_over / Reorient)
+            turns = any(spec.get("mode") == "turn" for spec in self.grounding.skills.values())
+            return "re-orientation or pose repair" if self.reorientable or turns else None
         if self.reorientable and name in self.grasped and feasible.get(name, (True, None, ""))[0]:
             return "the domain's re-orientation"
         owned = [feature for owner, feature in self.target_features if owner == name]

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from bt_meta.judge.checks import evaluate
+from bt_meta.world.base import RUNNING
 from bt_meta.world.simulation.sim_world import SimWorld, quiet_stdout
 
 TASK = """\
@@ -40,6 +41,12 @@ obstacles:
 anchors:
   stack_spot: [0.60, -0.10, table, 0, 0, 0]
   slot: [0.62, 0.12, table, 0, 0, 0]
+variants:
+  no_top:
+    remove: [top]
+    add: [{name: spare, type: megablok_1x1, colour: red, pose: [0.66, -0.42, table, 0, 0, 0]}]
+  top_on_side:
+    override: {top: {pose: [0.58, -0.38, table, 90, 0, 0]}}
 """
 
 
@@ -100,3 +107,49 @@ def test_the_labeller_does_not_take_the_support_for_what_blocks_the_place(tmp_pa
     with Labeller(task_family(tmp_path / "task.yaml", "nominal"), scene, start_seed=None) as labeller:
         label = labeller.label(scene.path, None)
     assert label.expected == "nominal_equivalent", label.reason
+
+
+@pytest.mark.slow
+def test_the_labeller_needs_the_domain_to_turn_a_block_it_stacks(tmp_path: Path):
+    """A block on its side on a frame's cell is only repairable when the domain can turn it (the letters'
+    turn_over / Reorient); this one cannot: a limit, not ``repairable``. A missing block with a spare is."""
+    from bt_meta.campaign.families import task_family
+    from bt_meta.campaign.labeller import Labeller
+    from bt_meta.world.simulation.scenes import load_scene
+
+    _world(tmp_path, "stack").close()
+    tray = "obstacles:\n  - {name: tray, shape: box, size: [0.20, 0.20, 0.02], pose: [0.62, 0.12, table, 0, 0, 0]}\n"
+    assert tray in SCENE
+    (tmp_path / "scene.yaml").write_text(SCENE.replace(tray, ""))  # no obstacle: the turn alone decides
+    scene = load_scene(str(tmp_path / "scene.yaml"))
+    with Labeller(task_family(tmp_path / "task.yaml", "nominal"), scene, start_seed=None) as labeller:
+        turned = labeller.label(scene.path, "top_on_side")
+        assert turned.expected == "limit:reachability", turned.reason
+        assert labeller.label(scene.path, "no_top").expected == "repairable"
+
+
+@pytest.mark.slow
+def test_the_support_is_never_put_onto_itself(tmp_path: Path):
+    """With the block to stack missing, the block it goes on is no spare for it: placed onto itself, the stacking
+    "succeeded" with nothing stacked (a false success). The place skill refuses it, and the spare is used."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    world = _world(tmp_path, "stack")
+    try:
+        skill = world.skill("put")
+        skill.start(["base_block", "0", "0"])
+        for _ in range(50):
+            if skill.tick() != RUNNING:
+                break
+        assert skill.inner.failure is not None and "support" in skill.inner.failure.message
+    finally:
+        world.close()
+    command = [str(Path(sys.executable).with_name("bt-meta")), "run", str(tmp_path / "task.yaml"),
+               "--variant", "no_top", "--repair", "--json"]
+    done = subprocess.run(command, capture_output=True, text=True, env=dict(os.environ), timeout=120)
+    out = json.loads(done.stdout)
+    assert out["status"] == "SUCCESS", out.get("attempts")
+    assert [a["proposal"]["changes"]["symbols"] for a in out["attempts"]] == [{"top": "spare"}]

@@ -85,6 +85,13 @@ def _colour_of(problem: Any, symbol: str) -> str | None:
     return next((str(f[2]) for f in facts if len(f) == 3 and f[0] == "colour" and str(f[1]) == symbol), None)
 
 
+def frame_supports(world: Any) -> set[str]:
+    """The objects the grounding's frames name as ``support:`` (a tray, the block parts are stacked on): where
+    parts are put, so never a spare standing in for one (placed onto itself, the stacking "succeeded")."""
+    frames = getattr(getattr(world, "grounding", None), "frames", None) or {}
+    return {str(spec["support"]) for spec in frames.values() if spec.get("support")}
+
+
 def rebind_proposals(failure: Any, context: Any, limit: int = 3, *, failed_step_only: bool = False
                      ) -> list[RepairProposal]:
     """``rebind`` proposals: each missing entity symbol a step still to run uses -- with ``failed_step_only``, the
@@ -117,7 +124,8 @@ def rebind_proposals(failure: Any, context: Any, limit: int = 3, *, failed_step_
     named = {str(a) for p in plan for a in p.get("args") or []}
     bound = set(symbols.values()) | named
     held = {str(v) for v in ((observe() or {}).get("held") or {}).values() if v}
-    spares = sorted(n for n in seen if n not in bound and n not in held and n not in unusable)
+    spares = sorted(n for n in seen if n not in bound and n not in held and n not in unusable
+                    and n not in frame_supports(world))
     types = demonstrated_types(world)
     out: list[RepairProposal] = []
     for symbol, obj in sorted(missing.items()):

@@ -28,6 +28,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
+from bt_meta_plugins._grounding_spares import frame_supports
 from bt_meta_plugins._tilings import cells_in_the_way, read_drawing
 
 from bt_meta.bt.failures import RepairProposal
@@ -147,7 +148,8 @@ def spare_proposals(vector: Any, failure: Any, context: Any, limit: int = 3, col
     missing_names = {e.name for e in vector.missing}
     used = _used(plan)
     unusable = set(getattr(vector, "unusable", ()) or ())
-    spares = sorted(n for n in seen if n not in used and n not in missing_names and n not in unusable)
+    spares = sorted(n for n in seen if n not in used and n not in missing_names and n not in unusable
+                    and n not in frame_supports(world))
     todo = [p for p in plan if not p.get("done")]
     wanted = [e.name for e in vector.missing if any(e.name in map(str, p["args"]) for p in todo)]
     if not wanted or not spares:

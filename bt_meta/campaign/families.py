@@ -289,12 +289,11 @@ def task_family(task: str | Path, problem: str, *, scene: str | None = None,
 
 def family_spec(chosen: CampaignFamily, scene: Any = None, roles: Mapping[str, Sequence[str]] | None = None) -> Any:
     """A family's perturbation spec read against ``scene`` (default its own): objects by name, type or role."""
-    from bt_meta.world.simulation.objects import make_model
     from bt_meta.world.simulation.scenes import load_scene
 
     if scene is None:
         scene = load_scene(chosen.scene) if chosen.scene is not None else None
-    objects = {o.name: (o.type, make_model(o.type).role) for o in scene.objects}
+    objects = {o.name: (o.type, o.model().role) for o in scene.objects}
     return chosen.spec(objects, roles or {})
 
 

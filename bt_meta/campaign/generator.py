@@ -28,6 +28,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Sequence
+from contextvars import ContextVar
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -115,10 +116,22 @@ class Obstacle:
         return best
 
 
+_TYPES: ContextVar[dict[str, Callable[[str | None], Any]] | None] = ContextVar("campaign_object_types", default=None)
+"""The object types of the scene being perturbed (built-in, shipped catalogue and the scene's ``catalogue:``)."""
+
+
+def make_model(type_name: str) -> Any:
+    """The model of an object type as the scene being perturbed defines it: a user's catalogue types too."""
+    from bt_meta.world.simulation.objects import make_model as built_in
+
+    types = _TYPES.get()
+    if types is not None and type_name in types:
+        return types[type_name](None)
+    return built_in(type_name)
+
+
 def _radius(type_name: str) -> float:
     """Half the diagonal of an object's footprint (any yaw)."""
-    from bt_meta.world.simulation.objects import make_model
-
     low, high = make_model(type_name).extent()
     return 0.5 * float(math.hypot(high[0] - low[0], high[1] - low[1]))
 
@@ -292,7 +305,7 @@ def _resting_on(draw: _Draw, type_name: str, x: float, y: float) -> float | None
     a target on a part (the reference's magnet, the housing's bore) -- or ``None`` (on the table) when nothing is
     there. Put on the table at the part's place instead, the two would start inside each other and the simulator
     would throw the part over as it settles."""
-    from bt_meta.world.simulation.objects import make_model, rpy_to_matrix
+    from bt_meta.world.simulation.objects import rpy_to_matrix
     from bt_meta.world.simulation.sim import Table
 
     for other in draw.objects:
@@ -336,7 +349,6 @@ def _obstacle_shape(draw: _Draw, p: Perturbation, shape: str, under: tuple[float
 def _obstacles(draw: _Draw, p: Perturbation, obj: Placed | None) -> dict[str, Any] | None:
     """Static obstacles: the first, with ``on_work_probability``, within ``offset`` of a place the task puts
     something or of ``obj`` (a shelf centred over it); the others (and a first that is not) on free table space."""
-    from bt_meta.world.simulation.objects import make_model
 
     lo, hi = p.params["count"]
     count = int(draw.rng.integers(lo, hi + 1))
@@ -465,6 +477,11 @@ def scene_text(scene: Any, name: str, objects: Sequence[Placed], changes: Sequen
     if expected:
         lines.append(f"# Expected outcome (from ground truth): {expected} -- {reason}")
     lines += [f"scene: {name}", f"description: {scene.name} perturbed ({len(changes)} change(s))"]
+    if scene.catalogues:  # the scene's own object types, wherever the variant file is read
+        lines.append(f"catalogue: [{', '.join(json.dumps(str(path)) for path in scene.catalogues)}]")
+    if scene.obstacles:  # the nominal scene's obstacles (a tray the task places on), as its file writes them
+        lines.append("obstacles:")
+        lines += [f"  - {json.dumps(entry)}" for entry in _nominal_obstacles(scene)]
     if scene.anchors:
         lines.append("anchors:")
         for anchor, ((x, y, z), rpy) in scene.anchors.items():
@@ -496,6 +513,13 @@ def scene_text(scene: Any, name: str, objects: Sequence[Placed], changes: Sequen
     return "\n".join(lines) + "\n"
 
 
+def _nominal_obstacles(scene: Any) -> list[Any]:
+    """The entries of the scene file's ``obstacles:`` as written (already checked when the scene loaded)."""
+    import yaml
+
+    return list((yaml.safe_load(Path(scene.path).read_text(encoding="utf-8")) or {}).get("obstacles") or [])
+
+
 def _obstacle_flow(entry: dict[str, Any]) -> str:
     return "{" + ", ".join(f"{k}: {json.dumps(v) if isinstance(v, list) else v}" for k, v in entry.items()) + "}"
 
@@ -525,7 +549,7 @@ def generate(chosen: Any, n: int, seed: int, out: str | Path, *, spec_path: str 
     from bt_meta.campaign.labeller import Labeller
     from bt_meta.campaign.manifest import new_manifest, write_manifest
     from bt_meta.campaign.spec import load_spec
-    from bt_meta.world.simulation.objects import make_model
+    from bt_meta.world.simulation.catalogue import object_types
     from bt_meta.world.simulation.scenes import load_scene
     from bt_meta.world.simulation.sim import Table
     from bt_meta.world.simulation.sim_world import load_grounding
@@ -541,6 +565,7 @@ def generate(chosen: Any, n: int, seed: int, out: str | Path, *, spec_path: str 
         scene = scene_of(chosen, load_grounding(load_task_file(chosen.task_path()).domain.name, chosen.task_path()))
     out.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
+    types = _TYPES.set(object_types(scene.catalogues))
     try:
         folder = staging / "variants"
         folder.mkdir()
@@ -552,7 +577,7 @@ def generate(chosen: Any, n: int, seed: int, out: str | Path, *, spec_path: str 
 
                 raise UserInputError(f"problem {chosen.problem!r} has no plan: nothing to perturb",
                                      chosen.task_path())
-            objects = {o.name: (o.type, make_model(o.type).role) for o in scene.objects}
+            objects = {o.name: (o.type, o.model().role) for o in scene.objects}
             roles = {"grasped": list(labeller.grasped), "needed": list(labeller.needed)}
             spec = (load_spec(spec_path, objects, family=chosen.name, roles=roles) if spec_path is not None
                     else chosen.spec(objects, roles))
@@ -584,4 +609,6 @@ def generate(chosen: Any, n: int, seed: int, out: str | Path, *, spec_path: str 
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
+    finally:
+        _TYPES.reset(types)
     return manifest

@@ -187,8 +187,12 @@ class Labeller:
         finally:
             world.close()
         self.cells = letter_cells(self.plan, self.shapes, self.cell_actions)
-        self.on_cells = bool(self.cells)
-        """The task puts blocks on a frame's cells: the inventory rule decides what can be drawn."""
+        placed = [self.nominal.get(self.grounding.objects.get(str(a.args[0]), str(a.args[0])))
+                  for a in self.plan if a.name in self.cell_actions]
+        self.on_cells = bool(self.cells) and all(o is not None and o.model().shape in ("1x1", "1x2") for o in placed)
+        """The task puts Mega Bloks on a frame's cells: the inventory rule decides what can be drawn (any block of a
+        shape fills a cell). A task placing other parts (a pin into a kit's slot) needs each part or a spare of its
+        type, as every other task does."""
         self.reorientable = any(str(task).startswith(REORIENT_PREFIX) for task in self.task_file.domain.tasks)
 
     def _held_as_demonstrated(self, world: Any) -> dict[str, np.ndarray]:
@@ -251,7 +255,7 @@ class Labeller:
                 x, y = float(action.args[1]), float(action.args[2])
                 for dx in _cell_offsets(shape):
                     gx, gy, _ = world.ground_cell(str(frame), str(x + dx), str(y))
-                    out.append((gx, gy, world.sim.table.top_z))
+                    out.append((gx, gy, self._floor(world, str(frame), gx, gy)))
         if out:
             return out
         grasped = set(self.grasped)
@@ -266,6 +270,22 @@ class Labeller:
             out.append((float(point[0]), float(point[1]), float(point[2])))
             self.target_features.append((name, feature))
         return out
+
+    def _supports(self) -> set[str]:
+        """The objects and obstacles the grounding's frames name as ``support:``: where parts are put, so never
+        what occupies or blocks a place."""
+        return {str(spec["support"]) for spec in self.grounding.frames.values() if spec.get("support")}
+
+    @staticmethod
+    def _floor(world: Any, frame: str, x: float, y: float) -> float:
+        """The height a part put at (x, y) of ``frame`` rests on, as the place skill takes it: the top of the
+        frame's support there (a tray's floor, the block it is stacked on), else the table top."""
+        _, support = world.frame_support(frame)
+        table = float(world.sim.table.top_z)
+        if support is None:
+            return table
+        top = world.surface_under(support, np.array([[x, y]]))
+        return table if top is None else max(float(top), table)
 
     def _occupied_cell(self, world: Any, names: Sequence[str]) -> Label | None:
         """``limit:collision`` when an object reaches into a letter cell's footprint deeper than the place skill's
@@ -290,7 +310,7 @@ class Labeller:
                 pose = np.eye(4)
                 c, s_ = math.cos(yaw), math.sin(yaw)
                 pose[:2, :2] = [[c, -s_], [s_, c]]
-                pose[:3, 3] = (gx, gy, sim.table.top_z + 0.002 + PROBE_HEIGHT / 2.0)
+                pose[:3, 3] = (gx, gy, self._floor(world, str(frame), gx, gy) + 0.002 + PROBE_HEIGHT / 2.0)
                 near = {n: d for n, d in sim.box_clearances((LB, LB, PROBE_HEIGHT), pose, names, 0.0).items()
                         if d < -overlap and n != str(action.args[0])}  # a block on its own cell is picked
                 if near:
@@ -309,7 +329,7 @@ class Labeller:
         for action in self.plan:
             if action.name in self.cell_actions and frame is not None:
                 gx, gy, _ = world.ground_cell(str(frame), str(action.args[1]), str(action.args[2]))
-                out.append((str(action.args[0]), (gx, gy, world.sim.table.top_z)))
+                out.append((str(action.args[0]), (gx, gy, self._floor(world, str(frame), gx, gy))))
         if out:
             return out
         return [(name, target) for name in self.grasped
@@ -346,7 +366,8 @@ class Labeller:
         fixtures = {n for n in self.needed if not self.on_cells and n not in self.grasped}
         # only what the task does not name blocks a place: an object the plan uses is picked up by the plan, and
         # so is one it takes for a missing block
-        named = set(self.needed) | self._stand_ins(world, present)
+        # a frame's support (the tray, the block a part is stacked on) is where the part goes, not in its way
+        named = set(self.needed) | self._stand_ins(world, present) | self._supports()
         steps = self._target_steps()
         for index, (tx, ty, _) in enumerate(self.targets):
             blocking = next((name for name in present if name not in fixtures and name not in named and math.hypot(
@@ -408,7 +429,7 @@ class Labeller:
         cannot make the goal."""
         grasped = None if self.on_cells else self.grasped
         if self.on_cells:
-            blocks = {n: m for n, m in present.items() if m.shape in ("1x1", "1x2")}
+            blocks = {n: m for n, m in present.items() if m.shape in ("1x1", "1x2") and n not in self._supports()}
             n1 = sum(m.shape == "1x1" for m in blocks.values())
             n2 = sum(m.shape == "1x2" for m in blocks.values())
             units, pairs = len(self.cells), max_pairs(self.cells)
@@ -432,12 +453,14 @@ class Labeller:
     def _turned_way(self, world: Any, name: str, feasible: dict[str, tuple[bool, str | None, str]]) -> str | None:
         """How a correct system gets the goal with ``name`` turned off its nominal up axis -- by the domain's own
         means, on the true scene -- or None when nothing does. A block on a frame's cell is turned where it lies
-        (checked with its grasp). A part the robot carries is re-oriented by a ``Reorient...`` task the domain
-        offers, or held as it lies (a top-down grasp) and turned in the hand so its primary feature meets its
-        target's (:meth:`_feature_arrival`). A target turned (a fixture) keeps its feature where it now faces: every
-        part carried onto it must meet it so. An object that is neither is followed by poses relative to it."""
-        if self.on_cells:
-            return "re-orientation or pose repair"
+        (checked with its grasp) when the domain can turn it (a ``turn``-mode place or a ``Reorient...`` task).
+        A part the robot carries is re-oriented by a ``Reorient...`` task the domain offers, or held as it lies (a
+        top-down grasp) and turned in the hand so its primary feature meets its target's (:meth:`_feature_arrival`).
+        A target turned (a fixture) keeps its feature where it now faces: every part carried onto it must meet it so.
+        An object that is neither is followed by poses relative to it."""
+        if self.on_cells:  # turned where it lies, by the domain's own means (letters: turn_over / Reorient)
+            turns = any(spec.get("mode") == "turn" for spec in self.grounding.skills.values())
+            return "re-orientation or pose repair" if self.reorientable or turns else None
         if self.reorientable and name in self.grasped and feasible.get(name, (True, None, ""))[0]:
             return "the domain's re-orientation"
         owned = [feature for owner, feature in self.target_features if owner == name]
@@ -501,7 +524,8 @@ class Labeller:
         named = [m.shape for n, m in present.items() if n in self.needed]
         if letters_feasible(len(self.cells), max_pairs(self.cells), named.count("1x1"), named.count("1x2")):
             return set()
-        unnamed = sorted(n for n, m in present.items() if n not in self.needed and m.shape in ("1x1", "1x2"))
+        unnamed = sorted(n for n, m in present.items() if n not in self.needed and n not in self._supports()
+                         and m.shape in ("1x1", "1x2"))
         occupied = {n: label.evidence["step"] for n in unnamed if (label := self._occupied_cell(world, [n]))}
         taken: set[str] = set()
         cleared: set[str] = set()

@@ -194,15 +194,29 @@ def _frame(world: Any, options: dict[str, Any]) -> str:
 def _model(world: Any, symbol: str) -> Any:
     """The object model whose outline a cell of ``symbol`` has: the scene's nominal object of that name (what the
     task means by the symbol, even when a variant changed or removed it), else the world's object."""
-    from bt_meta.world.simulation.objects import make_model
-
     name = world.grounding.objects.get(symbol, symbol)
     for obj in getattr(world.scene, "objects", ()):
         if obj.name == name:
-            return make_model(obj.type)
+            return obj.model()  # its type as the scene's catalogue defines it
     if name in world.sim.object_names():
         return world.sim.object_model(name)
     raise CheckFailed(f"at_cell: no object {name!r} in the scene nor in the world to take the cell's outline from")
+
+
+def _cell_floor(world: Any, frame: str, target: np.ndarray) -> tuple[float | None, str | None]:
+    """(height, support) a part in a cell of ``frame`` rests on, as the place skill puts it there: the top of the
+    frame's ``support:`` under the cell (a tray's floor, the block a part is stacked on; ``None`` when the support
+    is not under it), else the table top (an anchor's own height is a surface the scene does not model: what is
+    set down there lands on the table). A cell is filled by what rests there, not by the support itself nor by a
+    part on the table under a stacked cell."""
+    floor, support = world.frame_support(frame)
+    if support is None:
+        return float(world.sim.table.top_z), None
+    low, high = target[:, :2].min(axis=0), target[:, :2].max(axis=0)
+    centre, half = (low + high) / 2.0, 0.25 * (high - low)  # the middle of the cell, as place takes its floor
+    middle = np.array([centre + (u, v) * half for u, v in ((0, 0), (1, 1), (-1, 1), (1, -1), (-1, -1))])
+    top = world.surface_under(support, middle)
+    return (None if top is None else max(float(top), float(floor))), support
 
 
 def _at_cell(world: Any, args: list[str], options: dict[str, Any]) -> tuple[bool, str]:
@@ -214,16 +228,18 @@ def _at_cell(world: Any, args: list[str], options: dict[str, Any]) -> tuple[bool
     rotation = rpy_to_matrix(0.0, 0.0, float(yaw))
     target = model.points() @ rotation.T + np.array([gx, gy, 0.0])
     sim = world.sim
-    top = float(sim.table.top_z)
+    floor, support = _cell_floor(world, frame, target)
+    where = f"cell ({args[1]}, {args[2]}) of {frame}"
+    if floor is None:
+        return False, f"{where}: its support {support} is not under it"
     held = _held_group(world)
     outlines = []
     for name in sim.object_names():
-        if name in held or float(world.object_lowest(name)) - top > 0.01:
+        if name in held or name == support or abs(float(world.object_lowest(name)) - floor) > 0.01:
             continue
         t = sim.object_transform(name)
         outlines.append(footprint(sim.object_model(name).points() @ t[:3, :3].T + t[:3, 3]))
     hit, total = covered(target, outlines, float(options["tolerance"]), float(options["gap"]))
-    where = f"cell ({args[1]}, {args[2]}) of {frame}"
     if hit == total:
         return True, f"{where} is covered"
     return False, f"{where} is not covered ({total - hit} of {total} points of its outline bare)"

@@ -125,6 +125,9 @@ class Scene:
     origin cell is and which way its axes point."""
     obstacles: tuple[SceneObstacle, ...] = ()
     """Static obstacles of the nominal scene."""
+    catalogues: tuple[Path, ...] = ()
+    """The catalogue files (``catalogue:``) the scene's object types come from besides the built-in and shipped ones:
+    a file written from this scene (a campaign's variant) names them too."""
 
     def obstacles_for(self, variant: str | None = None) -> tuple[SceneObstacle, ...]:
         """The nominal obstacles, or those of a named variant (the nominal ones plus what it adds)."""
@@ -257,7 +260,8 @@ class _SceneFile(YamlNodeReader):
         if "anchors" in top:
             for key, (_, value) in self.mapping(top["anchors"][1], "anchors", None).items():
                 anchors[key] = self.pose(value, key, what=f"anchor {key!r}")
-        return Scene(name, description, self.path, objects, variants, jitter_position, jitter_yaw, anchors, obstacles)
+        return Scene(name, description, self.path, objects, variants, jitter_position, jitter_yaw, anchors, obstacles,
+                     tuple(path.resolve() for path in extra))
 
     # -- parts -----------------------------------------------------------------------------------------------
 

@@ -229,6 +229,10 @@ class Place(PhasedSkill):
         if block not in self.world.sim.object_names():
             raise SkillAbort(FailureKind.UNKNOWN_ENTITY, f"place: there is no block {block!r} in the world",
                              {"object": block, "present": list(self.world.sim.object_names())})
+        if self._support is not None and self._support[1] == block:
+            raise SkillAbort(FailureKind.UNEXPECTED_CONFIGURATION,
+                             f"place {block}: it is the support of frame {frame}, what parts are put on",
+                             {"object": block, "support": block, "objects": [block]})
         self.block = block
         self.goal = goal
         self._yaw: float | None = None

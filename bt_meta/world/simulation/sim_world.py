@@ -559,10 +559,11 @@ class SimWorld:
                 self.collision.detach(part, q=q)
         return name
 
-    def allow_hand(self, name: str, arm: str, allowed: bool = True) -> None:
+    def allow_hand(self, name: str, arm: str, allowed: bool = True, preshape: bool = True) -> None:
         """Let the hand touch ``name`` in collision checks (approaching it to grasp), or stop letting it. Allowing
-        it also opens a friction gripper's fingers just wider than ``name``, for the way down around it."""
-        if allowed and self.sim.held(arm) is None:
+        it also opens a friction gripper's fingers just wider than ``name``, for the way down around it (not with
+        ``preshape`` false: a check that must not move the fingers)."""
+        if allowed and preshape and self.sim.held(arm) is None:
             self.sim.preshape(arm, name)
         for part in self._geometry.get(name, []):
             if allowed:

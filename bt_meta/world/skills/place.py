@@ -236,6 +236,8 @@ class Place(PhasedSkill):
         self.block = block
         self.goal = goal
         self._yaw: float | None = None
+        self._goal_ref: float | None = None
+        """The yaw the block is set down nearest (up to its symmetry), when the pick chose one."""
         self._beside = False
         self._down: np.ndarray | None = None
         self.info.update(block=block, goal=rounded(goal))
@@ -390,8 +392,11 @@ class Place(PhasedSkill):
                 # narrowest across the fingers first (a pin lying down is held across, not along it); for a turn
                 # by a hand that turns parts about its fingers, those closing along the turn's axis first
                 turns = [preferred + k * math.pi / 2.0 for k in (0, 1, -1, 2)]
-                self._yaw = min(turns, key=lambda yaw: (self._finger_obstruction(yaw), self._off_turn_axis(yaw),
+                ranked = sorted(turns, key=lambda yaw: (self._finger_obstruction(yaw), self._off_turn_axis(yaw),
                                                         self._width_across(yaw)))
+                self._yaw = ranked[0]
+                if self._descent_collides(ranked[0]):
+                    self._clear_descent(ranked)
             else:
                 turns = [preferred + k * period for k in range(max(1, round(math.pi / period)))]
                 self._yaw = min(turns, key=self._finger_obstruction)  # ties: the first, the preferred yaw
@@ -420,6 +425,39 @@ class Place(PhasedSkill):
         closing = self._closing_axis_at(yaw)
         return int(abs(float(closing @ axis)) / float(np.linalg.norm(axis)) < math.cos(math.radians(45.0)))
 
+    def _clear_descent(self, ranked: list[float]) -> None:
+        """Where every way down at the chosen yaw collides -- the pad samples miss the fingers' bodies, and a
+        friction hand stands open wider than the part (a Panda's 8 cm over a 6.1 cm block; letters_A 11_0001: a 1x2
+        turned 33 degrees beside the block, 1.2 mm into a finger) -- pick at the first of ``ranked`` whose way down
+        is clear (the labeller's check), and set the block down turned by a multiple of its symmetry that keeps
+        the fingers out of its neighbours there (a quarter turn of the pick alone put a finger into the block
+        beside the cell). Nothing clear: the chosen yaw stays, and the descent reports its collision."""
+        sim = self.world.sim
+        period = symmetry(sim.object_model(self.block))
+        count = max(1, round(2.0 * math.pi / period))
+        goal_turns = sorted((math.remainder(k * period, 2.0 * math.pi) for k in range(count)), key=abs)
+        options = [((self._finger_obstruction(yaw, goal_turn=turn), abs(turn)), index, yaw, turn)
+                   for index, yaw in enumerate(ranked) if not self._descent_collides(yaw) for turn in goal_turns]
+        if not options:
+            return
+        _, _, self._yaw, turn = min(options, key=lambda option: option[:2])
+        self._goal_ref = object_yaw(sim.object_transform(self.block)) + turn
+
+    def _descent_collides(self, yaw: float) -> bool:
+        """Whether every IK solution of the top-down grasp at ``yaw`` collides with the scene (the hand may touch
+        the block), as the descent's own move would find; the fingers as they are now, open."""
+        import pinocchio as pin
+
+        world = self.world
+        x, y = world.grasp_xy(self.block)
+        pose = top_down(x, y, world.object_top(self.block) + world.grasp_height(self.block, self.arm, 0.004), yaw)
+        world.allow_hand(self.block, self.arm, preshape=False)
+        try:
+            result = world.ik.solve(self.arm, pin.SE3(pose[:3, :3], pose[:3, 3]), world.current_q(), seed=0)
+        finally:
+            world.allow_hand(self.block, self.arm, False)
+        return not result.success and result.kind == "collision"
+
     def _width_across(self, yaw: float) -> int:
         """The part's width (in 5 mm steps) between the fingers of a top-down gripper at ``yaw``."""
         sim = self.world.sim
@@ -428,9 +466,10 @@ class Place(PhasedSkill):
         along = (sim.object_model(self.block).points() @ t[:3, :3].T) @ axis
         return round(float(along.max() - along.min()) / 0.005)
 
-    def _finger_obstruction(self, yaw: float) -> int:
+    def _finger_obstruction(self, yaw: float, goal_turn: float | None = None) -> int:
         """How many sample points of the two finger pads, gripping with the gripper at ``yaw``, fall inside other
-        objects, at the pick and at the goal."""
+        objects, at the pick and at the goal; with ``goal_turn``, at the goal only, the block set down turned so
+        from where it lies."""
         world, sim = self.world, self.world.sim
         block = sim.object_transform(self.block)
         model = sim.object_model(self.block)
@@ -443,7 +482,7 @@ class Place(PhasedSkill):
         top = world.object_top(self.block) - block[2, 3] + world.grasp_height(self.block, self.arm, 0.004)
         others = self._others()  # 108 points per pose against every object: read each object's pose once
         count = 0
-        for pose in (block, self._goal_block()):
+        for pose in ((block, self._goal_block()) if goal_turn is None else (self._goal_block(goal_turn),)):
             gripper_yaw = object_yaw(pose) + relative
             axis = top_down(0.0, 0.0, 0.0, gripper_yaw)[:3, :3] @ local_axis
             across = np.array([-axis[1], axis[0], 0.0])
@@ -518,13 +557,17 @@ class Place(PhasedSkill):
         high[2, 3] = max(high[2, 3], gripper[2, 3] + TURN_RISE)
         return high
 
-    def _goal_block(self) -> np.ndarray:
-        """Where the block should end up: centroid at the goal, resting on the table, axes along the frame."""
+    def _goal_block(self, turn: float | None = None) -> np.ndarray:
+        """Where the block should end up: centroid at the goal, resting on the table, axes along the frame, at
+        the symmetric yaw nearest its own -- turned by ``turn`` from where it is, else nearest the yaw the pick
+        chose for it (:meth:`_clear_descent`), else nearest its yaw now."""
         sim = self.world.sim
         model = sim.object_model(self.block)
         current = sim.object_transform(self.block)
         x, y, frame_yaw = self.goal
-        yaw = nearest_yaw(frame_yaw, symmetry(model), object_yaw(current))
+        reference = (object_yaw(current) + turn if turn is not None
+                     else self._goal_ref if self._goal_ref is not None else object_yaw(current))
+        yaw = nearest_yaw(frame_yaw, symmetry(model), reference)
         z = self._floor(model, x, y, yaw) + model.lowest_z(0.0, 0.0) + self.clearance
         return pose_to_matrix((x, y, z, 0.0, 0.0, yaw))
 

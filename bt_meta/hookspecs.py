@@ -120,7 +120,8 @@ def bt_meta_observation_needs(context: StepContext) -> list[str] | None:
     ``RunContext.start_observations``); include what later steps read from this observation (a view kept to
     compare the next step with). Return a list of keys, ``[]`` when it reads nothing now, or ``None`` for "I do not
     know": then every key is requested. While any ``bt_meta_compare`` plugin does not implement this hook, every
-    observation requests every key (a reader written before this hook existed gets everything, as before).
+    observation requests every key (a reader written before this hook existed gets everything, as before); with
+    no comparison plugin and no implementation of this hook only ``"symbolic_state"`` (the belief) is requested.
     """
 
 

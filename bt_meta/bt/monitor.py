@@ -252,12 +252,15 @@ class Monitor(py_trees.decorators.Decorator):
     @staticmethod
     def _request(run: RunContext, context: StepContext) -> ObserveRequest:
         """What the readers of this observation will read: the monitor's belief (``symbolic_state``) and every
-        key the ``bt_meta_observation_needs`` plugins name; everything while a comparison plugin has not said."""
+        key the ``bt_meta_observation_needs`` plugins name; everything while a comparison plugin has not said (it
+        may read any key), only the belief when nothing reads observations."""
         plugins = run.plugins
         declared = {impl.plugin_name for impl in plugins.implementations("bt_meta_observation_needs")}  # type: ignore
-        if not declared or any(impl.plugin_name not in declared
-                               for impl in plugins.implementations("bt_meta_compare")):  # type: ignore[union-attr]
+        if any(impl.plugin_name not in declared
+               for impl in plugins.implementations("bt_meta_compare")):  # type: ignore[union-attr]
             return OBSERVE_ALL
+        if not declared:
+            return BELIEF_ONLY  # nothing compares (a demonstration being recorded): only the belief is read
         result = plugins.call("bt_meta_observation_needs", context=context)  # type: ignore[union-attr]
         for error in result.errors:
             log.warning("%s; observing everything", error)

@@ -48,10 +48,11 @@ class ImageReader:
         return None
 
 
-def _run(camera: CountingCamera, *extra: tuple[str, Any], faults: tuple[str, ...] = ()) -> tuple[Status, Any]:
+def _run(camera: CountingCamera, *extra: tuple[str, Any], faults: tuple[str, ...] = (),
+         symbolic: bool = True) -> tuple[Status, Any]:
+    monitors = [("symbolic_expectations", symbolic_plugin)] if symbolic else []
     plugins = create_plugin_host(entry_points=False, plugins=[
-        ("ground_truth_perception", truth_plugin), ("symbolic_expectations", symbolic_plugin),
-        ("camera_perception", camera), *extra])
+        ("ground_truth_perception", truth_plugin), *monitors, ("camera_perception", camera), *extra])
     harness = TreeHarness.from_file(trees_dir() / "letters.yaml", "A", plugins=plugins, faults=faults)
     return harness.tick_until(), harness
 
@@ -61,6 +62,13 @@ def test_no_frame_is_rendered_when_no_reader_reads_one():
     status, harness = _run(camera)
     assert status is Status.SUCCESS and harness.failures == []
     assert camera.renders == 0  # the symbolic monitor reads the symbolic state only
+
+
+def test_no_frame_is_rendered_when_nothing_compares():
+    """A demonstration being recorded: perception observes for the belief, the recorder takes its own frame."""
+    camera = CountingCamera()
+    status, _ = _run(camera, symbolic=False)
+    assert status is Status.SUCCESS and camera.renders == 0
 
 
 def test_a_grid_map_reader_gets_the_start_view_and_every_steps_view_but_none_after_a_failure(tmp_path):

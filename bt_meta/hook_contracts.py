@@ -67,6 +67,10 @@ def _is_proposals(value: Any) -> bool:
     return isinstance(value, (list, tuple, _proposal(), Failure))
 
 
+def _is_keys(value: Any) -> bool:
+    return isinstance(value, (list, tuple, set, frozenset)) and all(isinstance(key, str) for key in value)
+
+
 def _is_kind(value: Any) -> bool:
     from bt_meta.bt.failures import FailureKind
 
@@ -76,6 +80,7 @@ def _is_kind(value: Any) -> bool:
 RESULT_CONTRACTS: dict[str, tuple[Callable[[Any], bool], str]] = {
     "bt_meta_make_world": (_is_world, "a World (with symbolic_state, skill and observe) or None"),
     "bt_meta_external_predicate": (_is_bool, "True, False or None"),
+    "bt_meta_observation_needs": (_is_keys, "a list of observation keys (str) or None"),
     "bt_meta_observe": (lambda value: isinstance(value, dict), "a dict of observations or None"),
     "bt_meta_expectations": (_list_of(_expectation), "a list of Expectation or None"),
     "bt_meta_compare": (_instance_of(_comparison), "a Comparison or None"),

@@ -18,7 +18,8 @@ Offers:
   ``bt_meta_make_world``         yes        when a command needs a world by name (``--world fake``)
   ``bt_meta_external_predicate`` yes        when the planner or a guard evaluates an external predicate
   ``bt_meta_trace_event``        no         run start/end, every tree tick, every step start/end, failures
-  ``bt_meta_observe``            no         after a primitive's skill succeeds: gather observations
+  ``bt_meta_observation_needs``  no         before each observation: which observation keys a reader reads
+  ``bt_meta_observe``            no         before a run's first step, after each step: gather observations
   ``bt_meta_expectations``       no         after a primitive's skill succeeds: what should now hold
   ``bt_meta_compare``            yes        once per expectation: does the observation match it
   ``bt_meta_classify_failure``   yes        on a mismatch or a kind-less failure: the taxonomy kind
@@ -54,7 +55,7 @@ from typing import TYPE_CHECKING, Any
 import pluggy
 
 if TYPE_CHECKING:
-    from bt_meta.bt.expectations import Comparison, Expectation, StepContext
+    from bt_meta.bt.expectations import Comparison, Expectation, ObserveRequest, StepContext
     from bt_meta.bt.failures import Failure, FailureKind, RepairProposal
 
 PROJECT_NAME = "bt_meta"
@@ -110,13 +111,36 @@ def bt_meta_trace_event(event: dict[str, Any]) -> None:
 
 
 @hookspec
-def bt_meta_observe(world: Any, context: StepContext) -> dict[str, Any] | None:
-    """Observe the world after the step in ``context`` reported success.
+def bt_meta_observation_needs(context: StepContext) -> list[str] | None:
+    """Say which observation keys this plugin will read after the step in ``context`` (``"image"``,
+    ``"objects"``, ...), so observe plugins produce only those.
+
+    Called before every observation of a monitored step (and before the one a run takes before its first step).
+    Implement it in a plugin that reads observations (a ``bt_meta_compare``, or anything reading
+    ``RunContext.start_observations``); include what later steps read from this observation (a view kept to
+    compare the next step with). Return a list of keys, ``[]`` when it reads nothing now, or ``None`` for "I do not
+    know": then every key is requested. While any ``bt_meta_compare`` plugin does not implement this hook, every
+    observation requests every key (a reader written before this hook existed gets everything, as before); with
+    no comparison plugin and no implementation of this hook only ``"symbolic_state"`` (the belief) is requested.
+    """
+
+
+@hookspec
+def bt_meta_observe(world: Any, context: StepContext, request: ObserveRequest) -> dict[str, Any] | None:
+    """Observe the world: before a run's first step (``RunContext.start_observations``), after the step in
+    ``context`` succeeded, and after it failed (for the belief state).
 
     Return a dict of observations keyed by modality, or ``None`` to contribute nothing. Keys in use:
     ``"symbolic_state"`` (a :class:`bt_meta.htn.State`: the monitor also adopts it as the new belief state),
     ``"objects"`` (object name -> object state), ``"gridmaps"``, ``"image"``. Results of all plugins are merged;
     when two plugins give the same key the first one called (the last registered) is kept.
+
+    ``request`` (an :class:`~bt_meta.bt.expectations.ObserveRequest`) says which keys will be read
+    (``request.wants("image")``, gathered through :func:`bt_meta_observation_needs`): skip costly keys nobody
+    wants (a camera frame), and return ``None`` when you would produce none of them. A key not wanted may still
+    be returned; it is ignored. Accepting ``request`` is optional (pluggy passes only the arguments a hook
+    implementation names): an implementation taking ``(world, context)`` is called as before and its results
+    used alike.
     """
 
 

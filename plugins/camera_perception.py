@@ -18,7 +18,9 @@ Offers:
 * :func:`bt_meta_observe` -- ``{"blocks": [...], "gridmaps": [GridMap, ...], "image": TopView,
   "object_gridmaps": {name: GridMap}}``: detected blocks (with ``name`` when matched), one grid-map per detected
   block, the analysed view (crops anywhere on demand), and -- in the simulator -- one grid-map per block object
-  centred where it truly is (the instructor's annotation when recording a demonstration)
+  centred where it truly is (the instructor's annotation when recording a demonstration); only the keys the
+  observe request wants (:class:`~bt_meta.bt.expectations.ObserveRequest`, ``image`` with any of them), and no
+  frame at all when it wants none of them
 * :func:`configure` -- replace the settings of the module-level plugin
 """
 
@@ -29,12 +31,16 @@ import weakref
 from collections.abc import Mapping
 from typing import Any
 
+from bt_meta.bt.expectations import OBSERVE_ALL
 from bt_meta.perception.colours import scene_thresholds
 from bt_meta.perception.gridmap import DEFAULT_SPEC, GridSpec
 from bt_meta.perception.hsv import HSVThresholds
 from bt_meta.perception.topview import TopView, capture
 from bt_meta.plugins import ConfiguredPlugin, hookimpl
 from bt_meta.world.simulation.objects import LB
+
+VIEW_KEYS = ("image", "blocks", "gridmaps", "object_gridmaps")
+"""The observation keys made from the top view: no request wants any of them, no frame is rendered."""
 
 TABLE_COLOUR = (0.93, 0.9, 0.83, 1.0)
 """The simulator's table (RGBA), the background thresholds are derived on when the world does not say."""
@@ -131,12 +137,24 @@ class CameraPerception:
         return maps
 
     @hookimpl
-    def bt_meta_observe(self, world: Any, context: Any) -> dict[str, Any] | None:
+    def bt_meta_observe(self, world: Any, context: Any, request: Any) -> dict[str, Any] | None:
+        """Render and analyse a top view only when ``request`` wants one of the keys made from it; of those,
+        only the wanted ones are computed (the blocks' descriptions and the true-pose grid-maps cost per block)."""
+        if request is None:
+            request = OBSERVE_ALL
+        if not request.wants(*VIEW_KEYS):
+            return None
         view = self.look(world)
         if view is None:
             return None
-        return {"blocks": view.describe(), "gridmaps": list(view.grid_maps), "image": view,
-                "object_gridmaps": self.object_grid_maps(world, view)}
+        out: dict[str, Any] = {"image": view}
+        if request.wants("blocks"):
+            out["blocks"] = view.describe()
+        if request.wants("gridmaps"):
+            out["gridmaps"] = list(view.grid_maps)
+        if request.wants("object_gridmaps"):
+            out["object_gridmaps"] = self.object_grid_maps(world, view)
+        return out
 
 
 plugin = ConfiguredPlugin(CameraPerception)
@@ -144,5 +162,5 @@ configure = plugin.configure
 
 
 @hookimpl
-def bt_meta_observe(world: Any, context: Any) -> dict[str, Any] | None:
-    return plugin.current.bt_meta_observe(world, context)
+def bt_meta_observe(world: Any, context: Any, request: Any) -> dict[str, Any] | None:
+    return plugin.current.bt_meta_observe(world, context, request)

@@ -130,6 +130,12 @@ class GridMapExpectations:
         )]
 
     @hookimpl
+    def bt_meta_observation_needs(self, context: Any) -> list[str] | None:
+        """The top view and the object states whenever the run has a memory to expect grid-maps from: every
+        step's view, compared or not, is the ``before`` of the next compared step (and the start's of the first)."""
+        return ["image", "objects"] if memory_for(context, self.memory) is not None else []
+
+    @hookimpl
     def bt_meta_compare(self, expectation: Expectation, observations: dict[str, Any], context: Any
                         ) -> Comparison | None:
         run = getattr(context, "run", None)
@@ -451,6 +457,11 @@ configure = plugin.configure
 @hookimpl
 def bt_meta_expectations(context: Any) -> list[Expectation] | None:
     return plugin.current.bt_meta_expectations(context)
+
+
+@hookimpl
+def bt_meta_observation_needs(context: Any) -> list[str] | None:
+    return plugin.current.bt_meta_observation_needs(context)
 
 
 @hookimpl

@@ -216,6 +216,11 @@ class KeypointExpectations:
         return out
 
     @hookimpl
+    def bt_meta_observation_needs(self, context: Any) -> list[str] | None:
+        """The object states (the keypoints are computed from them)."""
+        return ["objects"]
+
+    @hookimpl
     def bt_meta_compare(self, expectation: Expectation, observations: dict[str, Any], context: Any
                         ) -> Comparison | None:
         return compare(expectation, observations)
@@ -339,6 +344,11 @@ configure = plugin.configure
 @hookimpl
 def bt_meta_expectations(context: Any) -> list[Expectation] | None:
     return plugin.current.bt_meta_expectations(context)
+
+
+@hookimpl
+def bt_meta_observation_needs(context: Any) -> list[str] | None:
+    return plugin.current.bt_meta_observation_needs(context)
 
 
 @hookimpl

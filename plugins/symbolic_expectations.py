@@ -51,6 +51,12 @@ def bt_meta_expectations(context: Any) -> list[Expectation] | None:
 
 
 @hookimpl
+def bt_meta_observation_needs(context: Any) -> list[str] | None:
+    """The observed symbolic state."""
+    return ["symbolic_state"]
+
+
+@hookimpl
 def bt_meta_compare(expectation: Expectation, observations: dict[str, Any], context: Any) -> Comparison | None:
     if expectation.kind != KIND:
         return None

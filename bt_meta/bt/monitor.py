@@ -3,7 +3,9 @@
 Every primitive of a compiled or loaded tree runs inside a Monitor (section 3 of the paper). Before its child
 starts, the monitor checks the primitive's precondition against the run's belief state (kind ``precondition``
 on failure; the child is not started; before the run's first step starts it also keeps what the observe plugins
-report then, ``RunContext.start_observations``). When the child succeeds it gathers observations (``bt_meta_observe``),
+report then, ``RunContext.start_observations``). When the child succeeds it gathers observations (``bt_meta_observe``,
+with an :class:`~bt_meta.bt.expectations.ObserveRequest` of the keys the readers declared through
+``bt_meta_observation_needs``, so a camera frame nobody reads is not rendered; after a failed step only the belief),
 asks for expectations (``bt_meta_expectations``) and compares each (``bt_meta_compare``); a mismatch turns
 SUCCESS into FAILURE with a structured :class:`~bt_meta.bt.failures.Failure` on ``/bt_meta/failures`` and in the
 run log, after which the meta-reasoner hook runs. A failing child's own failure (its skill's kind) is recorded the
@@ -22,6 +24,7 @@ Offers:
 
 from __future__ import annotations
 
+import logging
 import re
 from typing import Any
 
@@ -30,14 +33,17 @@ from py_trees.common import Status
 
 from bt_meta.bt.actions import PrimitiveAction
 from bt_meta.bt.context import RunContext, current_run
-from bt_meta.bt.expectations import Comparison, Expectation, StepContext
+from bt_meta.bt.expectations import OBSERVE_ALL, Comparison, Expectation, ObserveRequest, StepContext
 from bt_meta.bt.failures import Failure, FailureKind, parse_kind
 from bt_meta.errors import BtMetaError
 from bt_meta.htn.state import atom_text
 
 _BEHAVIOUR_TICK = py_trees.behaviour.Behaviour.tick
 _BEHAVIOUR_STOP = py_trees.behaviour.Behaviour.stop
+log = logging.getLogger("bt_meta.monitor")
 _RUNNING = Status.RUNNING
+BELIEF_ONLY = ObserveRequest(frozenset({"symbolic_state"}))
+"""The request of an observation only the monitor's belief update reads (after a failed step)."""
 _SUCCESS = Status.SUCCESS
 _FAILURE = Status.FAILURE
 _PRED_RE = re.compile(r"([A-Za-z_][\w\-]*)\s*\(")
@@ -114,7 +120,8 @@ class Monitor(py_trees.decorators.Decorator):
                 return
             if run is not None and run.start_observations is None and "bt_meta_observe" in run.hooks \
                     and "bt_meta_compare" in run.hooks:
-                run.start_observations = self._observe(run, self._step_context(run))[0]
+                context = self._step_context(run)
+                run.start_observations = self._observe(run, context, self._request(run, context))[0]
         child = self.decorated
         if self._inline:
             if child.status is not _RUNNING:
@@ -225,7 +232,7 @@ class Monitor(py_trees.decorators.Decorator):
             internal = None
             observations: dict[str, Any] = {}
             if observe:
-                observations, internal = self._observe(run, context)
+                observations, internal = self._observe(run, context, self._request(run, context))
             mismatches: list[Comparison] = []
             if internal is None and expect:
                 mismatches, internal = self._compare(run, context, observations)
@@ -242,8 +249,32 @@ class Monitor(py_trees.decorators.Decorator):
             run.state = run.state.apply(add=effects[0], delete=effects[1])
         return _SUCCESS
 
-    def _observe(self, run: RunContext, context: StepContext) -> tuple[dict[str, Any], Failure | None]:
-        result = run.plugins.call("bt_meta_observe", world=run.world, context=context)  # type: ignore[union-attr]
+    @staticmethod
+    def _request(run: RunContext, context: StepContext) -> ObserveRequest:
+        """What the readers of this observation will read: the monitor's belief (``symbolic_state``) and every
+        key the ``bt_meta_observation_needs`` plugins name; everything while a comparison plugin has not said (it
+        may read any key), only the belief when nothing reads observations."""
+        plugins = run.plugins
+        declared = {impl.plugin_name for impl in plugins.implementations("bt_meta_observation_needs")}  # type: ignore
+        if any(impl.plugin_name not in declared
+               for impl in plugins.implementations("bt_meta_compare")):  # type: ignore[union-attr]
+            return OBSERVE_ALL
+        if not declared:
+            return BELIEF_ONLY  # nothing compares (a demonstration being recorded): only the belief is read
+        result = plugins.call("bt_meta_observation_needs", context=context)  # type: ignore[union-attr]
+        for error in result.errors:
+            log.warning("%s; observing everything", error)
+        if result.errors or any(keys is None for _, keys in result.results):
+            return OBSERVE_ALL  # a reader that cannot say gets everything, as before
+        wanted = {"symbolic_state"}
+        for _, keys in result.results:
+            wanted.update(keys)
+        return ObserveRequest(frozenset(wanted))
+
+    def _observe(self, run: RunContext, context: StepContext,
+                 request: ObserveRequest) -> tuple[dict[str, Any], Failure | None]:
+        result = run.plugins.call("bt_meta_observe", world=run.world, context=context,  # type: ignore[union-attr]
+                                  request=request)
         observations: dict[str, Any] = {}
         for _, value in result.results:
             if not isinstance(value, dict):
@@ -313,7 +344,8 @@ class Monitor(py_trees.decorators.Decorator):
             failure = reported
             failure.node_name = failure.node_name or self.decorated.name
         if "bt_meta_observe" in run.hooks:
-            observations, internal = self._observe(run, context)
+            # after a failure only the belief is read (no comparison, and the next step observes afresh)
+            observations, internal = self._observe(run, context, BELIEF_ONLY)
             self._update_belief(run, observations)
             if internal is not None:
                 failure.evidence["observation_error"] = internal.message

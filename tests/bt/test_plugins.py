@@ -24,8 +24,8 @@ SHIPPED = {"reporting", "symbolic_expectations", "ground_truth_perception"}
 def test_every_hook_is_documented_with_when_and_what_to_return():
     assert set(HOOK_NAMES) == {
         "bt_meta_register_nodes", "bt_meta_make_world", "bt_meta_external_predicate", "bt_meta_trace_event",
-        "bt_meta_observe", "bt_meta_expectations", "bt_meta_compare", "bt_meta_classify_failure",
-        "bt_meta_on_failure", "bt_meta_propose_repairs",
+        "bt_meta_observation_needs", "bt_meta_observe", "bt_meta_expectations", "bt_meta_compare",
+        "bt_meta_classify_failure", "bt_meta_on_failure", "bt_meta_propose_repairs",
     }
     for name in HOOK_NAMES:
         doc = inspect.getdoc(getattr(hookspecs, name))
@@ -37,7 +37,8 @@ def test_entry_points_load_the_shipped_plugins():
     host = create_plugin_host()
     names = set(host.plugin_names())
     assert names >= SHIPPED and "fake_world" in names
-    assert host.hooks_of("symbolic_expectations") == ["bt_meta_compare", "bt_meta_expectations"]
+    assert host.hooks_of("symbolic_expectations") == ["bt_meta_compare", "bt_meta_expectations",
+                                                          "bt_meta_observation_needs"]
     assert "entry point bt_meta_plugins.reporting" in {p["source"] for p in host.describe()}
 
 

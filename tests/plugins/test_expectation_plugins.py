@@ -564,7 +564,7 @@ def test_gridmap_symbol_colours_from_the_environment(monkeypatch):
 def test_camera_perception_needs_a_camera():
     import bt_meta_plugins.camera_perception as camera_plugin
 
-    assert camera_plugin.bt_meta_observe(world=SimpleNamespace(), context=None) is None
+    assert camera_plugin.bt_meta_observe(world=SimpleNamespace(), context=None, request=None) is None
     assert camera_plugin.CameraPerception().camera_for(None) is None
     from bt_meta.perception.hsv import PerceptionConfigError
 

@@ -2,9 +2,10 @@
 and ``sensor_msgs/CameraInfo`` of the fixed top view over the table, rendered only while someone subscribes (a
 render costs 14-20 ms).
 
-A frame is rendered when the simulation has moved since the last one (so a world waiting for a frame taken after
-its last motion gets one within a timer period) and otherwise once a second (a late subscriber's first frame);
-never twice for the same state in between.
+A frame is rendered once the simulation has moved since the last one and then rested for a timer period (no
+goal ran in between: the world is waiting, e.g. for a frame taken after its last motion), and otherwise once a
+second (a late subscriber's first frame); never during a run of goals (a render would delay each) and never twice
+for the same state in between.
 
 Offers:
 
@@ -38,13 +39,19 @@ class CameraPublisher:
         self.info = node.create_publisher(CameraInfo, config.camera_info, 2)
         self.depth = node.create_publisher(Image, config.camera_depth, 2)
         self._last: tuple[int, float] | None = None  # (sim steps, wall time) of the last frame sent
+        self._seen = -1  # sim steps at the last check
 
     def publish(self) -> bool:
         publishers = (self.image, self.info, self.depth)
         if all(p.get_subscription_count() == 0 for p in publishers):
             return False
         now = time.monotonic()
-        if self._last is not None and self._last[0] == self.sim.steps and now - self._last[1] < REPEAT_SECONDS:
+        steps = self.sim.steps
+        if steps != self._seen:  # moved since the last check: wait until it rests (the next check)
+            self._seen = steps
+            if self._last is not None:
+                return False
+        if self._last is not None and self._last[0] == steps and now - self._last[1] < REPEAT_SECONDS:
             return False
         from sensor_msgs.msg import CameraInfo, Image
         from std_msgs.msg import Header

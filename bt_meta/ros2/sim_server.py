@@ -64,7 +64,7 @@ class Faults:
 class SimServer:
     def __init__(self, robot: Any, scene: Any, *, variant: str | None = None, seed: int = 0,
                  start: Mapping[str, float] | None = None, config: Any = None, faults: Faults | None = None,
-                 state_rate: float = 20.0, camera_rate: float = 10.0, reach: float = 0.03,
+                 state_rate: float = 20.0, camera_rate: float = 20.0, reach: float = 0.03,
                  node_name: str = "bt_meta_sim") -> None:
         from bt_meta.ros2.config import default_config
         from bt_meta.world.simulation.sim import Simulation

@@ -108,8 +108,8 @@ class Served:
         self.env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
         self.env.pop("ROS_STATIC_PEERS", None)
         self.log = log
-        script = "ip link set lo up && exec " + shlex.join([*BT_META, "sim", "serve", "--ros2", "--camera-rate", "0",
-                                                            *serve_args])
+        # the camera on (its default rate): the world's perception looks through it
+        script = "ip link set lo up && exec " + shlex.join([*BT_META, "sim", "serve", "--ros2", *serve_args])
         with open(log, "w") as err:
             self.process = subprocess.Popen(["unshare", "-n", "sh", "-c", script], env=self.env,
                                             stdout=subprocess.DEVNULL, stderr=err)

@@ -40,8 +40,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     serve.add_argument("--fault", action="append", default=[], metavar="SPEC",
                        help="make a controller fail on purpose: reject@N, abort@N[:CODE] (the N-th trajectory goal), "
                             "no-feedback (goals succeed, feedback is never sent)")
-    serve.add_argument("--camera-rate", type=float, default=1.0, help="camera frames per second while "
-                                                                      "subscribed (0: none; default 1)")
+    serve.add_argument("--camera-rate", type=float, default=20.0,
+                       help="camera checks per second while subscribed: a frame when the scene moved and rested, "
+                            "else one a second (0: no camera; default 20)")
     serve.set_defaults(func=serve_command)
     parser.set_defaults(func=lambda _args: parser.print_help() or 2)
 

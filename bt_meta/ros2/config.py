@@ -29,7 +29,7 @@ from bt_meta.world._yaml_nodes import YamlNodeReader
 __all__ = ["ArmConfig", "Ros2Config", "default_config", "load_config"]
 
 _NAME = re.compile(r"^/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*$")
-_TOPICS = ("joint_states", "object_poses", "camera_image", "camera_info")
+_TOPICS = ("joint_states", "object_poses", "camera_image", "camera_info", "camera_depth")
 
 
 @dataclass(frozen=True)
@@ -53,10 +53,15 @@ class Ros2Config:
     simulator publishes the ground truth there; on a robot, a perception node must."""
     camera_image: str = "/bt_meta/camera/image_raw"
     camera_info: str = "/bt_meta/camera/camera_info"
+    camera_depth: str = "/bt_meta/camera/depth/image_raw"
+    """The top view's depth (``sensor_msgs/Image``, 32FC1 metres along the optical axis, or 16UC1 mm), registered
+    to ``camera_image``: the camera perception plugin reads block heights from it."""
     server_timeout: float = 5.0
     """s to wait for every action server at the start (then exit 2, before any motion)."""
     result_timeout: float = 10.0
     """s a goal's result, or a state stamped after it, may take before the connection counts as lost."""
+    camera_timeout: float = 5.0
+    """s a camera frame stamped after the last motion may take before perception fails naming the topic."""
     path: Path | None = field(default=None, compare=False)
 
     def trajectory_action(self, arm: str) -> str:
@@ -112,7 +117,8 @@ class _ConfigFile(YamlNodeReader):
             if "base" in frames:
                 values["base_frame"] = self.frame(frames["base"][1], "frames.base")
         if "timeouts" in top:
-            for name, (_, node) in self.mapping(top["timeouts"][1], "timeouts", {"server", "result"}).items():
+            for name, (_, node) in self.mapping(top["timeouts"][1], "timeouts",
+                                                  {"server", "result", "camera"}).items():
                 values[f"{name}_timeout"] = self.number(node, f"timeouts.{name}", positive=True)
         return dataclasses.replace(base, **values)
 

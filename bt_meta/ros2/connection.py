@@ -1,5 +1,5 @@
 """The ROS 2 world's connection to a robot: its own rclpy context and node, an executor on a background thread,
-the robot state subscriptions and one action client per arm controller and gripper of the config.
+the robot state and camera subscriptions and one action client per arm controller and gripper of the config.
 
 :meth:`Connection.open` waits for every action server and for a first state, up to the config's server timeout:
 a missing one is a :class:`~bt_meta.ros2.errors.ServerUnavailable` naming the action (or topic) and the timeout,
@@ -8,7 +8,8 @@ Ctrl-C stays Python's KeyboardInterrupt (the CLI's exit 130) and SIGTERM the CLI
 
 Offers:
 
-* :class:`Connection` -- ``open()``, ``trajectory[arm]``, ``gripper[arm]``, ``state``, ``cancel_all()``, ``close()``
+* :class:`Connection` -- ``open()``, ``trajectory[arm]``, ``gripper[arm]``, ``state``, ``camera``, ``cancel_all()``,
+  ``close()``
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ class Connection:
         from rclpy.signals import SignalHandlerOptions
 
         from bt_meta.ros2.action_clients import GripperClient, TrajectoryClient
+        from bt_meta.ros2.camera_subscriber import CameraFrames
         from bt_meta.ros2.robot_state import RobotState
 
         self.config = config
@@ -44,6 +46,7 @@ class Connection:
         # one thread takes every response and runs every request (see ActionClient), the world waits on events
         self.executor = SingleThreadedExecutor(context=self.context)
         self.state = RobotState(self.node, config)
+        self.camera = CameraFrames(self.node, config)
         self.trajectory = {arm: TrajectoryClient(self.node, config.trajectory_action(arm), spec.joints, self.executor)
                            for arm, spec in config.arms.items()}
         self.gripper = {arm: GripperClient(self.node, spec.gripper_action, self.executor)
@@ -86,8 +89,9 @@ class Connection:
         return ", ".join(names) or "none"
 
     def record(self, tap: Any) -> None:
-        """``tap(topic, message)`` sees the states received and the trajectories sent from now on."""
+        """``tap(topic, message)`` sees the states and images received and the trajectories sent from now on."""
         self.state.tap = tap
+        self.camera.tap = tap
         for client in self.trajectory.values():
             client.tap = tap
 

@@ -5,7 +5,7 @@ It builds the scene as the in-process world does (same robot, home pose and star
 the same objects at the same poses), then serves one FollowJointTrajectory per arm controller and one
 GripperCommand per gripper (:mod:`~bt_meta.ros2.trajectory_server`, :mod:`~bt_meta.ros2.gripper_server`),
 publishes ``/joint_states`` and the ground-truth object poses after every executed point and at
-``state_rate`` Hz (:mod:`~bt_meta.ros2.state_publishers`), and the top-view camera at ``camera_rate`` Hz while
+``state_rate`` Hz (:mod:`~bt_meta.ros2.state_publishers`), and the top-view camera (checked at ``camera_rate`` Hz) while
 subscribed (:mod:`~bt_meta.ros2.camera_publisher`). Everything runs on one thread (the physics is not shared).
 SIGINT and SIGTERM end the spin between two callbacks (within 0.1 s of the last); the node and the simulation
 are closed and :meth:`SimServer.serve` returns.
@@ -64,7 +64,7 @@ class Faults:
 class SimServer:
     def __init__(self, robot: Any, scene: Any, *, variant: str | None = None, seed: int = 0,
                  start: Mapping[str, float] | None = None, config: Any = None, faults: Faults | None = None,
-                 state_rate: float = 20.0, camera_rate: float = 1.0, reach: float = 0.03,
+                 state_rate: float = 20.0, camera_rate: float = 20.0, reach: float = 0.03,
                  node_name: str = "bt_meta_sim") -> None:
         from bt_meta.ros2.config import default_config
         from bt_meta.world.simulation.sim import Simulation

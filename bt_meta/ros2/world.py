@@ -19,7 +19,9 @@ A goal rejected or aborted fails the skill (``physical``; evidence: action, ``er
 result or state that does not come within the config's result timeout is a lost connection: the running goals are
 cancelled and every later skill fails at once, so the run stops within that bound (and a failed run stores no
 trace). With ``record_mcap`` the states received and the goals sent are written as MCAP
-(:mod:`~bt_meta.ros2.mcap_recording`). What stays in-process, and why, is in docs/ros2.md.
+(:mod:`~bt_meta.ros2.mcap_recording`), with the camera frames perception used. Perception looks through the
+robot's camera (``top_camera``, :mod:`~bt_meta.ros2.camera_subscriber`): a frame stamped after the last motion, not a
+render of the model. What stays in-process, and why, is in docs/ros2.md.
 
 Offers:
 
@@ -82,6 +84,10 @@ class RosWorld(SimWorld):
             self.connection.open()
             self._check_start()
             self._sync()
+            from bt_meta.ros2.camera_subscriber import RosTopViewCamera
+
+            self.top_camera = RosTopViewCamera(self, self.connection.camera)
+            """What the camera perception plugin looks through: the robot's camera topics, not the model."""
         except BaseException:
             self.close()
             raise

@@ -43,3 +43,14 @@ def test_a_config_overrides_the_defaults(tmp_path):
     assert config.trajectory_action("right") == "/scaled_joint_trajectory_controller/follow_joint_trajectory"
     assert config.arms["right"].gripper_action is None and config.object_poses == "/perception/objects"
     assert config.server_timeout == 20.0 and config.path == path
+
+
+def test_the_camera_topics_and_timeout_are_configured(tmp_path):
+    path = tmp_path / "ros2.yaml"
+    path.write_text("topics: {camera_depth: /camera/aligned_depth_to_color/image_raw}\ntimeouts: {camera: 2.5}\n")
+    config = load_config(path, load_robot("baxter"))
+    assert config.camera_depth == "/camera/aligned_depth_to_color/image_raw" and config.camera_timeout == 2.5
+    assert default_config(load_robot("baxter")).camera_depth == "/bt_meta/camera/depth/image_raw"
+    path.write_text("timeouts: {camera: 0}\n")
+    with pytest.raises(ConfigError, match="must be positive"):
+        load_config(path, load_robot("baxter"))

@@ -13,7 +13,8 @@ import time
 import pytest
 
 pytestmark = pytest.mark.slow
-ray = pytest.importorskip("ray")
+pytest.importorskip("ray.exceptions")  # Ray itself, not a stray folder named ray (Ray's /tmp/ray) on sys.path
+import ray  # noqa: E402
 
 SPEC = """family: housing
 perturbations:

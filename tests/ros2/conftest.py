@@ -44,6 +44,12 @@ def _skip_reason() -> str | None:
 REASON = _skip_reason()
 
 
+def default_sigint() -> None:
+    """A child's SIGINT as a terminal gives it, whatever this pytest inherited (a background job ignores SIGINT,
+    and an ignored SIGINT is kept across exec): the tests that send Ctrl-C assert on what the default does."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def pytest_collection_modifyitems(config, items):
     """Every test here that starts ROS 2 processes (uses ``serve`` or ``loopback_only``) skips with the reason."""
     if REASON is None:
@@ -87,7 +93,7 @@ class Served:
 
     def start(self, *args: str) -> subprocess.Popen:
         return subprocess.Popen(self.command(*args), cwd=ROOT, env=self.env, stdout=subprocess.PIPE,
-                                stderr=subprocess.PIPE, text=True)
+                                stderr=subprocess.PIPE, text=True, preexec_fn=default_sigint)
 
     def stop(self) -> int | None:
         if self.process.poll() is None:

@@ -16,6 +16,8 @@ from pathlib import Path
 
 import pytest
 
+from .conftest import default_sigint
+
 ROOT = Path(__file__).resolve().parents[2]
 PYTHON = sys.executable
 BT_META = [PYTHON, "-m", "bt_meta.cli"]
@@ -122,7 +124,8 @@ class Peer:
         path.write_text(tree)
         return subprocess.Popen(["nsenter", f"--net=/proc/{self.process.pid}/ns/net", *BT_META, "tick", str(path),
                                  "--ros2-leaves", str(self.folder / "leaves.yaml"), "--ticks", "100000"], cwd=ROOT,
-                                env=self.env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                                env=self.env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                preexec_fn=default_sigint)
 
     def wait_for(self, text: str, timeout: float = 20.0, count: int = 1) -> bool:
         deadline = time.monotonic() + timeout

@@ -60,13 +60,7 @@ class Connection:
         atexit.register(self.close)
 
     def _spin(self) -> None:
-        from rclpy.executors import ExternalShutdownException
-
-        try:
-            while self.context.ok():
-                self.executor.spin_once(timeout_sec=0.05)
-        except (ExternalShutdownException, RuntimeError):  # the context shut down under the spin: closing
-            pass
+        spin_until_shutdown(self.executor, self.context)
 
     def open(self) -> None:
         """Every action server and a first state within the server timeout, else ServerUnavailable."""
@@ -111,3 +105,14 @@ class Connection:
             with contextlib.suppress(Exception):  # handles already gone with the context
                 self.executor.shutdown(timeout_sec=1.0)
                 self.node.destroy_node()
+
+
+def spin_until_shutdown(executor: Any, context: Any) -> None:
+    """Spin ``executor`` on its own thread until ``context`` shuts down (a shutdown under the spin is the close)."""
+    from rclpy.executors import ExternalShutdownException
+
+    try:
+        while context.ok():
+            executor.spin_once(timeout_sec=0.05)
+    except (ExternalShutdownException, RuntimeError):
+        pass

@@ -76,13 +76,9 @@ class LeafRuntime:
         atexit.register(self.close)  # rclpy's threads must not be left to the interpreter's exit
 
     def _spin(self) -> None:
-        from rclpy.executors import ExternalShutdownException
+        from bt_meta.ros2.connection import spin_until_shutdown
 
-        try:
-            while self.context.ok():
-                self.executor.spin_once(timeout_sec=0.05)
-        except (ExternalShutdownException, RuntimeError):  # the context shut down under the spin: closing
-            pass
+        spin_until_shutdown(self.executor, self.context)
 
     def call(self, make: Callable[[], Any]) -> Pending:
         """Run ``make()`` on the executor thread; the Pending gets the result of the future it returns (or of

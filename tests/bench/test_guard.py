@@ -88,9 +88,8 @@ def test_a_changed_outcome_fails_the_guard_and_update_records_it(capsys, tmp_pat
 @pytest.mark.guard
 @pytest.mark.slow
 @pytest.mark.timeout(1800)
-def test_the_whole_population_keeps_its_recorded_outcomes(request, capsys):
-    if "guard" not in (request.config.option.markexpr or ""):
-        pytest.skip("the whole outcome-guard population (40 variants, minutes): run with -m guard")
+def test_the_whole_population_keeps_its_recorded_outcomes(capsys):
+    """Skipped unless ``-m guard`` (tests/conftest.py): 40 variants take minutes."""
     code = main(["bench", "guard", "--population", str(POPULATION), "--json"])
     out = json.loads(capsys.readouterr().out)
     assert out["failing"] == [], out["failing"]

@@ -262,10 +262,17 @@ def test_status_full_tree_and_blackboard_replies_equal_btcpp(mode: str, context:
         compare_server(seed, context, mode=mode)
 
 
-@pytest.mark.slow
+# The sweeps: a slow share in every full run, the whole sweep behind ``-m fuzz`` (each tree costs about 0.4 s,
+# most of it the two servers' 100 ms receive timeouts on close).
+SWEEP = [pytest.param(40, marks=pytest.mark.slow, id="40"),
+         pytest.param(144, marks=[pytest.mark.slow, pytest.mark.fuzz], id="144")]
+
+
+@pytest.mark.parametrize("size", SWEEP)
 @pytest.mark.parametrize("mode", ["exactly_once", "once"])
-def test_status_full_tree_and_blackboard_replies_equal_btcpp_sweep(mode: str, context: zmq.Context) -> None:
-    for seed in range(6, 150):
+def test_status_full_tree_and_blackboard_replies_equal_btcpp_sweep(mode: str, size: int,
+                                                                   context: zmq.Context) -> None:
+    for seed in range(6, 6 + size):
         compare_server(seed, context, ticks=10, mode=mode)
 
 
@@ -400,10 +407,12 @@ def test_trees_with_every_condition_attribute_serve_what_btcpp_serves(mode: str,
     assert used_conditions(seeds) == set(CONDITIONS)
 
 
-@pytest.mark.slow
+@pytest.mark.parametrize("size", [pytest.param(20, marks=pytest.mark.slow, id="20"),
+                                  pytest.param(60, marks=[pytest.mark.slow, pytest.mark.fuzz], id="60")])
 @pytest.mark.parametrize("mode", ["exactly_once", "once"])
-def test_trees_with_every_condition_attribute_serve_what_btcpp_serves_sweep(mode: str, context: zmq.Context) -> None:
-    for seed in condition_seeds(60, mode, ticks=10, start=1000):
+def test_trees_with_every_condition_attribute_serve_what_btcpp_serves_sweep(mode: str, size: int,
+                                                                            context: zmq.Context) -> None:
+    for seed in condition_seeds(size, mode, ticks=10, start=1000):
         compare_server(seed, context, ticks=10, mode=mode, kind="conditions")
 
 

@@ -341,7 +341,7 @@ def test_fuzzed_text_raises_only_bt_meta_errors(pieces: list[str]) -> None:
 @pytest.mark.fuzz
 @pytest.mark.slow
 def test_fuzz_campaign_ten_thousand_trees(capsys: pytest.CaptureFixture[str]) -> None:
-    """``pytest -m fuzz -s tests/bt/test_xml_robustness.py`` prints the counts quoted in docs/benchmarks.md."""
+    """``pytest -m fuzz -n 0 -s tests/bt/test_xml_robustness.py`` prints the counts quoted in docs/benchmarks.md."""
     import collections
     import logging
 

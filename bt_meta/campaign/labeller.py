@@ -412,9 +412,11 @@ class Labeller:
                     turned = f"{name} is turned {math.degrees(angle):.0f} deg off its nominal up axis"
                     way = self._turned_way(world, name, feasible)
                     if way is None:
-                        return Label("limit:reachability", f"{turned}; the domain offers no re-orientation and no "
-                                     "grasp as the parts lie brings one onto the other within reach",
-                                     {"object": name, "degrees": math.degrees(angle), "step": self._step_of(name)})
+                        kind, why = self._nominal_arrival(world, name) or (
+                            "reachability", "no grasp as the parts lie brings one onto the other within reach")
+                        return Label(f"limit:{kind}", f"{turned}; the domain offers no re-orientation and {why}",
+                                     {"object": name, "degrees": math.degrees(angle), "step": self._step_of(name),
+                                      "kind": kind})
                     return Label("repairable", f"{turned} ({way})", {"object": name,
                                                                       "degrees": math.degrees(angle)})
             if name in self.absolute_fixtures and name in self.nominal_xy:
@@ -460,7 +462,10 @@ class Labeller:
         An object that is neither is followed by poses relative to it."""
         if self.on_cells:  # turned where it lies, by the domain's own means (letters: turn_over / Reorient)
             turns = any(spec.get("mode") == "turn" for spec in self.grounding.skills.values())
-            return "re-orientation or pose repair" if self.reorientable or turns else None
+            if self.reorientable or turns:
+                return "re-orientation or pose repair"
+            # no turn: the place itself stands it up on the way, held as it was picked (the gripper tilted)
+            return "set down upright as it is held" if self._nominal_arrival(world, name) is None else None
         if self.reorientable and name in self.grasped and feasible.get(name, (True, None, ""))[0]:
             return "the domain's re-orientation"
         owned = [feature for owner, feature in self.target_features if owner == name]
@@ -474,6 +479,40 @@ class Labeller:
         for owner, feature in self.target_features:
             if owner != name and self._feature_arrival(world, name, owner, feature):
                 return f"held as it lies, its feature brought onto {owner}'s"
+        return None
+
+    def _nominal_arrival(self, world: Any, name: str) -> tuple[str, str] | None:
+        """Why the nominal plan's own step cannot put the turned ``name`` where it goes -- (kind, what failed) -- or
+        None when it can (or the plan carries it nowhere). The step's way, in the order a run meets it: the part
+        grasped top-down as it lies at the skills' own yaw, brought to its target standing as the nominal plan puts
+        it (the place turns it on the way, so the gripper holds the part's tilt), first above the target, then down
+        onto it. The kind is the physical obstacle at the first pose that fails: ``reachability`` when the arm has
+        no solution there even through obstacles, ``collision`` when every solution runs into the scene (a Panda's
+        hand into the tray where a Baxter's arm cannot reach at all)."""
+        import pinocchio as pin
+
+        target = next((t for n, t in self.jobs if n == name), None)
+        if target is None:
+            return None
+        kept = self._grasp_turn.pop(name, None)  # the skills' own yaw: the one the run takes
+        try:
+            transform = world.sim.object_transform(name)
+            as_grasped = np.linalg.inv(self._over(world, name, GRASP_HEIGHT)) @ transform
+        finally:
+            if kept is not None:
+                self._grasp_turn[name] = kept
+        held, goal = self._arrivals(world, name, as_grasped, target)[0]
+        down = goal @ np.linalg.inv(held)
+        above = down.copy()
+        above[2, 3] += APPROACH_HEIGHT
+        at = f"({target[0]:.3f}, {target[1]:.3f})"
+        q = world.current_q()
+        for pose, where in ((above, f"above {at}"), (down, f"down at {at}")):
+            result = world.ik.solve(world.default_arm, pin.SE3(pose[:3, :3], pose[:3, 3]), q, seed=0)
+            if not result.success:
+                return str(result.kind or "reachability"), f"{name}, held as it lies and set upright, {where}: " \
+                    f"{result.message}"
+            q = result.q
         return None
 
     def _feature_arrival(self, world: Any, name: str, owner: str, feature: str | None) -> bool:

@@ -367,7 +367,7 @@ class Labeller:
         # only what the task does not name blocks a place: an object the plan uses is picked up by the plan, and
         # so is one it takes for a missing block
         # a frame's support (the tray, the block a part is stacked on) is where the part goes, not in its way
-        named = set(self.needed) | self._stand_ins(world, present) | self._supports()
+        named = set(self.needed) | self._stand_ins(world, present, feasible) | self._supports()
         steps = self._target_steps()
         for index, (tx, ty, _) in enumerate(self.targets):
             blocking = next((name for name in present if name not in fixtures and name not in named and math.hypot(
@@ -551,17 +551,17 @@ class Labeller:
                 self._grasp_turn[name] = kept
         return False
 
-    def _stand_ins(self, world: Any, present: dict[str, Any]) -> set[str]:
-        """Letters: the blocks the task does not name that the run takes for its missing ones, as the substitution
-        chooses. Only when the blocks the task names cannot draw the letter (a 1x2 standing in for two 1x1 needs no
-        stand-in: the tiling lays it). For each missing block (by name) one of its shape, of its colour first where
+    def _stand_ins(self, world: Any, present: dict[str, Any], feasible: dict[str, tuple[bool, str | None, str]]
+                   ) -> set[str]:
+        """Letters: the blocks the task does not name that can stand in for its missing ones. The goal is judged by
+        the cells occupied (any block of the shape fills a cell), so a free block of a missing block's shape is one
+        the domain's place can put at that block's cell -- whether or not the named blocks could also tile the
+        letter another way (letters_H s11 0008: b3 missing, b7 a 1x2, a green 1x1 lying on b4's cell is taken for
+        b3 and the letter is drawn). For each missing block (by name) one of its shape, of its colour first where
         the task's symbols name colours, then one lying on a letter cell, then by name. The plan picks them up, so
         a cell one lies on is not occupied -- when that cell is filled after the missing block's step, which is
         where the stand-in is taken (letters_A s0 0101: a green 1x1 on b3's cell stands in for the missing b0)."""
         if not self.on_cells:
-            return set()
-        named = [m.shape for n, m in present.items() if n in self.needed]
-        if letters_feasible(len(self.cells), max_pairs(self.cells), named.count("1x1"), named.count("1x2")):
             return set()
         unnamed = sorted(n for n, m in present.items() if n not in self.needed and n not in self._supports()
                          and m.shape in ("1x1", "1x2"))
@@ -571,7 +571,8 @@ class Labeller:
         for name in sorted(n for n in self.needed if n not in present):
             nominal = self.nominal.get(name)
             colour = nominal.colour if nominal is not None and name in self.colour_symbols else None
-            fits = [n for n in unnamed if n not in taken and present[n].shape == self.shapes.get(name)]
+            fits = [n for n in unnamed if n not in taken and present[n].shape == self.shapes.get(name)
+                    and feasible.get(n, (True,))[0]]  # one the robot can pick up
             if not fits:
                 continue
             best = min(fits, key=lambda n: (colour is not None and present[n].colour != colour, n not in occupied, n))

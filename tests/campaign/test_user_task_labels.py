@@ -1,0 +1,46 @@
+"""Labels of a user's own stacking task (tests/data/usertask_stack) decided like the physics: the kind of a limit
+is the obstacle the step meets on each robot, not a default (issue 31 item 6)."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+DATA = Path(__file__).resolve().parent.parent / "data" / "usertask_stack"
+
+ON_ITS_SIDE = """    override:
+      top: {pose: [0.5862, -0.3985, table, 90.0, 0.0, 0.0]}
+"""
+
+
+def _label(tmp_path: Path, robot: str, change: str):
+    from bt_meta.campaign.families import task_family
+    from bt_meta.campaign.labeller import Labeller
+    from bt_meta.world.simulation.scenes import load_scene
+
+    shutil.copytree(DATA, tmp_path / "stack")
+    scene_path = tmp_path / "stack" / "scene.yaml"
+    variant = tmp_path / "v.yaml"
+    variant.write_text(scene_path.read_text(encoding="utf-8") + "variants:\n  perturbed:\n" + change,
+                       encoding="utf-8")
+    with Labeller(task_family(tmp_path / "stack" / "stack.yaml", "nominal"), load_scene(str(scene_path)),
+                  start_seed=None, robot=robot) as labeller:
+        return labeller.label(variant, "perturbed")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("robot", "kind"), [("panda", "collision"), ("baxter", "reachability")])
+def test_a_block_on_its_side_is_a_limit_of_the_kind_its_own_step_meets(tmp_path: Path, robot: str, kind: str):
+    # No turn in the domain: the place stands the block up on the way, held as picked (the wrist turned a quarter).
+    # Above the base the Panda has solutions that all run into the table or its own fingers; the Baxter has none.
+    label = _label(tmp_path, robot, ON_ITS_SIDE)
+    assert label.expected == f"limit:{kind}", label.reason
+    assert label.evidence["kind"] == kind and "held as it lies" in label.reason
+
+
+@pytest.mark.slow
+def test_a_shifted_block_is_nominal(tmp_path: Path):
+    label = _label(tmp_path, "panda", "    override:\n      top: {pose: [0.60, -0.38, table, 0, 0, 20]}\n")
+    assert label.expected == "nominal_equivalent", label.reason

@@ -44,3 +44,18 @@ def test_a_block_on_its_side_is_a_limit_of_the_kind_its_own_step_meets(tmp_path:
 def test_a_shifted_block_is_nominal(tmp_path: Path):
     label = _label(tmp_path, "panda", "    override:\n      top: {pose: [0.60, -0.38, table, 0, 0, 20]}\n")
     assert label.expected == "nominal_equivalent", label.reason
+
+
+@pytest.mark.slow
+def test_a_plain_run_says_whether_the_goal_holds_in_the_simulator(tmp_path: Path, capsys):
+    """``bt-meta run --json`` outside a campaign: ``achieved`` / ``truth`` are the campaigns' judge of the task's
+    goal on the simulator's true state (they were missing: a user could not see whether the block was stacked)."""
+    import json
+
+    from bt_meta.cli import main
+
+    shutil.copytree(DATA, tmp_path / "stack")
+    assert main(["run", str(tmp_path / "stack" / "stack.yaml"), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["status"] == "SUCCESS" and out["achieved"] is True, out.get("truth")
+    assert "cell (0, 0) of stack" in out["truth"]

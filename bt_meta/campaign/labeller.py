@@ -201,7 +201,7 @@ class Labeller:
         for name in self.grasped:
             if name in world.sim.object_names():
                 out.setdefault(world.sim.object_model(name).type,
-                               np.linalg.inv(self._over(world, name, GRASP_HEIGHT)) @ world.sim.object_transform(name))
+                               np.linalg.inv(self._grasp(world, name)) @ world.sim.object_transform(name))
         return out
 
     def _over(self, world: Any, name: str, height: float) -> np.ndarray:
@@ -213,6 +213,29 @@ class Labeller:
         yaw = nearest_yaw(object_yaw(transform), symmetry(world.sim.object_model(name)), GRIPPER_YAW)
         yaw += self._grasp_turn.get(name, 0.0)
         return top_down(transform[0, 3], transform[1, 3], world.stack_top(name) + height, yaw)
+
+    def _grasp(self, world: Any, name: str) -> np.ndarray:
+        """The top-down gripper pose at the grasp of ``name``, as the pick makes it: a fixed-constraint gripper
+        :data:`GRASP_HEIGHT` over its top; a friction gripper (the Panda's) with its end-effector below the top, so
+        the open finger pads overlap the part (:meth:`~bt_meta.world.simulation.sim_world.SimWorld.grasp_height`):
+        the fingers reach down beside it, where a neighbour can be in their way."""
+        pose = self._over(world, name, GRASP_HEIGHT)
+        height = world.grasp_height(name, world.default_arm, GRASP_HEIGHT)
+        if height != GRASP_HEIGHT:
+            pose[2, 3] = world.object_top(name) + height
+        return pose
+
+    def _open_around(self, world: Any, name: str, q: np.ndarray) -> np.ndarray:
+        """``q`` with a friction gripper's fingers open as the pick has them when it solves its way down to
+        ``name``: fully open (the pick opens them just wider than the part as it starts down, but its move's IK
+        is solved while they still stand open, and a neighbour an open finger meets there fails the grasp
+        ``collision``). Set from the robot description, not from the simulator's fingers, which keep whatever the
+        last variant labelled left them at. Other grippers: ``q`` as it is."""
+        sim = world.sim
+        gripper = sim.robot.arm(world.default_arm).gripper
+        if gripper is None or not gripper.joints or not sim.grasps_by_friction(name, world.default_arm):
+            return q
+        return world.kin.q_from_dict(dict(zip(gripper.joints, gripper.open, strict=True)), q)
 
     def __enter__(self) -> Labeller:
         return self
@@ -497,7 +520,7 @@ class Labeller:
         kept = self._grasp_turn.pop(name, None)  # the skills' own yaw: the one the run takes
         try:
             transform = world.sim.object_transform(name)
-            as_grasped = np.linalg.inv(self._over(world, name, GRASP_HEIGHT)) @ transform
+            as_grasped = np.linalg.inv(self._grasp(world, name)) @ transform
         finally:
             if kept is not None:
                 self._grasp_turn[name] = kept
@@ -530,11 +553,11 @@ class Labeller:
         align = _rotation_onto(normal_f, -target_normal)
         q0 = world.current_q()
         kept = self._grasp_turn.get(name)
-        world.allow_hand(name, world.default_arm, True)
+        world.allow_hand(name, world.default_arm, True, preshape=False)
         try:
             for turn in GRASP_TURNS:
                 self._grasp_turn[name] = math.radians(turn)
-                in_gripper = np.linalg.inv(self._over(world, name, GRASP_HEIGHT)) @ part  # the part in the hand
+                in_gripper = np.linalg.inv(self._grasp(world, name)) @ part  # the part in the hand
                 for yaw in ARRIVAL_YAWS:
                     goal = np.eye(4)
                     goal[:3, :3] = _axis_rotation(target_normal, math.radians(yaw)) @ align
@@ -599,9 +622,11 @@ class Labeller:
         import pinocchio as pin
 
         q = world.current_q()
-        for height, allowed in ((APPROACH_HEIGHT, False), (GRASP_HEIGHT, True)):
-            target = self._over(world, name, height)
-            world.allow_hand(name, world.default_arm, allowed)
+        for allowed in (False, True):  # the approach over it, then the grasp, the fingers opened around it
+            target = self._grasp(world, name) if allowed else self._over(world, name, APPROACH_HEIGHT)
+            if allowed:
+                q = self._open_around(world, name, q)
+            world.allow_hand(name, world.default_arm, allowed, preshape=False)
             try:
                 result = world.ik.solve(world.default_arm, pin.SE3(target[:3, :3], target[:3, 3]), q, seed=0)
                 if result.success and allowed and world.sim.obstacles():  # the descent, against obstacles
@@ -636,7 +661,7 @@ class Labeller:
             # tilt in the gripper): the turn the skill would make from that grasp, lifted, must be reachable.
             from bt_meta.world.skills.place import turned_pose
 
-            grasp = self._over(world, name, GRASP_HEIGHT)
+            grasp = self._grasp(world, name)
             lifted = grasp.copy()
             lifted[2, 3] += APPROACH_HEIGHT
             if not turned_pose(world, name, world.default_arm, lifted, np.linalg.inv(grasp) @ transform)[1]:
@@ -778,13 +803,13 @@ class Labeller:
         from bt_meta.world.kinematics.forward import pose_matrix
 
         transform = world.sim.object_transform(name)
-        above, grasp = self._over(world, name, APPROACH_HEIGHT), self._over(world, name, GRASP_HEIGHT)
-        world.allow_hand(name, world.default_arm, True)
+        above, grasp = self._over(world, name, APPROACH_HEIGHT), self._grasp(world, name)
+        world.allow_hand(name, world.default_arm, True, preshape=False)
         try:
             q1, why = self._motion(world, q0, above, f"reaching above {name}", f"reaching for {name}")
             if q1 is None:
                 return why
-            q2, why = self._solve(world, grasp, q1)
+            q2, why = self._solve(world, grasp, self._open_around(world, name, q1))
             if q2 is None:
                 return f"grasping {name}: {why}"
             parts = [p for p in world.collision.objects if world.contact_object(p) == name]

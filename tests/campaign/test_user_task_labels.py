@@ -59,3 +59,49 @@ def test_a_plain_run_says_whether_the_goal_holds_in_the_simulator(tmp_path: Path
     out = json.loads(capsys.readouterr().out)
     assert out["status"] == "SUCCESS" and out["achieved"] is True, out.get("truth")
     assert "cell (0, 0) of stack" in out["truth"]
+
+
+KIT = Path(__file__).resolve().parent.parent / "data" / "usertask_kit"
+
+LOW_PEG = """  peg:
+    description: A 2.4 cm wide, 3 cm tall cylinder no slot takes (lower than the pin)
+    shape: cylinder
+    radius: 0.012
+    length: 0.03
+    mass: 0.03
+    colour: white
+    features:
+      bottom: {point: [0, 0, -0.015], normal: [0, 0, -1]}
+    grasp_frames:
+      top: [0, 0, 0.019, 180, 0, 180]
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("radius", "expected"), [(0.047, "limit:collision"), (0.06, "nominal_equivalent")])
+def test_the_grasp_check_holds_the_fingers_as_the_pick_does(tmp_path: Path, radius: float, expected: str):
+    """The pin ringed by eight pegs lower than it: the Panda's pick goes down with its end-effector below the pin's
+    top and its fingers still open 8 cm, so at 4.7 cm every grasp yaw puts a finger into a peg (the run fails
+    ``collision`` at the grasp); at 6 cm they clear. Checked 4 mm over the pin's top, the fingers missed the pegs
+    and the variant was labelled ``nominal_equivalent``."""
+    import math
+
+    from bt_meta.campaign.families import task_family
+    from bt_meta.campaign.labeller import Labeller
+    from bt_meta.world.simulation.scenes import load_scene
+
+    shutil.copytree(KIT, tmp_path / "kit")
+    parts = tmp_path / "kit" / "parts.yaml"
+    parts.write_text(parts.read_text(encoding="utf-8") + LOW_PEG, encoding="utf-8")
+    pegs = "".join(f"      - {{name: peg{k}, type: peg, colour: white, pose: [{0.52 + radius * math.cos(a):.4f}, "
+                   f"{-0.42 + radius * math.sin(a):.4f}, table, 0, 0, 0]}}\n"
+                   for k, a in enumerate(math.radians(22.5 + 45 * k) for k in range(8)))
+    scene_path = tmp_path / "kit" / "scene.yaml"
+    scene_path.write_text(scene_path.read_text(encoding="utf-8") + "variants:\n  ringed:\n    add:\n" + pegs,
+                          encoding="utf-8")
+    with Labeller(task_family(tmp_path / "kit" / "kit.yaml", "nominal"), load_scene(str(scene_path)),
+                  start_seed=None, robot="panda") as labeller:
+        label = labeller.label(scene_path, "ringed")
+    assert label.expected == expected, label.reason
+    if expected.startswith("limit"):
+        assert "panda_leftfinger" in label.reason or "panda_rightfinger" in label.reason

@@ -12,7 +12,10 @@ The problem is planned and compiled with a Monitor around every primitive, then 
 :class:`~bt_meta.world.simulation.sim_world.SimWorld` built from the grounding file (``poses/<domain>.yaml``) and the
 problem's scene with the chosen variant, headless unless ``--gui``. The tick log prints one line per tick in which
 some primitive changed status. ``--json`` prints ``{status, ticks, failures: [{kind, step, node_id, action, args,
-evidence, message}], objects (final object states), ...}``. Exit status: 0 SUCCESS, 1 FAILURE (a failed step, no
+evidence, message}], objects (final object states), achieved, truth, ...}``: ``achieved`` / ``truth`` are the
+ground truth, the task's goal on the simulator's true state judged as campaigns judge it
+(:func:`~bt_meta.runs.report.judge_world`; ``null`` with the reason when a goal predicate has no check), printed
+as a "ground truth" line without ``--json``. Exit status: 0 SUCCESS, 1 FAILURE (a failed step, no
 plan, or still running after ``--max-ticks``), 2 bad input (unknown problem or variant: the known ones are listed).
 
 ``--robot NAME|FILE`` runs on another robot description (default: the grounding file's ``robot:``, else the

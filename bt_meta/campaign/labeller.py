@@ -12,7 +12,8 @@ wins):
    spare of that type is.
 2. ``limit:reachability`` / ``limit:collision`` -- kinematics and collision checks on the true scene: for every
    object the robot must pick up (the needed ones, else spares that could stand in), mink IK to the top-down
-   grasp pose the skills use, collision-checked against the robot and the scene (the hand may touch the object
+   grasp pose the skills use (a friction gripper's end-effector below the part's top, its fingers open, as the
+   pick solves its way down), collision-checked against the robot and the scene (the hand may touch the object
    grasped; a letters block on another face: also the turn the place skill's ``turn`` mode would make from that
    grasp; the motions between, against static obstacles, by the ways move_to takes: the joint-space line, the
    gripper's straight line, a lift first, a planned path). A role no candidate can fill: the failed solve's kind
@@ -20,9 +21,12 @@ wins):
    where the task puts something that an object the task does not name occupies (its centre near; for a letter
    cell, any part of it inside the cell's footprint): ``limit:collision``; a block the task names lying on another
    block's cell is moved by the plan: ``repairable`` (step 3), and so is a letters block the run takes for a missing
-   one when the named blocks cannot draw the letter (of the missing block's shape; of its colour first where the
-   task's symbols name colours, then one lying on a cell, then by name: as the substitution chooses) and its cell
-   is filled after the missing block's step. When several limits apply and the plan
+   one (of the missing block's shape and graspable, whether or not the named blocks could tile the letter another
+   way: the goal counts cells occupied; of its colour first where the task's symbols name colours, then one lying
+   on a cell, then by name: as the substitution chooses) and its cell is filled after the missing block's step. A
+   part turned off its up axis that the domain cannot bring to its place is a limit of the kind its own step
+   meets (held as it lies, set upright above and at its place: no IK solution even through obstacles,
+   ``reachability``; every solution collides, ``collision``). When several limits apply and the plan
    step each stops is known (letters), the label is the one the plan meets first (an obstacle at the fourth
    placement before a block out of reach at the fifth); otherwise the first found in this order.
 3. ``repairable`` -- the goal can be reached but not by the nominal plan: a needed object is missing or of

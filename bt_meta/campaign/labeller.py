@@ -439,7 +439,7 @@ class Labeller:
                     turned = f"{name} is turned {math.degrees(angle):.0f} deg off its nominal up axis"
                     way = self._turned_way(world, name, feasible)
                     if way is None:
-                        kind, why = self._nominal_arrival(world, name) or (
+                        kind, why = self._nominal_arrival(world, name) or self._fixture_arrival(world, name) or (
                             "reachability", "no grasp as the parts lie brings one onto the other within reach")
                         return Label(f"limit:{kind}", f"{turned}; the domain offers no re-orientation and {why}",
                                      {"object": name, "degrees": math.degrees(angle), "step": self._step_of(name),
@@ -542,11 +542,65 @@ class Labeller:
             q = result.q
         return None
 
-    def _feature_arrival(self, world: Any, name: str, owner: str, feature: str | None) -> bool:
+    def _fixture_arrival(self, world: Any, name: str) -> tuple[str, str] | None:
+        """Why the nominal plan's step cannot bring a part onto the turned fixture ``name`` -- (kind, what failed)
+        -- or None (``name`` is no such fixture, or that step gets there and the limit comes later). The step's way,
+        as a run meets it: the first part the plan carries onto ``name`` (in the plan's order), grasped top-down as
+        it lies at the skills' own yaw and held in the collision checker, taken to where the plan puts it -- the
+        place its poses were taught at, above it, then down on it -- with the fixture now lying there as it does.
+        The kind is the IK's at the first pose that fails (the tutorial's base on its side: the held peg goes into
+        the base, ``collision``, on the Baxter and the Panda alike)."""
+        import pinocchio as pin
+
+        places = [target for target, (owner, _) in zip(self.targets, self.target_features, strict=True)
+                  if owner == name]
+        carried = sorted((p for p in self.grasped if p != name and p in world.sim.object_names()),
+                         key=lambda p: self._step_of(p) if self._step_of(p) is not None else len(self.plan))
+        if not places or not carried:
+            return None
+        part, target = carried[0], places[0]
+        kept = self._grasp_turn.pop(part, None)  # the skills' own yaw: the one the run takes
+        try:
+            grasp = self._grasp(world, part)
+        finally:
+            if kept is not None:
+                self._grasp_turn[part] = kept
+        held, goal = self._arrivals(world, part, np.linalg.inv(grasp) @ world.sim.object_transform(part), target)[0]
+        down = goal @ np.linalg.inv(held)
+        above = down.copy()
+        above[2, 3] += APPROACH_HEIGHT
+        arm = world.default_arm
+        q = world.current_q()
+        world.allow_hand(part, arm, True, preshape=False)
+        pieces = [p for p in world.collision.objects if world.contact_object(p) == part]
+        saved = {p: world.collision.pose(p) for p in pieces}
+        try:
+            q_grasp = world.ik.solve(arm, pin.SE3(grasp[:3, :3], grasp[:3, 3]), q, seed=0,
+                                     check_collisions=False)
+            if not q_grasp.success:
+                return None  # not graspable: the grasp checks say so
+            for piece in pieces:
+                world.collision.attach(piece, world.end_effector(arm), q_grasp.q, allow=world.hand_links(arm))
+            q = q_grasp.q
+            at = f"({target[0]:.3f}, {target[1]:.3f})"
+            for pose, where in ((above, f"above {at}"), (down, f"down at {at}")):
+                result = world.ik.solve(arm, pin.SE3(pose[:3, :3], pose[:3, 3]), q, seed=0)
+                if not result.success:
+                    return str(result.kind or "reachability"), f"{part}, carried where the plan puts it onto " \
+                        f"{name}, {where}: {result.message}"
+                q = result.q
+            return None
+        finally:
+            for piece in pieces:
+                world.collision.detach(piece, pose=saved[piece])
+            world.allow_hand(part, arm, False)
+
+    def _feature_arrival(self, world: Any, name: str, owner: str, feature: str | None,
+                         check_collisions: bool = True) -> bool:
         """Whether ``name``, grasped top-down as it lies (at one of :data:`GRASP_TURNS`), can be held with its
         primary feature on ``owner``'s ``feature`` (normals opposed, 2 mm apart) at one of :data:`ARRIVAL_YAWS`
         about the feature's normal: an IK solution clear of the scene for the gripper there (the part itself not
-        carried in the check)."""
+        carried in the check); ``check_collisions`` false: any IK solution, through obstacles or not."""
         import pinocchio as pin
 
         sim = world.sim
@@ -568,7 +622,8 @@ class Labeller:
                     goal[:3, 3] = target + 0.002 * target_normal - goal[:3, :3] @ point_f
                     gripper = goal @ np.linalg.inv(in_gripper)
                     target_se3 = pin.SE3(gripper[:3, :3], gripper[:3, 3])
-                    if world.ik.solve(world.default_arm, target_se3, q0, seed=0).success:
+                    if world.ik.solve(world.default_arm, target_se3, q0, seed=0,
+                                      check_collisions=check_collisions).success:
                         return True
         finally:
             world.allow_hand(name, world.default_arm, False)

@@ -12,7 +12,8 @@ wins):
    spare of that type is.
 2. ``limit:reachability`` / ``limit:collision`` -- kinematics and collision checks on the true scene: for every
    object the robot must pick up (the needed ones, else spares that could stand in), mink IK to the top-down
-   grasp pose the skills use, collision-checked against the robot and the scene (the hand may touch the object
+   grasp pose the skills use (a friction gripper's end-effector below the part's top, its fingers open, as the
+   pick solves its way down), collision-checked against the robot and the scene (the hand may touch the object
    grasped; a letters block on another face: also the turn the place skill's ``turn`` mode would make from that
    grasp; the motions between, against static obstacles, by the ways move_to takes: the joint-space line, the
    gripper's straight line, a lift first, a planned path). A role no candidate can fill: the failed solve's kind
@@ -20,9 +21,12 @@ wins):
    where the task puts something that an object the task does not name occupies (its centre near; for a letter
    cell, any part of it inside the cell's footprint): ``limit:collision``; a block the task names lying on another
    block's cell is moved by the plan: ``repairable`` (step 3), and so is a letters block the run takes for a missing
-   one when the named blocks cannot draw the letter (of the missing block's shape; of its colour first where the
-   task's symbols name colours, then one lying on a cell, then by name: as the substitution chooses) and its cell
-   is filled after the missing block's step. When several limits apply and the plan
+   one (of the missing block's shape and graspable, whether or not the named blocks could tile the letter another
+   way: the goal counts cells occupied; of its colour first where the task's symbols name colours, then one lying
+   on a cell, then by name: as the substitution chooses) and its cell is filled after the missing block's step. A
+   part turned off its up axis that the domain cannot bring to its place is a limit of the kind its own step
+   meets (held as it lies, set upright above and at its place: no IK solution even through obstacles,
+   ``reachability``; every solution collides, ``collision``). When several limits apply and the plan
    step each stops is known (letters), the label is the one the plan meets first (an obstacle at the fourth
    placement before a block out of reach at the fifth); otherwise the first found in this order.
 3. ``repairable`` -- the goal can be reached but not by the nominal plan: a needed object is missing or of
@@ -201,7 +205,7 @@ class Labeller:
         for name in self.grasped:
             if name in world.sim.object_names():
                 out.setdefault(world.sim.object_model(name).type,
-                               np.linalg.inv(self._over(world, name, GRASP_HEIGHT)) @ world.sim.object_transform(name))
+                               np.linalg.inv(self._grasp(world, name)) @ world.sim.object_transform(name))
         return out
 
     def _over(self, world: Any, name: str, height: float) -> np.ndarray:
@@ -213,6 +217,29 @@ class Labeller:
         yaw = nearest_yaw(object_yaw(transform), symmetry(world.sim.object_model(name)), GRIPPER_YAW)
         yaw += self._grasp_turn.get(name, 0.0)
         return top_down(transform[0, 3], transform[1, 3], world.stack_top(name) + height, yaw)
+
+    def _grasp(self, world: Any, name: str) -> np.ndarray:
+        """The top-down gripper pose at the grasp of ``name``, as the pick makes it: a fixed-constraint gripper
+        :data:`GRASP_HEIGHT` over its top; a friction gripper (the Panda's) with its end-effector below the top, so
+        the open finger pads overlap the part (:meth:`~bt_meta.world.simulation.sim_world.SimWorld.grasp_height`):
+        the fingers reach down beside it, where a neighbour can be in their way."""
+        pose = self._over(world, name, GRASP_HEIGHT)
+        height = world.grasp_height(name, world.default_arm, GRASP_HEIGHT)
+        if height != GRASP_HEIGHT:
+            pose[2, 3] = world.object_top(name) + height
+        return pose
+
+    def _open_around(self, world: Any, name: str, q: np.ndarray) -> np.ndarray:
+        """``q`` with a friction gripper's fingers open as the pick has them when it solves its way down to
+        ``name``: fully open (the pick opens them just wider than the part as it starts down, but its move's IK
+        is solved while they still stand open, and a neighbour an open finger meets there fails the grasp
+        ``collision``). Set from the robot description, not from the simulator's fingers, which keep whatever the
+        last variant labelled left them at. Other grippers: ``q`` as it is."""
+        sim = world.sim
+        gripper = sim.robot.arm(world.default_arm).gripper
+        if gripper is None or not gripper.joints or not sim.grasps_by_friction(name, world.default_arm):
+            return q
+        return world.kin.q_from_dict(dict(zip(gripper.joints, gripper.open, strict=True)), q)
 
     def __enter__(self) -> Labeller:
         return self
@@ -367,7 +394,7 @@ class Labeller:
         # only what the task does not name blocks a place: an object the plan uses is picked up by the plan, and
         # so is one it takes for a missing block
         # a frame's support (the tray, the block a part is stacked on) is where the part goes, not in its way
-        named = set(self.needed) | self._stand_ins(world, present) | self._supports()
+        named = set(self.needed) | self._stand_ins(world, present, feasible) | self._supports()
         steps = self._target_steps()
         for index, (tx, ty, _) in enumerate(self.targets):
             blocking = next((name for name in present if name not in fixtures and name not in named and math.hypot(
@@ -412,9 +439,11 @@ class Labeller:
                     turned = f"{name} is turned {math.degrees(angle):.0f} deg off its nominal up axis"
                     way = self._turned_way(world, name, feasible)
                     if way is None:
-                        return Label("limit:reachability", f"{turned}; the domain offers no re-orientation and no "
-                                     "grasp as the parts lie brings one onto the other within reach",
-                                     {"object": name, "degrees": math.degrees(angle), "step": self._step_of(name)})
+                        kind, why = self._nominal_arrival(world, name) or self._fixture_arrival(world, name) or (
+                            "reachability", "no grasp as the parts lie brings one onto the other within reach")
+                        return Label(f"limit:{kind}", f"{turned}; the domain offers no re-orientation and {why}",
+                                     {"object": name, "degrees": math.degrees(angle), "step": self._step_of(name),
+                                      "kind": kind})
                     return Label("repairable", f"{turned} ({way})", {"object": name,
                                                                       "degrees": math.degrees(angle)})
             if name in self.absolute_fixtures and name in self.nominal_xy:
@@ -460,7 +489,10 @@ class Labeller:
         An object that is neither is followed by poses relative to it."""
         if self.on_cells:  # turned where it lies, by the domain's own means (letters: turn_over / Reorient)
             turns = any(spec.get("mode") == "turn" for spec in self.grounding.skills.values())
-            return "re-orientation or pose repair" if self.reorientable or turns else None
+            if self.reorientable or turns:
+                return "re-orientation or pose repair"
+            # no turn: the place itself stands it up on the way, held as it was picked (the gripper tilted)
+            return "set down upright as it is held" if self._nominal_arrival(world, name) is None else None
         if self.reorientable and name in self.grasped and feasible.get(name, (True, None, ""))[0]:
             return "the domain's re-orientation"
         owned = [feature for owner, feature in self.target_features if owner == name]
@@ -476,11 +508,99 @@ class Labeller:
                 return f"held as it lies, its feature brought onto {owner}'s"
         return None
 
-    def _feature_arrival(self, world: Any, name: str, owner: str, feature: str | None) -> bool:
+    def _nominal_arrival(self, world: Any, name: str) -> tuple[str, str] | None:
+        """Why the nominal plan's own step cannot put the turned ``name`` where it goes -- (kind, what failed) -- or
+        None when it can (or the plan carries it nowhere). The step's way, in the order a run meets it: the part
+        grasped top-down as it lies at the skills' own yaw, brought to its target standing as the nominal plan puts
+        it (the place turns it on the way, so the gripper holds the part's tilt), first above the target, then down
+        onto it. The kind is the physical obstacle at the first pose that fails: ``reachability`` when the arm has
+        no solution there even through obstacles, ``collision`` when every solution runs into the scene (a Panda's
+        hand into the tray where a Baxter's arm cannot reach at all)."""
+        import pinocchio as pin
+
+        target = next((t for n, t in self.jobs if n == name), None)
+        if target is None:
+            return None
+        kept = self._grasp_turn.pop(name, None)  # the skills' own yaw: the one the run takes
+        try:
+            transform = world.sim.object_transform(name)
+            as_grasped = np.linalg.inv(self._grasp(world, name)) @ transform
+        finally:
+            if kept is not None:
+                self._grasp_turn[name] = kept
+        held, goal = self._arrivals(world, name, as_grasped, target)[0]
+        down = goal @ np.linalg.inv(held)
+        above = down.copy()
+        above[2, 3] += APPROACH_HEIGHT
+        at = f"({target[0]:.3f}, {target[1]:.3f})"
+        q = world.current_q()
+        for pose, where in ((above, f"above {at}"), (down, f"down at {at}")):
+            result = world.ik.solve(world.default_arm, pin.SE3(pose[:3, :3], pose[:3, 3]), q, seed=0)
+            if not result.success:
+                return str(result.kind or "reachability"), f"{name}, held as it lies and set upright, {where}: " \
+                    f"{result.message}"
+            q = result.q
+        return None
+
+    def _fixture_arrival(self, world: Any, name: str) -> tuple[str, str] | None:
+        """Why the nominal plan's step cannot bring a part onto the turned fixture ``name`` -- (kind, what failed)
+        -- or None (``name`` is no such fixture, or that step gets there and the limit comes later). The step's way,
+        as a run meets it: the first part the plan carries onto ``name`` (in the plan's order), grasped top-down as
+        it lies at the skills' own yaw and held in the collision checker, taken to where the plan puts it -- the
+        place its poses were taught at, above it, then down on it -- with the fixture now lying there as it does.
+        The kind is the IK's at the first pose that fails (the tutorial's base on its side: the held peg goes into
+        the base, ``collision``, on the Baxter and the Panda alike)."""
+        import pinocchio as pin
+
+        places = [target for target, (owner, _) in zip(self.targets, self.target_features, strict=True)
+                  if owner == name]
+        carried = sorted((p for p in self.grasped if p != name and p in world.sim.object_names()),
+                         key=lambda p: self._step_of(p) if self._step_of(p) is not None else len(self.plan))
+        if not places or not carried:
+            return None
+        part, target = carried[0], places[0]
+        kept = self._grasp_turn.pop(part, None)  # the skills' own yaw: the one the run takes
+        try:
+            grasp = self._grasp(world, part)
+        finally:
+            if kept is not None:
+                self._grasp_turn[part] = kept
+        held, goal = self._arrivals(world, part, np.linalg.inv(grasp) @ world.sim.object_transform(part), target)[0]
+        down = goal @ np.linalg.inv(held)
+        above = down.copy()
+        above[2, 3] += APPROACH_HEIGHT
+        arm = world.default_arm
+        q = world.current_q()
+        world.allow_hand(part, arm, True, preshape=False)
+        pieces = [p for p in world.collision.objects if world.contact_object(p) == part]
+        saved = {p: world.collision.pose(p) for p in pieces}
+        try:
+            q_grasp = world.ik.solve(arm, pin.SE3(grasp[:3, :3], grasp[:3, 3]), q, seed=0,
+                                     check_collisions=False)
+            if not q_grasp.success:
+                return None  # not graspable: the grasp checks say so
+            for piece in pieces:
+                world.collision.attach(piece, world.end_effector(arm), q_grasp.q, allow=world.hand_links(arm))
+            q = q_grasp.q
+            at = f"({target[0]:.3f}, {target[1]:.3f})"
+            for pose, where in ((above, f"above {at}"), (down, f"down at {at}")):
+                result = world.ik.solve(arm, pin.SE3(pose[:3, :3], pose[:3, 3]), q, seed=0)
+                if not result.success:
+                    return str(result.kind or "reachability"), f"{part}, carried where the plan puts it onto " \
+                        f"{name}, {where}: {result.message}"
+                q = result.q
+            return None
+        finally:
+            for piece in pieces:
+                world.collision.detach(piece, pose=saved[piece])
+            world.allow_hand(part, arm, False)
+
+    def _feature_arrival(self, world: Any, name: str, owner: str, feature: str | None,
+                         check_collisions: bool = True) -> bool:
         """Whether ``name``, grasped top-down as it lies (at one of :data:`GRASP_TURNS`), can be held with its
         primary feature on ``owner``'s ``feature`` (normals opposed, 2 mm apart) at one of :data:`ARRIVAL_YAWS`
         about the feature's normal: an IK solution clear of the scene for the gripper there (the part itself not
-        carried in the check)."""
+        carried in the check); ``check_collisions`` false: any IK solution, through obstacles or not."""
         import pinocchio as pin
 
         sim = world.sim
@@ -491,18 +611,19 @@ class Labeller:
         align = _rotation_onto(normal_f, -target_normal)
         q0 = world.current_q()
         kept = self._grasp_turn.get(name)
-        world.allow_hand(name, world.default_arm, True)
+        world.allow_hand(name, world.default_arm, True, preshape=False)
         try:
             for turn in GRASP_TURNS:
                 self._grasp_turn[name] = math.radians(turn)
-                in_gripper = np.linalg.inv(self._over(world, name, GRASP_HEIGHT)) @ part  # the part in the hand
+                in_gripper = np.linalg.inv(self._grasp(world, name)) @ part  # the part in the hand
                 for yaw in ARRIVAL_YAWS:
                     goal = np.eye(4)
                     goal[:3, :3] = _axis_rotation(target_normal, math.radians(yaw)) @ align
                     goal[:3, 3] = target + 0.002 * target_normal - goal[:3, :3] @ point_f
                     gripper = goal @ np.linalg.inv(in_gripper)
                     target_se3 = pin.SE3(gripper[:3, :3], gripper[:3, 3])
-                    if world.ik.solve(world.default_arm, target_se3, q0, seed=0).success:
+                    if world.ik.solve(world.default_arm, target_se3, q0, seed=0,
+                                      check_collisions=check_collisions).success:
                         return True
         finally:
             world.allow_hand(name, world.default_arm, False)
@@ -512,17 +633,17 @@ class Labeller:
                 self._grasp_turn[name] = kept
         return False
 
-    def _stand_ins(self, world: Any, present: dict[str, Any]) -> set[str]:
-        """Letters: the blocks the task does not name that the run takes for its missing ones, as the substitution
-        chooses. Only when the blocks the task names cannot draw the letter (a 1x2 standing in for two 1x1 needs no
-        stand-in: the tiling lays it). For each missing block (by name) one of its shape, of its colour first where
+    def _stand_ins(self, world: Any, present: dict[str, Any], feasible: dict[str, tuple[bool, str | None, str]]
+                   ) -> set[str]:
+        """Letters: the blocks the task does not name that can stand in for its missing ones. The goal is judged by
+        the cells occupied (any block of the shape fills a cell), so a free block of a missing block's shape is one
+        the domain's place can put at that block's cell -- whether or not the named blocks could also tile the
+        letter another way (letters_H s11 0008: b3 missing, b7 a 1x2, a green 1x1 lying on b4's cell is taken for
+        b3 and the letter is drawn). For each missing block (by name) one of its shape, of its colour first where
         the task's symbols name colours, then one lying on a letter cell, then by name. The plan picks them up, so
         a cell one lies on is not occupied -- when that cell is filled after the missing block's step, which is
         where the stand-in is taken (letters_A s0 0101: a green 1x1 on b3's cell stands in for the missing b0)."""
         if not self.on_cells:
-            return set()
-        named = [m.shape for n, m in present.items() if n in self.needed]
-        if letters_feasible(len(self.cells), max_pairs(self.cells), named.count("1x1"), named.count("1x2")):
             return set()
         unnamed = sorted(n for n, m in present.items() if n not in self.needed and n not in self._supports()
                          and m.shape in ("1x1", "1x2"))
@@ -532,7 +653,8 @@ class Labeller:
         for name in sorted(n for n in self.needed if n not in present):
             nominal = self.nominal.get(name)
             colour = nominal.colour if nominal is not None and name in self.colour_symbols else None
-            fits = [n for n in unnamed if n not in taken and present[n].shape == self.shapes.get(name)]
+            fits = [n for n in unnamed if n not in taken and present[n].shape == self.shapes.get(name)
+                    and feasible.get(n, (True,))[0]]  # one the robot can pick up
             if not fits:
                 continue
             best = min(fits, key=lambda n: (colour is not None and present[n].colour != colour, n not in occupied, n))
@@ -559,9 +681,11 @@ class Labeller:
         import pinocchio as pin
 
         q = world.current_q()
-        for height, allowed in ((APPROACH_HEIGHT, False), (GRASP_HEIGHT, True)):
-            target = self._over(world, name, height)
-            world.allow_hand(name, world.default_arm, allowed)
+        for allowed in (False, True):  # the approach over it, then the grasp, the fingers opened around it
+            target = self._grasp(world, name) if allowed else self._over(world, name, APPROACH_HEIGHT)
+            if allowed:
+                q = self._open_around(world, name, q)
+            world.allow_hand(name, world.default_arm, allowed, preshape=False)
             try:
                 result = world.ik.solve(world.default_arm, pin.SE3(target[:3, :3], target[:3, 3]), q, seed=0)
                 if result.success and allowed and world.sim.obstacles():  # the descent, against obstacles
@@ -596,7 +720,7 @@ class Labeller:
             # tilt in the gripper): the turn the skill would make from that grasp, lifted, must be reachable.
             from bt_meta.world.skills.place import turned_pose
 
-            grasp = self._over(world, name, GRASP_HEIGHT)
+            grasp = self._grasp(world, name)
             lifted = grasp.copy()
             lifted[2, 3] += APPROACH_HEIGHT
             if not turned_pose(world, name, world.default_arm, lifted, np.linalg.inv(grasp) @ transform)[1]:
@@ -738,13 +862,13 @@ class Labeller:
         from bt_meta.world.kinematics.forward import pose_matrix
 
         transform = world.sim.object_transform(name)
-        above, grasp = self._over(world, name, APPROACH_HEIGHT), self._over(world, name, GRASP_HEIGHT)
-        world.allow_hand(name, world.default_arm, True)
+        above, grasp = self._over(world, name, APPROACH_HEIGHT), self._grasp(world, name)
+        world.allow_hand(name, world.default_arm, True, preshape=False)
         try:
             q1, why = self._motion(world, q0, above, f"reaching above {name}", f"reaching for {name}")
             if q1 is None:
                 return why
-            q2, why = self._solve(world, grasp, q1)
+            q2, why = self._solve(world, grasp, self._open_around(world, name, q1))
             if q2 is None:
                 return f"grasping {name}: {why}"
             parts = [p for p in world.collision.objects if world.contact_object(p) == name]

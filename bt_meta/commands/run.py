@@ -12,7 +12,10 @@ The problem is planned and compiled with a Monitor around every primitive, then 
 :class:`~bt_meta.world.simulation.sim_world.SimWorld` built from the grounding file (``poses/<domain>.yaml``) and the
 problem's scene with the chosen variant, headless unless ``--gui``. The tick log prints one line per tick in which
 some primitive changed status. ``--json`` prints ``{status, ticks, failures: [{kind, step, node_id, action, args,
-evidence, message}], objects (final object states), ...}``. Exit status: 0 SUCCESS, 1 FAILURE (a failed step, no
+evidence, message}], objects (final object states), achieved, truth, ...}``: ``achieved`` / ``truth`` are the
+ground truth, the task's goal on the simulator's true state judged as campaigns judge it
+(:func:`~bt_meta.runs.report.judge_world`; ``null`` with the reason when a goal predicate has no check), printed
+as a "ground truth" line without ``--json``. Exit status: 0 SUCCESS, 1 FAILURE (a failed step, no
 plan, or still running after ``--max-ticks``), 2 bad input (unknown problem or variant: the known ones are listed).
 
 ``--robot NAME|FILE`` runs on another robot description (default: the grounding file's ``robot:``, else the
@@ -171,7 +174,7 @@ def run(args: argparse.Namespace) -> int:
                                      capture, tree_log)
             else:
                 code = _run_plain(args, problem, world, plugins, memory, recorder, out, started, built, rrd, capture,
-                                  tree_log)
+                                  tree_log, task_file)
             if page is not None:  # after the result is printed and recorded: a bad path loses none of it
                 page.finish(args.file, task_file, problem, world, out, memory)
                 written = page.write(args.report)
@@ -220,7 +223,7 @@ def _memory(args: argparse.Namespace) -> Iterator[Any]:
 
 def _run_plain(args: argparse.Namespace, problem: Any, world: Any, plugins: Any, memory: Any, recorder: Any,
                out: dict[str, Any], started: float, built: float, rrd: Any = None, capture: Any = None,
-               tree_log: Any = None) -> int:
+               tree_log: Any = None, task_file: Any = None) -> int:
     from bt_meta.bt.failures import Failure, FailureKind
     from bt_meta.testing import TreeHarness
 
@@ -228,7 +231,7 @@ def _run_plain(args: argparse.Namespace, problem: Any, world: Any, plugins: Any,
         harness = TreeHarness.from_file(args.file, problem.name, world=world, plugins=plugins)
     except PlanningError as error:
         failure = Failure(kind=FailureKind.PRECONDITION, message=str(error), evidence={"planner": str(error)})
-        return _report(args, out, "FAILURE", 0, [failure.to_dict()], world, [], started, built, recorder)
+        return _report(args, out, "FAILURE", 0, [failure.to_dict()], world, [], started, built, recorder, task_file)
     if memory is not None:
         harness.run.memory = memory  # what the grid-map and keypoint expectation plugins read
     if recorder is not None:
@@ -269,7 +272,8 @@ def _run_plain(args: argparse.Namespace, problem: Any, world: Any, plugins: Any,
     harness.run.finish(status)
     failures = [f.to_dict() for f in harness.failures]
     harness.close()
-    code = _report(args, out, status.value, harness.run.tick_count, failures, world, plan, started, built, recorder)
+    code = _report(args, out, status.value, harness.run.tick_count, failures, world, plan, started, built, recorder,
+                   task_file)
     groot2.finish()
     return code
 
@@ -353,7 +357,8 @@ def _run_repaired(args: argparse.Namespace, task_file: Any, problem: Any, world:
             saved = report.refinement_saved
             print(f"refinement saved: {saved.get('method') or saved.get('reason') or saved}")
     plan = [" ".join(step) for step in report.plan]
-    code = _report(args, out, status, report.ticks, report.failures, world, plan, started, built, recorder)
+    code = _report(args, out, status, report.ticks, report.failures, world, plan, started, built, recorder,
+                   task_file)
     groot2.finish()
     return code
 
@@ -380,7 +385,8 @@ class _Progress:
 
 
 def _report(args: argparse.Namespace, out: dict[str, Any], status: str, ticks: int, failures: list[dict[str, Any]],
-            world: Any, plan: list[str], started: float, built: float, recorder: Any = None) -> int:
+            world: Any, plan: list[str], started: float, built: float, recorder: Any = None,
+            task_file: Any = None) -> int:
     finished = time.perf_counter()
     if recorder is not None:
         if recorder.error is not None:
@@ -389,6 +395,10 @@ def _report(args: argparse.Namespace, out: dict[str, Any], status: str, ticks: i
         out["recording"] = ("stored" if recorder.episode_id is not None
                             else recorder.skipped or "the run never started (no plan)")
     observed = world.observe()
+    if task_file is not None:  # the task's goal on the simulator's true state, as campaigns and the demo judge it
+        from bt_meta.runs.report import judge_world
+
+        out["achieved"], out["truth"] = judge_world(Path(args.file), task_file, task_file.problem(args.problem), world)
     keys = ("kind", "step", "node_id", "action", "args", "evidence", "message")
     out.update({
         "status": status,
@@ -412,6 +422,9 @@ def _report(args: argparse.Namespace, out: dict[str, Any], status: str, ticks: i
         for failure in failures:
             print(f"  [{failure['kind']}] {failure.get('node_id') or ''} {failure.get('action') or ''}"
                   f"{tuple(failure.get('args') or ())}: {failure['message']}")
+        if "achieved" in out:
+            verdict = {True: "done", False: "NOT done", None: "not judged"}[out["achieved"]]
+            print(f"  ground truth (simulator): task {verdict} -- {out['truth']}")
         robot = world.sim.robot
         if observed["objects"]:
             print(f"  object positions: base frame ({robot.base_frame}); "

@@ -361,6 +361,12 @@ class MetaExecutor:
                 if weak:
                     report.refinement_saved = {"saved": False, "reason": "the replayed plan would weaken the goal: "
                                                + ", ".join(atom_text(g) for g in weak) + " no longer reached"}
+                elif report.fallback is not None and replayed_report.plan == origin_plan and not report.rebound:
+                    # what ran is the hand-written plan the fallback went back to, retried where it failed
+                    report.refinement_saved = {"saved": False, "reason": (
+                        f"the learned plan ({', '.join(report.fallback['refinements'])}) failed on replay and was "
+                        "demoted; the run went back to the hand-written plan, which reached the goal with retries "
+                        "alone: nothing new to keep")}
                 else:
                     refines = origin_plan
                     if report.fallback is None and report.refinements_used:  # repaired on top of a refinement

@@ -77,9 +77,10 @@ LETTER_CASES = {
                                                      "megablok_1x1, colour: green, pose: [0.611, -0.083, table, 0, 0, "
                                                      "0]}, {name: s, type: megablok_1x1, colour: blue, pose: [0.72, "
                                                      "-0.52, table, 0, 0, 0]}]"),
-    # b1 and b2 became one 1x2: the named blocks still draw A, so nothing stands in and the green 1x1 on b3's cell
-    # stays in the way.
-    "cell_blocked_when_a_1x2_stands_in": ("limit:collision", "remove: [b1, b2]\n    add: [{name: b2, type: "
+    # b1 missing, b2 now a 1x2: the named blocks could tile A, but the goal counts cells occupied, so the green 1x1
+    # on b3's cell (filled at step 3, after b1's step 1) is a free block of b1's shape the plan takes for it
+    # (letters_H s11 0008 on the Baxter: every robot repairs it so and the letter is drawn).
+    "cell_blocked_by_a_stand_in_though_a_1x2_could_tile": ("repairable", "remove: [b1, b2]\n    add: [{name: b2, type: "
                                           "megablok_1x2, colour: blue, pose: [0.72, -0.40, table, 0, 0, 0]}, {name: d, "
                                           "type: megablok_1x1, colour: green, pose: [0.611, -0.083, table, 0, 0, 0]}]"),
     # b3 missing; the only stand-in lies on b0's cell, filled at step 0 before b3's step 3: the run meets it first.

@@ -195,3 +195,18 @@ def test_a_stored_goal_that_drops_a_fact_of_a_part_its_plan_does_not_move_is_ref
     reasons = {r["method"]: r["reason"] for r in again.refinements_skipped}
     assert reasons["refined_bar_unmoved"] == "its goal is weaker than the problem's: at(b5, 1.5, 1) dropped"
     assert again.refinements_used == [] and again.ok and len(again.attempts) == 1
+
+
+def test_a_fallback_that_only_retried_says_so_when_nothing_is_saved(attach, tmp_path):
+    """After the fallback, the hand-written plan is retried at a step and reaches the goal: nothing new is kept,
+    and the reason says what happened (it read "the repairs did not change the plan" -- they had: the learned
+    plan was dropped)."""
+    with RefinementStore.open(tmp_path / "memory.sqlite") as store:
+        learned, _ = _run(attach, store)
+        method = learned.refinement_saved["method"]
+        replay, _ = _run(attach, store, fits="g_nominal", faults=["Grasp#2=fail:physical"])
+        assert replay.ok and replay.fallback is not None and replay.attempts, replay.stop_reason
+        assert replay.refinement_saved["saved"] is False
+        reason = replay.refinement_saved["reason"]
+        assert reason.startswith(f"the learned plan ({method}) failed on replay and was demoted"), reason
+        assert "hand-written plan" in reason and "did not change the plan" not in reason

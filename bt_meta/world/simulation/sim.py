@@ -674,7 +674,8 @@ class Simulation:
             # createVisualShapeArray has no per-shape colour (and crashes when given one): colour the whole body.
             pybullet.changeVisualShape(body, link, rgbaColor=list(COLOURS[model.colour]), physicsClientId=c)
             pybullet.changeDynamics(
-                body, link, lateralFriction=model.lateral_friction, spinningFriction=0.001, physicsClientId=c
+                body, link, lateralFriction=model.lateral_friction, spinningFriction=model.spinning_friction,
+                rollingFriction=model.rolling_friction, physicsClientId=c
             )
         return body
 

@@ -280,7 +280,10 @@ class MoveTo(SimSkill):
         """Waypoints moving the gripper frame along the straight line (and the shortest rotation) to the target,
         each solved by IK from the one before: the fallback when the joint-space path sweeps into something (an
         arm whose joint-space straight line bends sideways while a block goes down between two others). ``None``
-        when a waypoint has no solution."""
+        when a waypoint has no solution. Each waypoint is solved collision-aware: from the one before, the nearest
+        solution may fold the arm into itself (the Panda over the re-orientation's set-down spot, link1 3.5 mm into
+        link5 one centimetre down), which the path check rejects, and the fallback's planned path swept the open
+        fingers 8 cm sideways through the part they were going down around."""
         world = self.world
         assert self.target is not None
         start = world.sim.link_transform(world.end_effector(self.arm))
@@ -292,7 +295,7 @@ class MoveTo(SimSkill):
             fraction = k / steps
             pose = pin.SE3(start[:3, :3] @ pin.exp3(rotation * fraction),
                            start[:3, 3] + (self.target[:3, 3] - start[:3, 3]) * fraction)
-            result = world.ik.solve(self.arm, pose, q, seed=world.seed, check_collisions=False)
+            result = world.ik.solve(self.arm, pose, q, seed=world.seed)
             if not result.success or result.q is None:
                 return None
             if float(np.max(np.abs(result.q[indices] - q[indices]))) > 0.5:  # jumped to another arm configuration

@@ -62,6 +62,20 @@ def test_a_users_file_extends_the_catalogue_through_a_scene(tmp_path):
     assert can.colour == "blue" and can.parts[0].radius == pytest.approx(0.033)
 
 
+def test_rolling_friction_follows_the_shape_unless_the_entry_gives_it(tmp_path):
+    """A round part gets rolling friction by default (lying on its side it would roll on its own); a part resting
+    on flat faces none; an entry's own value wins, and a negative one fails at its line."""
+    assert shipped_catalogue()["can"].model().rolling_friction == pytest.approx(0.001)
+    assert shipped_catalogue()["cube_5cm"].model().rolling_friction == 0.0
+    path = write(tmp_path / "mine.yaml", MINE.replace("    friction: 1.1\n", "    friction: 1.1\n"
+                                                      "    rolling_friction: 0.004\n    spinning_friction: 0.002\n"))
+    stick = load_catalogue(path)["block_long"].model()
+    assert stick.rolling_friction == pytest.approx(0.004) and stick.spinning_friction == pytest.approx(0.002)
+    write(path, MINE.replace("    friction: 1.1\n", "    friction: 1.1\n    rolling_friction: -0.1\n"))
+    with pytest.raises(ConfigError, match=r"mine.yaml:8:23: type 'block_long': rolling_friction must be at least 0"):
+        load_catalogue(path)
+
+
 @pytest.mark.parametrize(
     ("old", "new", "needle", "message"),
     [

@@ -77,10 +77,7 @@ def test_the_yaw_period_comes_from_the_geometry_and_the_features():
 @pytest.mark.slow
 @pytest.mark.parametrize(("robot", "where"), [
     ("baxter", "0.55, -0.31"),
-    pytest.param("panda", "0.64, -0.19", marks=pytest.mark.xfail(strict=True, reason=(
-        "known defect: the lying pin rolls across the table on its own (about 6 cm before the fingers close; "
-        "no rolling friction is set on bodies), and since the Panda's fingers close as mirror images they no "
-        "longer follow a part off their middle: the grasp fails before the turn"))),
+    ("panda", "0.64, -0.19"),
 ])
 def test_a_turn_that_leaves_the_pin_on_its_side_fails_at_the_turn(tmp_path: Path, robot: str, where: str):
     """turn_over(pin): stood on its 2.4 cm end and let go, the pin topples back onto its side. The turn used to end

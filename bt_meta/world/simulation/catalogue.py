@@ -47,8 +47,16 @@ from bt_meta.world.simulation.objects import (
 __all__ = ["CatalogueEntry", "catalogue_path", "load_catalogue", "object_types", "shipped_catalogue"]
 
 _ENTRY_KEYS = {"description", "shape", "size", "radius", "length", "mesh", "scale", "mass", "colour", "friction",
-               "role", "features", "primary", "grasp_frames"}
+               "rolling_friction", "spinning_friction", "role", "features", "primary", "grasp_frames"}
 _SHAPES = {"box": ("size",), "cylinder": ("radius", "length"), "mesh": ("mesh", "scale")}
+ROLLING_FRICTION = {"cylinder": 0.001, "box": 0.0, "mesh": 0.0}
+"""A type's default rolling friction, by its shape: a cylinder lying on its side rolls on the table with none (a
+2.4 cm pin rolled 6 cm on its own before a gripper reached it, and off the table in 5 s; real parts stop), 0.001
+holds it still. A box or a mesh (pybullet collides it as its convex hull) rests on flat faces and cannot roll: no
+rolling friction, which would also slow how such a part tips over when it is turned (0.001 on every body changed a
+Panda turn of a block). A catalogue entry's ``rolling_friction`` overrides it."""
+SPINNING_FRICTION = 0.001
+"""The default spinning (torsional) friction of every type, as the built-in ones have."""
 
 Pose6 = tuple[float, float, float, float, float, float]
 
@@ -67,13 +75,16 @@ class CatalogueEntry:
     grasp_frames: dict[str, Pose6]
     """Grasp frame name -> gripper pose (x, y, z in metres, roll, pitch, yaw in radians) in the object frame."""
     path: Path = field(compare=False)
+    rolling_friction: float = 0.0
+    spinning_friction: float = SPINNING_FRICTION
 
     def model(self, colour: str | None = None) -> ObjectModel:
         info = {f"grasp_{name}_{axis}": value for name, pose in self.grasp_frames.items()
                 for axis, value in zip(("x", "y", "z", "roll", "pitch", "yaw"), pose, strict=True)}
         return ObjectModel(type=self.name, colour=colour or self.colour, parts=self.parts, mass=self.mass,
                            features=self.features, primary=self.primary, role=self.role,
-                           lateral_friction=self.friction, info=info)
+                           lateral_friction=self.friction, rolling_friction=self.rolling_friction,
+                           spinning_friction=self.spinning_friction, info=info)
 
 
 def catalogue_path() -> Path:
@@ -151,6 +162,16 @@ class _CatalogueFile(YamlNodeReader):
                                  entries["colour"][1])
         friction = self.number(entries["friction"][1], f"{what} friction", positive=True) if "friction" in entries \
             else 0.8
+        rolling = ROLLING_FRICTION[shape]
+        if "rolling_friction" in entries:
+            rolling = self.number(entries["rolling_friction"][1], f"{what} rolling_friction")
+            if rolling < 0:
+                raise self.error(f"{what}: rolling_friction must be at least 0", entries["rolling_friction"][1])
+        spinning = SPINNING_FRICTION
+        if "spinning_friction" in entries:
+            spinning = self.number(entries["spinning_friction"][1], f"{what} spinning_friction")
+            if spinning < 0:
+                raise self.error(f"{what}: spinning_friction must be at least 0", entries["spinning_friction"][1])
         role = None
         if "role" in entries:
             role = self.string(entries["role"][1], f"{what} role")
@@ -191,7 +212,7 @@ class _CatalogueFile(YamlNodeReader):
         description = self.string(entries["description"][1], f"{what} description") if "description" in entries \
             else ""
         return CatalogueEntry(name, description, (part,), mass, colour, friction, role, tuple(features), primary,
-                              frames, self.path)
+                              frames, self.path, rolling, spinning)
 
     def mesh(self, node: yaml.Node, scale: tuple[yaml.Node, yaml.Node] | None, what: str) -> Mesh:
         """``mesh: FILE`` (beside this catalogue) or ``mesh: {distribution: NAME, path: FILE}`` (inside an

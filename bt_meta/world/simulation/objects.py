@@ -166,6 +166,11 @@ class ObjectModel:
     shape: str | None = None
     """Paper-level shape label, e.g. ``"1x2"`` for blocks; ``None`` for other objects."""
     lateral_friction: float = 0.8
+    rolling_friction: float = 0.0
+    """Bullet's rolling friction of the body's contacts: what stops a round part lying on its side from rolling
+    away on its own (0: a part that rests on flat faces, which cannot roll; see the catalogue's default)."""
+    spinning_friction: float = 0.001
+    """Bullet's spinning (torsional) friction: a part turning about the contact normal slows down."""
     info: dict[str, float] = field(default_factory=dict, compare=False)
     """Named dimensions (m) that perception and skills may want (e.g. ``body_height``, ``hole_radius``)."""
 

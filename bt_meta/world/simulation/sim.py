@@ -166,6 +166,10 @@ _CLOSE_STEPS = 120
 """Physics steps (0.5 s) a friction grasp lets the fingers close before judging whether they hold the part."""
 _LOST_AFTER = 2
 """A friction grasp is lost after this many consecutive step() calls without both fingers touching the part."""
+_HOLD_TOUCH = 0.001
+"""m: a finger of a friction grasp this near the part it holds still touches it. Bullet reports no contact for a
+pad resting on a flat face under a tenth of a millimetre of squeeze at some steps: a housing held by its 7 cm flange
+in the Panda's fingers was let go on the way down, held fast (a part that slips out leaves by centimetres)."""
 _COUPLING_ERP = 0.8
 """How hard the coupling of two fingers pulls them back to mirror images each physics step (pybullet's gear keeps
 their velocities equal only loosely; at 0.1 the pair crept sideways on a part it squeezed -- 7 mm apart on the
@@ -674,7 +678,8 @@ class Simulation:
             # createVisualShapeArray has no per-shape colour (and crashes when given one): colour the whole body.
             pybullet.changeVisualShape(body, link, rgbaColor=list(COLOURS[model.colour]), physicsClientId=c)
             pybullet.changeDynamics(
-                body, link, lateralFriction=model.lateral_friction, spinningFriction=0.001, physicsClientId=c
+                body, link, lateralFriction=model.lateral_friction, spinningFriction=model.spinning_friction,
+                rollingFriction=model.rolling_friction, physicsClientId=c
             )
         return body
 
@@ -939,10 +944,15 @@ class Simulation:
         values = [c + fraction * (o - c) for o, c in zip(gripper.open, gripper.closed, strict=True)]
         self.set_joint_targets(dict(zip(gripper.joints, values, strict=True)))
 
-    def touching_fingers(self, name: str, arm: str | None = None) -> int:
-        """How many of the arm's fingers touch ``name`` (friction grippers; 0 for others)."""
+    def touching_fingers(self, name: str, arm: str | None = None, within: float = 0.0) -> int:
+        """How many of the arm's fingers touch ``name`` (friction grippers; 0 for others); with ``within`` > 0,
+        how many are at most that far (m) from it."""
         arm = arm or self.robot.default_arm
         body = self._body(name).body_id
+        if within > 0.0:
+            return sum(1 for link in self._finger_links.get(arm, ())
+                       if pybullet.getClosestPoints(self.robot_id, body, within, linkIndexA=link,
+                                                    physicsClientId=self.client))
         return sum(
             1
             for link in self._finger_links.get(arm, ())
@@ -995,7 +1005,7 @@ class Simulation:
                                           physicsClientId=self.client)
             now = np.linalg.inv(_transform(state[0], state[1])) @ self.object_transform(grasp.object_name)
             slid = float(np.linalg.norm(now[:3, 3] - grasp.relative[:3, 3])) > slide
-            touching = self.touching_fingers(grasp.object_name, arm) == len(self._finger_links[arm])
+            touching = self.touching_fingers(grasp.object_name, arm, _HOLD_TOUCH) == len(self._finger_links[arm])
             grasp.lost = 0 if touching else grasp.lost + 1
             if (slid and not touching) or grasp.lost >= _LOST_AFTER:  # slipped out: the fingers hold nothing
                 pybullet.removeConstraint(grasp.constraint_id, physicsClientId=self.client)

@@ -55,6 +55,7 @@ from bt_meta.world.kinematics.collision import SHRINK
 from bt_meta.world.poses import axis_angle_matrix
 from bt_meta.world.robot.description import available_robots
 from bt_meta.world.simulation.objects import Box, Cylinder, Mesh, ObjectModel, pose_to_matrix, rpy_to_matrix
+from bt_meta.world.simulation.sections import Section, square_contact, widest_section
 from bt_meta.world.skills import SKILLS
 from bt_meta.world.skills.base import SimSkill, SkillAbort
 from bt_meta.world.symmetry import yaw_period
@@ -70,6 +71,9 @@ HELD_POSE_PREFIX = "held:"
 
 UNTURNED = math.radians(1.0)
 """rad: a part turned less than this about the vertical from its scene frame is grasped as if unturned."""
+SQUARE_CONTACT = 0.003
+"""A friction grasp's pads must meet faces square to them over at least this height (m), else they are on a slope
+or an edge (:func:`~bt_meta.world.simulation.sections.square_contact`) and go to the section's widest band."""
 
 
 def pose_symbol(pose: Sequence[float], digits: int = 4) -> str:
@@ -571,10 +575,35 @@ class SimWorld:
             else:
                 self.collision.disallow(part)
 
-    def grasp_xy(self, name: str) -> tuple[float, float]:
+    def grasp_xy(self, name: str, arm: str | None = None, rotation: np.ndarray | None = None) -> tuple[float, float]:
         """Where (base frame x, y) a top-down grasp of ``name`` goes: over the first of its type's catalogue grasp
         frames that points down as the object is turned now (within 30 degrees), else over its centroid (a part
-        lying on another face than its frames were written for, a built-in type)."""
+        lying on another face than its frames were written for, a built-in type). Given the ``arm`` (and the
+        gripper ``rotation`` it will grasp with; default: as the hand is turned now), a friction grasp whose fingers
+        would close there on a narrower section than the part's widest goes over the widest instead
+        (:func:`~bt_meta.world.simulation.sections.widest_section`: a housing lying on its side is held by its
+        flange, as standing, not by the body beside it)."""
+        if arm is not None:
+            section = self._section(name, arm, rotation)
+            if section is not None and section.moved:
+                return section.x, section.y
+        return self._grasp_frame_xy(name)
+
+    def _section(self, name: str, arm: str, rotation: np.ndarray | None = None) -> Section | None:
+        """The widest section of ``name`` across the fingers of ``arm``'s gripper held at ``rotation`` (default:
+        as it is now), for a friction grasp; ``None`` for other grasps."""
+        sim = self.sim
+        if not sim.grasps_by_friction(name, arm):
+            return None
+        axis = self._fingers_now(arm, rotation)
+        return widest_section(sim.object_model(name), sim.object_transform(name), axis, self._grasp_frame_xy(name))
+
+    def _fingers_now(self, arm: str, rotation: np.ndarray | None) -> np.ndarray:
+        """The closing axis of ``arm``'s fingers at ``rotation`` (default: as the hand is turned now)."""
+        return self.sim.closing_axis(arm) if rotation is None else self.fingers_axis(np.asarray(rotation), arm)
+
+    def _grasp_frame_xy(self, name: str) -> tuple[float, float]:
+        """Over the first catalogue grasp frame pointing down, else the centroid (:meth:`grasp_xy`)."""
         t = self.sim.object_transform(name)
         for frame in self.sim.object_model(name).grasp_frames():
             approach = t[:3, :3] @ rpy_to_matrix(*frame[3:])[:, 2]
@@ -624,17 +653,43 @@ class SimWorld:
         turn = (turn + math.pi / 2.0) % math.pi - math.pi / 2.0  # either way along the axis: the fingers are alike
         return 0.0 if abs(turn) < UNTURNED else turn
 
-    def grasp_height(self, name: str, arm: str, clearance: float) -> float:
+    def grasp_height(self, name: str, arm: str, clearance: float, rotation: np.ndarray | None = None) -> float:
         """Where the end-effector frame goes for a grasp of ``name``, above the top of it (negative: below).
 
         A fixed-constraint grasp stops ``clearance`` above the top; a friction grasp (:meth:`Simulation.fits
         <bt_meta.world.simulation.sim.Simulation.fits>`) centres the finger pads on the highest of the part's
         widest pieces across the fingers (a block's body below its studs, the housing's flange), at most the
         gripper's ``depth`` below the top, with the fingertips on that piece and never within 4 mm of the part's
-        bottom."""
+        bottom. Where that section lies deeper than ``depth`` allows, or the grasp goes over another section
+        than the centroid's (:meth:`grasp_xy` with the ``arm`` and ``rotation``), the pads go on the section's
+        widest band from the part's cross-sections (:func:`~bt_meta.world.simulation.sections.widest_section`),
+        deeper than ``depth``: a round section lying down is widest at its axis, and above it the pads close on a
+        slope and the part turns in them (the housing lying on its side, held 2 cm below its flange's top, stood
+        up tilted and fell back)."""
+        depth = self._band_depth(name, arm)
+        if depth is None:
+            return clearance
+        section = self._section(name, arm, rotation)
+        if section is None:
+            return -max(0.0, depth)
+        top = self.object_top(name)
+        gripper = self.sim.robot.arm(arm).gripper
+        assert gripper is not None
+        pad = (top - depth - gripper.fingertip, top - depth + gripper.fingertip)  # the pads' heights, centred
+        if section.moved or (top - depth > section.high + 1e-4 and square_contact(
+                self.sim.object_model(name), self.sim.object_transform(name), self._fingers_now(arm, rotation),
+                (section.x, section.y), *pad) < SQUARE_CONTACT):
+            bottom = self.object_lowest(name)
+            depth = min(top - 0.5 * (section.low + section.high), top - section.low - gripper.fingertip - 0.001,
+                        top - bottom - gripper.fingertip - 0.004)
+        return -max(0.0, depth)
+
+    def _band_depth(self, name: str, arm: str) -> float | None:
+        """How far below the top a friction grasp centres its pads by the pieces' height bands (``None``: not a
+        friction grasp) -- :meth:`grasp_height` without the cross-sections."""
         sim = self.sim
         if not sim.grasps_by_friction(name, arm):
-            return clearance
+            return None
         gripper = sim.robot.arm(arm).gripper
         t = sim.object_transform(name)
         axis = sim.closing_axis(arm)
@@ -649,9 +704,8 @@ class SimWorld:
         _, low, high = max((p for p in pieces if p[0] >= widest - 0.002), key=lambda p: p[2])
         top, bottom = self.object_top(name), self.object_lowest(name)
         # the fingertips stay on the band (below it they would close past a flange onto the narrower body)
-        depth = min(top - 0.5 * (low + high), gripper.depth, top - low - gripper.fingertip - 0.001,
-                    top - bottom - gripper.fingertip - 0.004)
-        return -max(0.0, depth)
+        return min(top - 0.5 * (low + high), gripper.depth, top - low - gripper.fingertip - 0.001,
+                   top - bottom - gripper.fingertip - 0.004)
 
     def allow_objects(self, name: str, others: Iterable[str]) -> None:
         """Let object ``name`` touch the ``others`` in collision checks (a part going into a hole)."""
@@ -818,8 +872,8 @@ class SimWorld:
             if "rpy" not in spec:  # grasped relative to itself: as it would be, turned back by its own heading
                 out[:3, :3] = rpy_to_matrix(0.0, 0.0, self.own_heading(name, arm)) @ out[:3, :3]
             if spec.get("touch"):  # a grasp pose: as deep as this gripper grasps
-                height = self.grasp_height(name, arm, height)
-            x, y = self.grasp_xy(name)
+                height = self.grasp_height(name, arm, height, out[:3, :3])
+            x, y = self.grasp_xy(name, arm, out[:3, :3])
             out[:3, 3] = (x, y, self.stack_top(name) + height)
             return out
         if "above_feature" in spec:

@@ -50,6 +50,7 @@ class MoveTo(SimSkill):
                  check_path: bool = True, check_held: bool = True, carried_clearance: float = 0.0,
                  speed: float = 1.0, straight: bool = False) -> None:
         super().__init__(world, arm)
+        self._straight_asked = straight
         self.straight = straight
         """Move the gripper frame along the straight line (an insertion), where IK follows it; else joint space."""
         if not 0.0 < speed <= 1.0:
@@ -89,9 +90,15 @@ class MoveTo(SimSkill):
         spec = self.world.pose_spec(args[0])
         # what a following grasp is meant to close on (the grasp skill tells an obstacle on top of it apart)
         self.world.grasp_target = self.world.object_name(str(spec["above"])) if "above" in spec else None
+        self.straight = self._straight_asked
         if spec.get("touch") and "above" in spec:
             # A grasp pose: the fingers may touch the object they are about to close on.
-            self.world.allow_hand(self.world.object_name(str(spec["above"])), self.arm)
+            target = self.world.object_name(str(spec["above"]))
+            self.world.allow_hand(target, self.arm)
+            # A friction grasp's open fingers go down around the part with millimetres to spare (a housing's 7 cm
+            # flange in the Panda's 8 cm): along the straight line, where the joint-space line swung them 13 mm
+            # sideways into the flange and turned the part before they closed.
+            self.straight = self.straight or self.world.sim.grasps_by_friction(target, self.arm)
         self.begin(self.world.ground_pose(args[0], self.arm), args[0])
         # a pose over an object where it lies: no IK solution there means the object is out of reach
         self.reached = self.world.grasp_target
@@ -273,7 +280,10 @@ class MoveTo(SimSkill):
         """Waypoints moving the gripper frame along the straight line (and the shortest rotation) to the target,
         each solved by IK from the one before: the fallback when the joint-space path sweeps into something (an
         arm whose joint-space straight line bends sideways while a block goes down between two others). ``None``
-        when a waypoint has no solution."""
+        when a waypoint has no solution. Each waypoint is solved collision-aware: from the one before, the nearest
+        solution may fold the arm into itself (the Panda over the re-orientation's set-down spot, link1 3.5 mm into
+        link5 one centimetre down), which the path check rejects, and the fallback's planned path swept the open
+        fingers 8 cm sideways through the part they were going down around."""
         world = self.world
         assert self.target is not None
         start = world.sim.link_transform(world.end_effector(self.arm))
@@ -285,7 +295,7 @@ class MoveTo(SimSkill):
             fraction = k / steps
             pose = pin.SE3(start[:3, :3] @ pin.exp3(rotation * fraction),
                            start[:3, 3] + (self.target[:3, 3] - start[:3, 3]) * fraction)
-            result = world.ik.solve(self.arm, pose, q, seed=world.seed, check_collisions=False)
+            result = world.ik.solve(self.arm, pose, q, seed=world.seed)
             if not result.success or result.q is None:
                 return None
             if float(np.max(np.abs(result.q[indices] - q[indices]))) > 0.5:  # jumped to another arm configuration

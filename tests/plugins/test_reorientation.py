@@ -414,7 +414,13 @@ def side_scene(tmp_path_factory):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("robot", ["baxter", "ur5"])
+@pytest.mark.parametrize("robot", [
+    "baxter",
+    pytest.param("panda", marks=pytest.mark.xfail(strict=True, reason=(
+        "known defect (issue 27): on the Panda the part on its side about roll with yaw (active_roll_yaw) is not "
+        "repaired -- the verification at step 11 fails and no proposal applies; active_pitch is repaired"))),
+    "ur5",
+])
 def test_a_part_on_its_side_about_pitch_or_roll_with_yaw_is_re_oriented(tmp_path, capsys, side_scene, robot):
     """Before, both were reported ``collision`` (every pose sampled from the traces collides once held so) and no
     re-orientation was tried. Now the turn toward the part's base (``turn_up``), about whichever horizontal axis
@@ -434,7 +440,9 @@ def test_a_part_on_its_side_about_pitch_or_roll_with_yaw_is_re_oriented(tmp_path
         assert code == 0 and report["status"] == "SUCCESS", (variant, report["stop_reason"])
         repaired = [a["proposal"]["plugin"] for a in report["attempts"] if a["outcome"] == "repaired"]
         assert repaired and set(repaired) <= {"reorientation", "pose_backtracking"}, (variant, repaired)
-        if variant == "active_pitch":  # no held pose brings the magnet down: only turning it over does
+        if variant == "active_pitch" and robot != "panda":
+            # Held by the Baxter's or the UR5's grasp, no pose brings the magnet down: only turning it over does.
+            # The Panda's grasp of the pitched part leaves a held pose that joins it (pose backtracking finds it).
             assert repaired == ["reorientation"]
         assert report["attachments"] == [["active", "reference"]]  # the simulator's true state
         assert report["objects"]["active"]["an"][2] == pytest.approx(-1.0, abs=0.05)  # magnet down, as shown

@@ -390,6 +390,8 @@ class SimWorld:
         self.stand_ins: dict[str, str] = {}
         """Simulator objects stood in for since a rebinding: the demonstrated part's name -> its stand-in's."""
         self.seed = seed
+        self._last_section: tuple[ObjectModel, tuple[Any, ...], Section | None] | None = None
+        """The last :meth:`_section` asked for and its answer: a grasp pose's height and point both need it."""
         self.steps_per_tick = steps_per_tick
         self.joint_speed = joint_speed
         problem_name = getattr(problem, "name", None) or str(problem)
@@ -596,7 +598,12 @@ class SimWorld:
         if not sim.grasps_by_friction(name, arm):
             return None
         axis = self._fingers_now(arm, rotation)
-        return widest_section(sim.object_model(name), sim.object_transform(name), axis, self._grasp_frame_xy(name))
+        model, transform, at = sim.object_model(name), sim.object_transform(name), self._grasp_frame_xy(name)
+        key = (transform.tobytes(), np.asarray(axis, float).tobytes(), at)
+        last = self._last_section
+        if last is None or last[0] is not model or last[1] != key:
+            last = self._last_section = (model, key, widest_section(model, transform, axis, at))
+        return last[2]
 
     def _fingers_now(self, arm: str, rotation: np.ndarray | None) -> np.ndarray:
         """The closing axis of ``arm``'s fingers at ``rotation`` (default: as the hand is turned now)."""

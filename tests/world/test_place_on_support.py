@@ -12,9 +12,8 @@ import pytest
 
 from bt_meta.errors import ConfigError
 from bt_meta.resources import trees_dir
-from bt_meta.world.base import RUNNING, SUCCESS
+from bt_meta.world.base import SUCCESS
 from bt_meta.world.simulation.sim_world import SimWorld, quiet_stdout
-from bt_meta.world.skills import Place
 
 TRAY_TYPES = """\
 types:
@@ -70,26 +69,17 @@ def _world(tmp_path: Path, scene: Path, support: str | None, robot: str = "baxte
                                        grounding=_grounding(tmp_path, support))
 
 
-def _place(world: SimWorld, block: str, x: str, y: str) -> Place:
-    skill = world.skill("place")
-    skill.start([block, x, y])
-    for _ in range(600):
-        if skill.tick() != RUNNING:
-            return skill.inner
-    raise AssertionError("place did not finish")
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize(("robot", "obstacle"), [("baxter", True), ("baxter", False), ("panda", True)])
-def test_a_block_is_placed_on_the_tray_under_its_cell(tmp_path: Path, robot: str, obstacle: bool):
+def test_a_block_is_placed_on_the_tray_under_its_cell(tmp_path: Path, robot: str, obstacle: bool, place):
     world = _world(tmp_path, _scene(tmp_path, obstacle=obstacle), "tray", robot)
     try:
         table = world.sim.table.top_z
-        skill = _place(world, "b0", "0", "0")
+        skill = place(world, "b0", "0", "0")
         assert skill.outcome == SUCCESS, skill.failure
         assert world.object_lowest("b0") == pytest.approx(table + 0.01, abs=0.003)  # on the tray, not in it
         assert skill.info["placement_error"] < 0.01
-        skill = _place(world, "b1", "1", "0")  # beside it, on the tray too
+        skill = place(world, "b1", "1", "0")  # beside it, on the tray too
         assert skill.outcome == SUCCESS, skill.failure
         assert world.object_lowest("b1") == pytest.approx(table + 0.01, abs=0.003)
     finally:
@@ -97,12 +87,12 @@ def test_a_block_is_placed_on_the_tray_under_its_cell(tmp_path: Path, robot: str
 
 
 @pytest.mark.slow
-def test_without_the_support_the_tray_is_in_the_way(tmp_path: Path):
+def test_without_the_support_the_tray_is_in_the_way(tmp_path: Path, place):
     """The same scene, the frame naming no support: the block is put down at the table's height, into the tray --
     the collision the support's height avoids."""
     world = _world(tmp_path, _scene(tmp_path, obstacle=False), None)
     try:
-        skill = _place(world, "b0", "0", "0")
+        skill = place(world, "b0", "0", "0")
         assert skill.outcome == "FAILURE"
         assert skill.failure.kind == "collision"
         assert "tray" in skill.failure.evidence["objects"]
@@ -112,11 +102,11 @@ def test_without_the_support_the_tray_is_in_the_way(tmp_path: Path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("robot", ["baxter", "panda"])
-def test_a_block_is_stacked_on_the_part_under_its_cell(tmp_path: Path, robot: str):
+def test_a_block_is_stacked_on_the_part_under_its_cell(tmp_path: Path, robot: str, place):
     world = _world(tmp_path, _scene(tmp_path, obstacle=False, stacked=True), "b1", robot)
     try:
         top = world.object_top("b1")
-        skill = _place(world, "b0", "0", "0")
+        skill = place(world, "b0", "0", "0")
         assert skill.outcome == SUCCESS, skill.failure
         assert world.object_lowest("b0") == pytest.approx(top, abs=0.004)  # on b1's studs
         b0, b1 = world.sim.object_transform("b0"), world.sim.object_transform("b1")

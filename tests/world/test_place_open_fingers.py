@@ -13,9 +13,8 @@ import numpy as np
 import pytest
 
 from bt_meta.resources import trees_dir
-from bt_meta.world.base import RUNNING, SUCCESS
+from bt_meta.world.base import SUCCESS
 from bt_meta.world.simulation.sim_world import SimWorld, quiet_stdout
-from bt_meta.world.skills import Place
 
 pytestmark = pytest.mark.slow
 
@@ -32,25 +31,16 @@ def _world(tmp_path: Path) -> SimWorld:
         return SimWorld.from_task_file(trees_dir() / "letters.yaml", "A", robot="panda", scene=scene)
 
 
-def _place(world: SimWorld, block: str, x: str, y: str) -> Place:
-    skill = world.skill("place")
-    skill.start([block, x, y])
-    for _ in range(600):
-        if skill.tick() != RUNNING:
-            return skill.inner
-    raise AssertionError("place did not finish")
-
-
-def test_pick_beside_a_turned_block_takes_a_clear_way_down(tmp_path: Path) -> None:
+def test_pick_beside_a_turned_block_takes_a_clear_way_down(tmp_path: Path, place) -> None:
     world = _world(tmp_path)
     try:
-        first = _place(world, "b2", "3", "0")
+        first = place(world, "b2", "3", "0")
         assert first.outcome == SUCCESS, first.failure
-        place = _place(world, "b3", "3", "1")  # the cell beside b2's; b5 turned beside b3 where it lies
-        assert place.outcome == SUCCESS, place.failure
+        beside = place(world, "b3", "3", "1")  # the cell beside b2's; b5 turned beside b3 where it lies
+        assert beside.outcome == SUCCESS, beside.failure
         # the case is the one described: the yaw the pad samples chose had no way down clear of b5
-        assert place._goal_ref is not None
+        assert beside._goal_ref is not None
         final = world.sim.object_transform("b3")
-        assert np.hypot(*(final[:2, 3] - np.asarray(place.goal[:2]))) < 0.01
+        assert np.hypot(*(final[:2, 3] - np.asarray(beside.goal[:2]))) < 0.01
     finally:
         world.close()

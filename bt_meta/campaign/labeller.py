@@ -516,29 +516,45 @@ class Labeller:
         onto it. The kind is the physical obstacle at the first pose that fails: ``reachability`` when the arm has
         no solution there even through obstacles, ``collision`` when every solution runs into the scene (a Panda's
         hand into the tray where a Baxter's arm cannot reach at all)."""
-        import pinocchio as pin
 
         target = next((t for n, t in self.jobs if n == name), None)
         if target is None:
             return None
-        kept = self._grasp_turn.pop(name, None)  # the skills' own yaw: the one the run takes
+        grasp = self._skills_grasp(world, name)
+        blocked = self._first_blocked(world, self._placing(world, name, grasp, target), world.current_q(), target)
+        return None if blocked is None else (blocked[0], f"{name}, held as it lies and set upright, {blocked[1]}")
+
+    def _skills_grasp(self, world: Any, name: str) -> np.ndarray:
+        """:meth:`_grasp` of ``name`` at the skills' own yaw (the one the run takes), whatever turn a check set."""
+        kept = self._grasp_turn.pop(name, None)
         try:
-            transform = world.sim.object_transform(name)
-            as_grasped = np.linalg.inv(self._grasp(world, name)) @ transform
+            return self._grasp(world, name)
         finally:
             if kept is not None:
                 self._grasp_turn[name] = kept
+
+    def _placing(self, world: Any, name: str, grasp: np.ndarray, target: Any) -> tuple[np.ndarray, np.ndarray]:
+        """The gripper poses above ``target`` and down at it that set ``name``, held by ``grasp``, where the
+        nominal plan puts it."""
+        as_grasped = np.linalg.inv(grasp) @ world.sim.object_transform(name)
         held, goal = self._arrivals(world, name, as_grasped, target)[0]
         down = goal @ np.linalg.inv(held)
         above = down.copy()
         above[2, 3] += APPROACH_HEIGHT
+        return above, down
+
+    @staticmethod
+    def _first_blocked(world: Any, poses: tuple[np.ndarray, np.ndarray], q: np.ndarray, target: Any
+                       ) -> tuple[str, str] | None:
+        """(kind, where and why) of the first of the poses above and down at ``target`` the arm cannot take from
+        ``q`` in turn, or None when it takes both."""
+        import pinocchio as pin
+
         at = f"({target[0]:.3f}, {target[1]:.3f})"
-        q = world.current_q()
-        for pose, where in ((above, f"above {at}"), (down, f"down at {at}")):
+        for pose, where in zip(poses, (f"above {at}", f"down at {at}"), strict=True):
             result = world.ik.solve(world.default_arm, pin.SE3(pose[:3, :3], pose[:3, 3]), q, seed=0)
             if not result.success:
-                return str(result.kind or "reachability"), f"{name}, held as it lies and set upright, {where}: " \
-                    f"{result.message}"
+                return str(result.kind or "reachability"), f"{where}: {result.message}"
             q = result.q
         return None
 
@@ -559,16 +575,8 @@ class Labeller:
         if not places or not carried:
             return None
         part, target = carried[0], places[0]
-        kept = self._grasp_turn.pop(part, None)  # the skills' own yaw: the one the run takes
-        try:
-            grasp = self._grasp(world, part)
-        finally:
-            if kept is not None:
-                self._grasp_turn[part] = kept
-        held, goal = self._arrivals(world, part, np.linalg.inv(grasp) @ world.sim.object_transform(part), target)[0]
-        down = goal @ np.linalg.inv(held)
-        above = down.copy()
-        above[2, 3] += APPROACH_HEIGHT
+        grasp = self._skills_grasp(world, part)
+        poses = self._placing(world, part, grasp, target)
         arm = world.default_arm
         q = world.current_q()
         world.allow_hand(part, arm, True, preshape=False)
@@ -581,15 +589,9 @@ class Labeller:
                 return None  # not graspable: the grasp checks say so
             for piece in pieces:
                 world.collision.attach(piece, world.end_effector(arm), q_grasp.q, allow=world.hand_links(arm))
-            q = q_grasp.q
-            at = f"({target[0]:.3f}, {target[1]:.3f})"
-            for pose, where in ((above, f"above {at}"), (down, f"down at {at}")):
-                result = world.ik.solve(arm, pin.SE3(pose[:3, :3], pose[:3, 3]), q, seed=0)
-                if not result.success:
-                    return str(result.kind or "reachability"), f"{part}, carried where the plan puts it onto " \
-                        f"{name}, {where}: {result.message}"
-                q = result.q
-            return None
+            blocked = self._first_blocked(world, poses, q_grasp.q, target)
+            return None if blocked is None else (
+                blocked[0], f"{part}, carried where the plan puts it onto {name}, {blocked[1]}")
         finally:
             for piece in pieces:
                 world.collision.detach(piece, pose=saved[piece])

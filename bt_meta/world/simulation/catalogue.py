@@ -162,16 +162,8 @@ class _CatalogueFile(YamlNodeReader):
                                  entries["colour"][1])
         friction = self.number(entries["friction"][1], f"{what} friction", positive=True) if "friction" in entries \
             else 0.8
-        rolling = ROLLING_FRICTION[shape]
-        if "rolling_friction" in entries:
-            rolling = self.number(entries["rolling_friction"][1], f"{what} rolling_friction")
-            if rolling < 0:
-                raise self.error(f"{what}: rolling_friction must be at least 0", entries["rolling_friction"][1])
-        spinning = SPINNING_FRICTION
-        if "spinning_friction" in entries:
-            spinning = self.number(entries["spinning_friction"][1], f"{what} spinning_friction")
-            if spinning < 0:
-                raise self.error(f"{what}: spinning_friction must be at least 0", entries["spinning_friction"][1])
+        rolling = self._not_negative(entries, "rolling_friction", ROLLING_FRICTION[shape], what)
+        spinning = self._not_negative(entries, "spinning_friction", SPINNING_FRICTION, what)
         role = None
         if "role" in entries:
             role = self.string(entries["role"][1], f"{what} role")
@@ -213,6 +205,16 @@ class _CatalogueFile(YamlNodeReader):
             else ""
         return CatalogueEntry(name, description, (part,), mass, colour, friction, role, tuple(features), primary,
                               frames, self.path, rolling, spinning)
+
+    def _not_negative(self, entries: dict[str, tuple[yaml.Node, yaml.Node]], key: str, default: float,
+                      what: str) -> float:
+        """The entry's ``key`` (a number, at least 0), else ``default``."""
+        if key not in entries:
+            return default
+        value = self.number(entries[key][1], f"{what} {key}")
+        if value < 0:
+            raise self.error(f"{what}: {key} must be at least 0", entries[key][1])
+        return value
 
     def mesh(self, node: yaml.Node, scale: tuple[yaml.Node, yaml.Node] | None, what: str) -> Mesh:
         """``mesh: FILE`` (beside this catalogue) or ``mesh: {distribution: NAME, path: FILE}`` (inside an
